@@ -1,0 +1,105 @@
+//! The floating-point abstraction that lets one implementation of every formula run as `f32`
+//! on the target and as `f64` on the host (the reference).
+//!
+//! Only operations whose results are identical on x86-64 (SSE) and on the Cortex-M4F FPU are
+//! used: IEEE add, subtract, multiply, divide and `libm`'s correctly rounded square root. No
+//! fused multiply-add is ever requested, so the host's `f32` results equal the target's bit for
+//! bit.
+
+use core::fmt::Debug;
+use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
+
+/// A real scalar: implemented for `f32` (target) and `f64` (host reference).
+pub trait Float:
+    Copy
+    + Default
+    + Debug
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+    + SubAssign
+    + MulAssign
+{
+    /// 0
+    const ZERO: Self;
+    /// 1
+    const ONE: Self;
+    /// The machine epsilon of the type.
+    const EPSILON: Self;
+    /// Converts a constant (rounding to nearest for `f32`).
+    fn of(x: f64) -> Self;
+    /// Widens to `f64` (exact).
+    fn to_f64(self) -> f64;
+    /// Absolute value.
+    fn abs(self) -> Self;
+    /// Square root (`libm`, correctly rounded).
+    fn sqrt(self) -> Self;
+    /// True unless NaN or ±∞.
+    fn is_finite(self) -> bool;
+    /// The larger of two values; a NaN operand yields the other one.
+    #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        if self >= other || other != other { self } else { other }
+    }
+    /// The smaller of two values; a NaN operand yields the other one.
+    #[inline(always)]
+    fn min(self, other: Self) -> Self {
+        if self <= other || other != other { self } else { other }
+    }
+}
+
+impl Float for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const EPSILON: Self = f32::EPSILON;
+    #[inline(always)]
+    fn of(x: f64) -> Self {
+        x as f32
+    }
+    #[inline(always)]
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        libm::fabsf(self)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        libm::sqrtf(self)
+    }
+    #[inline(always)]
+    fn is_finite(self) -> bool {
+        f32::is_finite(self)
+    }
+}
+
+impl Float for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const EPSILON: Self = f64::EPSILON;
+    #[inline(always)]
+    fn of(x: f64) -> Self {
+        x
+    }
+    #[inline(always)]
+    fn to_f64(self) -> f64 {
+        self
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        libm::fabs(self)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        libm::sqrt(self)
+    }
+    #[inline(always)]
+    fn is_finite(self) -> bool {
+        f64::is_finite(self)
+    }
+}

@@ -1,0 +1,42 @@
+//! # bins-comp: compensation core of a navigation-grade triaxial accelerometer
+//!
+//! This crate owns every formula the flight software applies to a sample, and the
+//! identification helpers the host tools use to find the constants those formulas need.
+//! It is `#![no_std]`, allocates nothing and contains no reachable panic on the per-sample
+//! path (checked at link time by the `linkcheck` binary).
+//!
+//! Every numeric routine is generic over [`Float`], so the same source runs as `f32` on the
+//! Cortex-M4F and as `f64` on the host, where it is the reference the `f32` results are tested
+//! against.
+//!
+//! Equation numbers refer to the project's physics specification: `T(n)` for the
+//! temperature paper, `V(n)` for the vibration paper.
+//!
+//! | module | owns |
+//! |---|---|
+//! | [`float`] | the `Float` abstraction over `f32`/`f64` |
+//! | [`linalg`] | 3×3 matrices: products, checked inverse, conditioning |
+//! | [`model`] | the metrological model T(1) and its constants |
+//! | [`temperature`] | temperature models T(3)/T(4) of the 12 constants |
+//! | [`compensate`] | the per-sample step: methods 1 and 2 of §5, status bits |
+//! | [`ident`] | identification: six-position T(10), least squares, T(11)/T(12) |
+//! | [`paper`] | the temperature paper's Tables T1/T2/T3 as constants |
+//! | [`vectors`] | the test-vector record shared by the host and the firmware |
+#![no_std]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+pub mod compensate;
+pub mod float;
+pub mod ident;
+pub mod linalg;
+pub mod model;
+pub mod paper;
+pub mod temperature;
+pub mod vectors;
+
+pub use compensate::{Calibration, CalibrationError, Form, Method, Sample, Status};
+pub use float::Float;
+pub use linalg::{Mat3, Vec3};
+pub use model::Constants;
+pub use temperature::{CoefDelta, TempModel};

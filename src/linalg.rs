@@ -1,0 +1,164 @@
+//! Fixed-size linear algebra for the 3×3 metrological model: products, a checked inverse and
+//! the conditioning measure that decides whether a matrix may be inverted at all.
+
+use crate::float::Float;
+
+/// A 3-vector, one element per unit axis x, y, z.
+pub type Vec3<F> = [F; 3];
+/// A 3×3 matrix, row-major: `m[i][j]` is row i, column j.
+pub type Mat3<F> = [[F; 3]; 3];
+
+/// Smallest accepted Hadamard ratio `|det K| / (‖k₁‖·‖k₂‖·‖k₃‖)` of a matrix to be inverted.
+///
+/// The ratio is 1 for orthogonal rows and 0 for singular ones, independent of scale. A real
+/// triaxial unit sits near 1 (its cross-sensitivities are a few per cent of its scale factors);
+/// 1e-3 rejects only matrices whose rows are nearly dependent, where an `f32` inverse would lose
+/// more than half its digits.
+pub const MIN_HADAMARD_RATIO: f64 = 1e-3;
+
+/// `m · v`.
+#[inline(always)]
+pub fn mat_vec<F: Float>(m: &Mat3<F>, v: &Vec3<F>) -> Vec3<F> {
+    [
+        m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2],
+        m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2],
+        m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2],
+    ]
+}
+
+/// `a · b`.
+pub fn mat_mul<F: Float>(a: &Mat3<F>, b: &Mat3<F>) -> Mat3<F> {
+    let mut c = [[F::ZERO; 3]; 3];
+    for (i, row) in c.iter_mut().enumerate() {
+        for (j, cell) in row.iter_mut().enumerate() {
+            *cell = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
+        }
+    }
+    c
+}
+
+/// `a − b` element-wise.
+#[inline(always)]
+pub fn vec_sub<F: Float>(a: &Vec3<F>, b: &Vec3<F>) -> Vec3<F> {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+/// Euclidean norm.
+#[inline(always)]
+pub fn norm<F: Float>(v: &Vec3<F>) -> F {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+/// Largest absolute element.
+pub fn max_abs<F: Float>(v: &Vec3<F>) -> F {
+    v[0].abs().max(v[1].abs()).max(v[2].abs())
+}
+
+/// Induced ∞-norm (largest absolute row sum).
+pub fn norm_inf<F: Float>(m: &Mat3<F>) -> F {
+    let row = |r: &[F; 3]| r[0].abs() + r[1].abs() + r[2].abs();
+    row(&m[0]).max(row(&m[1])).max(row(&m[2]))
+}
+
+/// Determinant.
+#[inline(always)]
+pub fn det<F: Float>(m: &Mat3<F>) -> F {
+    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+}
+
+/// Hadamard ratio `|det m| / Π‖row‖` in [0, 1]; 0 for a zero row or non-finite input.
+pub fn hadamard_ratio<F: Float>(m: &Mat3<F>) -> F {
+    let p = norm(&m[0]) * norm(&m[1]) * norm(&m[2]);
+    let d = det(m).abs();
+    if !(p > F::ZERO) || !p.is_finite() || !d.is_finite() {
+        return F::ZERO;
+    }
+    d / p
+}
+
+/// Inverse by the adjugate, or `None` when the matrix is not finite or its Hadamard ratio is
+/// below `min_ratio` (so no division by a vanishing determinant can happen).
+#[inline(always)]
+pub fn inverse_checked<F: Float>(m: &Mat3<F>, min_ratio: F) -> Option<Mat3<F>> {
+    let c00 = m[1][1] * m[2][2] - m[1][2] * m[2][1];
+    let c01 = m[1][2] * m[2][0] - m[1][0] * m[2][2];
+    let c02 = m[1][0] * m[2][1] - m[1][1] * m[2][0];
+    let d = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02;
+    let p = norm(&m[0]) * norm(&m[1]) * norm(&m[2]);
+    // `!(x >= y)` is also true for NaN, so a non-finite matrix is rejected here too.
+    if !(d.abs() >= min_ratio * p) || !(p > F::ZERO) || !d.is_finite() || !p.is_finite() {
+        return None;
+    }
+    let r = F::ONE / d;
+    Some([
+        [c00 * r, (m[0][2] * m[2][1] - m[0][1] * m[2][2]) * r, (m[0][1] * m[1][2] - m[0][2] * m[1][1]) * r],
+        [c01 * r, (m[0][0] * m[2][2] - m[0][2] * m[2][0]) * r, (m[0][2] * m[1][0] - m[0][0] * m[1][2]) * r],
+        [c02 * r, (m[0][1] * m[2][0] - m[0][0] * m[2][1]) * r, (m[0][0] * m[1][1] - m[0][1] * m[1][0]) * r],
+    ])
+}
+
+/// Converts every element between float types (through `f64`).
+pub fn cast_mat<A: Float, B: Float>(m: &Mat3<A>) -> Mat3<B> {
+    let mut out = [[B::ZERO; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            out[i][j] = B::of(m[i][j].to_f64());
+        }
+    }
+    out
+}
+
+/// Converts every element between float types (through `f64`).
+pub fn cast_vec<A: Float, B: Float>(v: &Vec3<A>) -> Vec3<B> {
+    [B::of(v[0].to_f64()), B::of(v[1].to_f64()), B::of(v[2].to_f64())]
+}
+
+/// Solves the small dense system `a·x = b` (n ≤ 5) by Gaussian elimination with partial
+/// pivoting; `None` when a pivot vanishes relative to the column scale.
+pub fn solve<F: Float, const N: usize>(mut a: [[F; N]; N], mut b: [F; N], n: usize) -> Option<[F; N]> {
+    if n == 0 || n > N {
+        return None;
+    }
+    let mut scale = F::ZERO;
+    for row in a.iter().take(n) {
+        for &x in row.iter().take(n) {
+            scale = scale.max(x.abs());
+        }
+    }
+    if !(scale > F::ZERO) || !scale.is_finite() {
+        return None;
+    }
+    let tiny = scale * F::EPSILON * F::of(16.0);
+    for col in 0..n {
+        let mut piv = col;
+        for r in col + 1..n {
+            if a[r][col].abs() > a[piv][col].abs() {
+                piv = r;
+            }
+        }
+        if !(a[piv][col].abs() > tiny) {
+            return None;
+        }
+        a.swap(col, piv);
+        b.swap(col, piv);
+        for r in col + 1..n {
+            let f = a[r][col] / a[col][col];
+            for c in col..n {
+                let v = a[col][c];
+                a[r][c] -= f * v;
+            }
+            let v = b[col];
+            b[r] -= f * v;
+        }
+    }
+    let mut x = [F::ZERO; N];
+    for col in (0..n).rev() {
+        let mut s = b[col];
+        for c in col + 1..n {
+            s -= a[col][c] * x[c];
+        }
+        x[col] = s / a[col][col];
+    }
+    if x.iter().take(n).all(|v| v.is_finite()) { Some(x) } else { None }
+}
