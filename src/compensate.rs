@@ -23,7 +23,7 @@
 //! - K(T) singular at the current temperature (method 1; load-time checks make this
 //!   practically unreachable): the T0 inverse is used, flagged [`Status::SINGULAR_AT_TEMP`].
 
-use crate::float::Float;
+use crate::float::{self, Float};
 use crate::linalg::{self, Mat3, Vec3};
 use crate::model::Constants;
 use crate::temperature::{CoefDelta, TempModel, TempModelError};
@@ -65,10 +65,17 @@ impl core::ops::BitOr for Status {
 /// Which form of the output correction method 2 uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Form {
-    /// T(5) (polynomial) / T(6) (piecewise-linear): all four terms of the bracket.
+    /// T(5) (polynomial) / T(6) (piecewise-linear) as printed: all four terms of the
+    /// bracket. It replaces N by diag(1/K_ii) in the scale term, so besides second-order
+    /// terms it differs from method 1 by (cross-sensitivity ratio)·ΔK·a, ≈ 1 mg at 10 g for
+    /// the paper's unit at −40 °C.
     Full,
     /// T(7) / T(8): scale-factor and offset terms only, cross-sensitivity terms dropped.
     Simplified,
+    /// T(2) without the diagonal approximation: `Δa_T = −N·(ΔK·â + ΔU0)`,
+    /// `â = N·(U − U0)`. The exact first-order expansion of method 1 (a project addition to
+    /// the paper's forms; it differs from method 1 only by second-order terms).
+    Linearized,
 }
 
 /// How the temperature is compensated (§5).
@@ -105,7 +112,8 @@ pub enum CalibrationError {
     TempModel(TempModelError),
     /// The valid temperature range is empty, not finite, or does not contain T0.
     BadRange,
-    /// K(T) becomes singular somewhere inside the valid range.
+    /// K(T) becomes singular somewhere inside the valid range, or a scale factor leaves
+    /// [1/2, 2]× its T0 value there.
     SingularInRange,
 }
 
@@ -117,7 +125,9 @@ impl core::fmt::Display for CalibrationError {
             CalibrationError::ZeroScaleFactor => write!(f, "a scale factor K_ii is zero"),
             CalibrationError::TempModel(e) => write!(f, "temperature model: {e}"),
             CalibrationError::BadRange => write!(f, "valid temperature range is empty, not finite, or excludes T0"),
-            CalibrationError::SingularInRange => write!(f, "K(T) becomes singular inside the valid temperature range"),
+            CalibrationError::SingularInRange => {
+                write!(f, "K(T) becomes singular or implausible inside the valid temperature range")
+            }
         }
     }
 }
@@ -125,16 +135,77 @@ impl core::fmt::Display for CalibrationError {
 impl core::error::Error for CalibrationError {}
 
 /// Number of temperatures, besides the knots and the range ends, at which a loaded
-/// calibration's K(T) is checked for invertibility.
+/// calibration's K(T) is checked.
 const RANGE_CHECK_POINTS: usize = 64;
 
+/// Largest plausible change of a scale factor over the calibrated range: K_ii(T)/K_ii(T0)
+/// must stay within [1/2, 2]. A model outside that has been extrapolated beyond reason (or
+/// drives a scale factor through zero, which no conditioning test on K alone can see, since
+/// scaling a row does not change its conditioning).
+const MAX_SCALE_RATIO: f64 = 2.0;
+
+/// Everything that defines a calibration, in `f64`: what the blob and the calibration file
+/// hold. [`Calibration::new`] validates it and precomputes the per-sample quantities in the
+/// working precision.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CalibrationParams {
+    /// The 12 constants at T0.
+    pub constants: Constants<f64>,
+    /// T0 [°C].
+    pub t0_c: f64,
+    /// Temperature model of the constants.
+    pub model: TempModel<f64>,
+    /// Compensation method.
+    pub method: Method,
+    /// Calibrated temperature range [°C]: (min, max).
+    pub temp_range_c: (f64, f64),
+}
+
+impl CalibrationParams {
+    /// The same parameters compensating with another method.
+    pub fn with_method(mut self, method: Method) -> Self {
+        self.method = method;
+        self
+    }
+
+    /// The constants at `temp_c` by T(3)/T(4), in `f64`:
+    /// `K_ij(T) = K_ij·(1 + ΔK_ij/K_ij)`, `U0(T) = U0 + ΔU0`.
+    pub fn constants_at(&self, temp_c: f64) -> Constants<f64> {
+        apply_delta(&self.constants, &self.model.delta(temp_c, self.t0_c))
+    }
+}
+
+/// The constants moved by `d`.
+fn apply_delta<F: Float>(c: &Constants<F>, d: &CoefDelta<F>) -> Constants<F> {
+    let mut out = *c;
+    for i in 0..3 {
+        out.u0_v[i] += d.du0_v[i];
+        for j in 0..3 {
+            out.k_v_per_g[i][j] += c.k_v_per_g[i][j] * d.rel_k[i][j];
+        }
+    }
+    out
+}
+
 /// A validated calibration: everything the per-sample step needs, immutable after boot.
+///
+/// Precision: N = K⁻¹ is computed in `f64` at load time and its diagonal kept as a
+/// double-word (hi + lo) pair, and `N·(U − U0)` is evaluated with error-free transformations
+/// on the diagonal (TwoSum, Veltkamp/Dekker TwoProduct). All temperature-dependent parts are
+/// small corrections to that product. In `f32` the result is then within about one rounding
+/// of the output (≈0.5 µg at 10 g) of the `f64` reference, instead of the several µg a plain
+/// `f32` inverse and product would lose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Calibration<F> {
+    params: CalibrationParams,
     t0_c: F,
     constants: Constants<F>,
-    /// N = K⁻¹ at T0.
+    /// N = K⁻¹ at T0, rounded (diagonal = hi part).
     n_g_per_v: Mat3<F>,
+    /// Veltkamp split of the diagonal's hi part.
+    n_diag_split: [(F, F); 3],
+    /// Low part of the diagonal: N_ii − hi.
+    n_diag_lo: Vec3<F>,
     /// 1/K_ii at T0.
     inv_diag: Vec3<F>,
     model: TempModel<F>,
@@ -145,56 +216,60 @@ pub struct Calibration<F> {
 }
 
 impl<F: Float> Calibration<F> {
-    /// Validates and precomputes. Fails on non-finite or singular constants, a malformed
-    /// temperature model, a bad range, or a K(T) that becomes singular inside the range.
-    pub fn new(
-        constants: Constants<F>,
-        t0_c: F,
-        model: TempModel<F>,
-        method: Method,
-        temp_range_c: (F, F),
-    ) -> Result<Self, CalibrationError> {
+    /// Validates `p` and precomputes. Fails on non-finite or singular constants, a malformed
+    /// temperature model, a bad range, or a K(T) that becomes singular (or a scale factor
+    /// that leaves [1/2, 2]× its T0 value) inside the range.
+    pub fn new(p: &CalibrationParams) -> Result<Self, CalibrationError> {
+        let constants = p.constants;
         if !constants.is_finite() {
             return Err(CalibrationError::NonFiniteConstants);
         }
         let n = constants.inverse().ok_or(CalibrationError::SingularK)?;
         let k = &constants.k_v_per_g;
-        if k[0][0] == F::ZERO || k[1][1] == F::ZERO || k[2][2] == F::ZERO {
+        if k[0][0] == 0.0 || k[1][1] == 0.0 || k[2][2] == 0.0 {
             return Err(CalibrationError::ZeroScaleFactor);
         }
-        model.check().map_err(CalibrationError::TempModel)?;
-        let (lo, hi) = temp_range_c;
-        if !(lo.is_finite() && hi.is_finite() && lo < hi && lo <= t0_c && t0_c <= hi) {
+        p.model.check().map_err(CalibrationError::TempModel)?;
+        let (lo, hi) = p.temp_range_c;
+        if !(lo.is_finite() && hi.is_finite() && p.t0_c.is_finite() && lo < hi && lo <= p.t0_c && p.t0_c <= hi) {
             return Err(CalibrationError::BadRange);
         }
-        let cal = Calibration {
-            t0_c,
-            constants,
-            n_g_per_v: n,
-            inv_diag: [F::ONE / k[0][0], F::ONE / k[1][1], F::ONE / k[2][2]],
-            model,
-            method,
-            temp_min_c: lo,
-            temp_max_c: hi,
-            valid: true,
-        };
-        // K(T) must stay invertible over the whole range: check the ends, the knots and a
-        // grid, so the run-time fallback is never expected to trigger.
-        let check = |t: F| -> Result<(), CalibrationError> {
-            let kt = cal.constants_at(t);
-            if kt.inverse().is_none() { Err(CalibrationError::SingularInRange) } else { Ok(()) }
+        // K(T) must stay invertible and plausible over the whole range: check the ends, the
+        // knots and a grid, so the run-time fallback is never expected to trigger.
+        let check = |t: f64| -> Result<(), CalibrationError> {
+            let kt = p.constants_at(t);
+            let plausible = (0..3).all(|i| {
+                let r = kt.k_v_per_g[i][i] / k[i][i];
+                (1.0 / MAX_SCALE_RATIO..=MAX_SCALE_RATIO).contains(&r)
+            });
+            if kt.inverse().is_none() || !plausible { Err(CalibrationError::SingularInRange) } else { Ok(()) }
         };
         for i in 0..=RANGE_CHECK_POINTS {
-            check(lo + (hi - lo) * F::of(i as f64 / RANGE_CHECK_POINTS as f64))?;
+            check(lo + (hi - lo) * (i as f64 / RANGE_CHECK_POINTS as f64))?;
         }
-        if let TempModel::Pwl { n_knots, knots_c, .. } = &model {
+        if let TempModel::Pwl { n_knots, knots_c, .. } = &p.model {
             for &kn in knots_c.iter().take(*n_knots as usize) {
                 if kn > lo && kn < hi {
                     check(kn)?;
                 }
             }
         }
-        Ok(cal)
+        let n_f: Mat3<F> = linalg::cast_mat(&n);
+        let n_diag_lo = [0, 1, 2].map(|i| F::of(n[i][i] - n_f[i][i].to_f64()));
+        Ok(Calibration {
+            params: *p,
+            t0_c: F::of(p.t0_c),
+            constants: constants.cast(),
+            n_g_per_v: n_f,
+            n_diag_split: [0, 1, 2].map(|i| float::split(n_f[i][i])),
+            n_diag_lo,
+            inv_diag: [0, 1, 2].map(|i| F::of(1.0 / k[i][i])),
+            model: p.model.cast(),
+            method: p.method,
+            temp_min_c: F::of(lo),
+            temp_max_c: F::of(hi),
+            valid: true,
+        })
     }
 
     /// The stand-in used when no valid calibration exists: identity K, zero offsets, no
@@ -202,10 +277,20 @@ impl<F: Float> Calibration<F> {
     /// and its output is the raw signal in volts, unscaled.
     pub fn uncalibrated() -> Self {
         let one = [[F::ONE, F::ZERO, F::ZERO], [F::ZERO, F::ONE, F::ZERO], [F::ZERO, F::ZERO, F::ONE]];
+        let one64 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         Calibration {
+            params: CalibrationParams {
+                constants: Constants { k_v_per_g: one64, u0_v: [0.0; 3] },
+                t0_c: 0.0,
+                model: TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] },
+                method: Method::Uncorrected,
+                temp_range_c: (-1.0e30, 1.0e30),
+            },
             t0_c: F::ZERO,
             constants: Constants { k_v_per_g: one, u0_v: [F::ZERO; 3] },
             n_g_per_v: one,
+            n_diag_split: [float::split(F::ONE); 3],
+            n_diag_lo: [F::ZERO; 3],
             inv_diag: [F::ONE; 3],
             model: TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] },
             method: Method::Uncorrected,
@@ -215,10 +300,9 @@ impl<F: Float> Calibration<F> {
         }
     }
 
-    /// The same calibration compensating with another method.
-    pub fn with_method(mut self, method: Method) -> Self {
-        self.method = method;
-        self
+    /// The parameters this calibration was built from.
+    pub fn params(&self) -> &CalibrationParams {
+        &self.params
     }
 
     /// The compensation method in use.
@@ -249,15 +333,55 @@ impl<F: Float> Calibration<F> {
     /// The constants at `temp_c` by T(3)/T(4): `K_ij(T) = K_ij·(1 + ΔK_ij/K_ij)`,
     /// `U0(T) = U0 + ΔU0`.
     pub fn constants_at(&self, temp_c: F) -> Constants<F> {
-        let d = self.model.delta(temp_c, self.t0_c);
-        let mut c = self.constants;
+        apply_delta(&self.constants, &self.model.delta(temp_c, self.t0_c))
+    }
+
+    /// `N·(U − U0')` with N at T0 and any offsets `u0_v`, accurate to about one rounding of
+    /// the result (see the type's note on precision).
+    #[inline(always)]
+    fn apply_n(&self, u_v: &Vec3<F>, u0_v: &Vec3<F>) -> Vec3<F> {
+        let v = [0, 1, 2].map(|i| float::two_sum(u_v[i], -u0_v[i]));
+        let n = &self.n_g_per_v;
+        let mut a = [F::ZERO; 3];
         for i in 0..3 {
-            c.u0_v[i] += d.du0_v[i];
+            let (p, pe) = float::two_prod_split(v[i].0, self.n_diag_split[i]);
+            let mut small = pe + n[i][i] * v[i].1 + self.n_diag_lo[i] * v[i].0;
             for j in 0..3 {
-                c.k_v_per_g[i][j] = c.k_v_per_g[i][j] * (F::ONE + d.rel_k[i][j]);
+                if j != i {
+                    small += n[i][j] * (v[j].0 + v[j].1);
+                }
+            }
+            a[i] = p + small;
+        }
+        a
+    }
+
+    /// Method 1's correction matrix at a temperature: with X = N·ΔK(T),
+    /// `K(T)⁻¹ = (I + X)⁻¹·N`, so `a = a₀ + M·a₀` with `M = −(I + X)⁻¹·X` and
+    /// `a₀ = N·(U − U0(T))`. M is small (|X| ≲ 10⁻²), so its rounding errors are negligible
+    /// beside a₀'s. `None` when K(T) is not invertible.
+    #[inline(always)]
+    fn method1_matrix(&self, d: &CoefDelta<F>) -> Option<Mat3<F>> {
+        let k = &self.constants.k_v_per_g;
+        let mut dk = [[F::ZERO; 3]; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                dk[i][j] = k[i][j] * d.rel_k[i][j];
             }
         }
-        c
+        let x = linalg::mat_mul(&self.n_g_per_v, &dk);
+        let mut y = x;
+        for (i, row) in y.iter_mut().enumerate() {
+            row[i] += F::ONE;
+        }
+        let inv = linalg::inverse_checked(&y, F::of(linalg::MIN_HADAMARD_RATIO))?;
+        let mut m = linalg::mat_mul(&inv, &x);
+        for row in m.iter_mut() {
+            for v in row.iter_mut() {
+                *v = -*v;
+            }
+        }
+        Some(m)
     }
 
     /// The output correction Δa_T of T(5)/T(6) (full) or T(7)/T(8) (simplified) for signals
@@ -266,10 +390,24 @@ impl<F: Float> Calibration<F> {
     ///
     /// `Δa_i = −v_i/K_ii·β_ii − α_i/K_ii` (simplified), plus in the full form
     /// `− Σ_{j≠i} v_j·K_ij·γ_ij/(K_ii·K_jj) + Σ_{j≠i} K_ij·α_j/(K_ii·K_jj)`.
+    ///
+    /// [`Form::Linearized`] is `−N·(ΔK·â + ΔU0)` with `â = N·v`.
     #[inline(always)]
     pub fn output_correction(&self, v: &Vec3<F>, d: &CoefDelta<F>, form: Form) -> Vec3<F> {
         let k = &self.constants.k_v_per_g;
         let r = &self.inv_diag;
+        if form == Form::Linearized {
+            let n = &self.n_g_per_v;
+            let a_hat = linalg::mat_vec(n, v);
+            let mut w = d.du0_v;
+            for (i, wi) in w.iter_mut().enumerate() {
+                for j in 0..3 {
+                    *wi += k[i][j] * d.rel_k[i][j] * a_hat[j];
+                }
+            }
+            let c = linalg::mat_vec(n, &w);
+            return [-c[0], -c[1], -c[2]];
+        }
         let mut out = [F::ZERO; 3];
         for i in 0..3 {
             let mut c = -(v[i] * d.rel_k[i][i] + d.du0_v[i]) * r[i];
@@ -315,23 +453,26 @@ impl<F: Float> Calibration<F> {
         };
 
         let mut a = match self.method {
-            Method::Uncorrected => {
-                linalg::mat_vec(&self.n_g_per_v, &linalg::vec_sub(&u, &self.constants.u0_v))
-            }
+            Method::Uncorrected => self.apply_n(&u, &self.constants.u0_v),
             Method::CoefficientCorrection => {
-                let c = self.constants_at(t);
-                let v = linalg::vec_sub(&u, &c.u0_v);
-                match c.inverse() {
-                    Some(n_t) => linalg::mat_vec(&n_t, &v),
+                let d = self.model.delta(t, self.t0_c);
+                let u0 = &self.constants.u0_v;
+                let u0_t = [u0[0] + d.du0_v[0], u0[1] + d.du0_v[1], u0[2] + d.du0_v[2]];
+                let a0 = self.apply_n(&u, &u0_t);
+                match self.method1_matrix(&d) {
+                    Some(m) => {
+                        let c = linalg::mat_vec(&m, &a0);
+                        [a0[0] + c[0], a0[1] + c[1], a0[2] + c[2]]
+                    }
                     None => {
                         status.insert(Status::SINGULAR_AT_TEMP);
-                        linalg::mat_vec(&self.n_g_per_v, &v)
+                        a0
                     }
                 }
             }
             Method::OutputCorrection(form) => {
+                let a0 = self.apply_n(&u, &self.constants.u0_v);
                 let v = linalg::vec_sub(&u, &self.constants.u0_v);
-                let a0 = linalg::mat_vec(&self.n_g_per_v, &v);
                 let d = self.model.delta(t, self.t0_c);
                 let c = self.output_correction(&v, &d, form);
                 [a0[0] + c[0], a0[1] + c[1], a0[2] + c[2]]
@@ -342,21 +483,5 @@ impl<F: Float> Calibration<F> {
             status.insert(Status::NONFINITE_INPUT);
         }
         Sample { accel_g: a, status }
-    }
-
-    /// Converts between float types (the constants are rounded, not re-validated; use on a
-    /// calibration already validated in the wider type, then validate with
-    /// [`Calibration::new`] if the narrow type could fail).
-    pub fn cast<G: Float>(&self) -> Result<Calibration<G>, CalibrationError> {
-        if !self.valid {
-            return Ok(Calibration::uncalibrated());
-        }
-        Calibration::new(
-            self.constants.cast(),
-            G::of(self.t0_c.to_f64()),
-            self.model.cast(),
-            self.method,
-            (G::of(self.temp_min_c.to_f64()), G::of(self.temp_max_c.to_f64())),
-        )
     }
 }

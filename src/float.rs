@@ -30,6 +30,8 @@ pub trait Float:
     const ONE: Self;
     /// The machine epsilon of the type.
     const EPSILON: Self;
+    /// Veltkamp's splitting constant `2^⌈p/2⌉ + 1` (p = mantissa bits), see [`split`].
+    const SPLITTER: Self;
     /// Converts a constant (rounding to nearest for `f32`).
     fn of(x: f64) -> Self;
     /// Widens to `f64` (exact).
@@ -41,21 +43,16 @@ pub trait Float:
     /// True unless NaN or ±∞.
     fn is_finite(self) -> bool;
     /// The larger of two values; a NaN operand yields the other one.
-    #[inline(always)]
-    fn max(self, other: Self) -> Self {
-        if self >= other || other != other { self } else { other }
-    }
+    fn max(self, other: Self) -> Self;
     /// The smaller of two values; a NaN operand yields the other one.
-    #[inline(always)]
-    fn min(self, other: Self) -> Self {
-        if self <= other || other != other { self } else { other }
-    }
+    fn min(self, other: Self) -> Self;
 }
 
 impl Float for f32 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const EPSILON: Self = f32::EPSILON;
+    const SPLITTER: Self = 4097.0; // 2^12 + 1
     #[inline(always)]
     fn of(x: f64) -> Self {
         x as f32
@@ -76,12 +73,21 @@ impl Float for f32 {
     fn is_finite(self) -> bool {
         f32::is_finite(self)
     }
+    #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        libm::fmaxf(self, other)
+    }
+    #[inline(always)]
+    fn min(self, other: Self) -> Self {
+        libm::fminf(self, other)
+    }
 }
 
 impl Float for f64 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const EPSILON: Self = f64::EPSILON;
+    const SPLITTER: Self = 134_217_729.0; // 2^27 + 1
     #[inline(always)]
     fn of(x: f64) -> Self {
         x
@@ -102,4 +108,41 @@ impl Float for f64 {
     fn is_finite(self) -> bool {
         f64::is_finite(self)
     }
+    #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        libm::fmax(self, other)
+    }
+    #[inline(always)]
+    fn min(self, other: Self) -> Self {
+        libm::fmin(self, other)
+    }
+}
+
+/// Knuth's TwoSum: `s + e = a + b` exactly, `s = fl(a + b)`.
+#[inline(always)]
+pub fn two_sum<F: Float>(a: F, b: F) -> (F, F) {
+    let s = a + b;
+    let bb = s - a;
+    let e = (a - (s - bb)) + (b - bb);
+    (s, e)
+}
+
+/// Veltkamp's split: `hi + lo = a` exactly, each half holding at most half the mantissa, so
+/// that products of halves are exact. Overflows (to a non-finite result) only for
+/// `|a| > MAX/SPLITTER`, which the callers' final finiteness check catches.
+#[inline(always)]
+pub fn split<F: Float>(a: F) -> (F, F) {
+    let c = F::SPLITTER * a;
+    let hi = c - (c - a);
+    (hi, a - hi)
+}
+
+/// Dekker's TwoProduct without FMA: `p + e = a·b` exactly, `p = fl(a·b)`, with `b` given
+/// already split.
+#[inline(always)]
+pub fn two_prod_split<F: Float>(a: F, b: (F, F)) -> (F, F) {
+    let p = a * (b.0 + b.1);
+    let (ah, al) = split(a);
+    let e = ((ah * b.0 - p) + ah * b.1 + al * b.0) + al * b.1;
+    (p, e)
 }

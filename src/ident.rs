@@ -280,3 +280,25 @@ pub fn poly_from_constants<F: Float>(
     }
     Ok(TempModel::Poly { order: order as u8, coef })
 }
+
+/// Specific force [g] in the tilted check positions CP1…CP6 of §6 (T(13)), for a tilt `θ`.
+///
+/// The paper's Figure 3 (the positions' drawing) did not survive in its text, so the project
+/// defines them: CPm starts from TPm, whose axis `a` is vertical, and tilts both horizontal
+/// axes `b`, `c` by θ out of the horizon plane, so that `f_b = sin θ`,
+/// `f_c = ±sin θ` (alternating with m) and `f_a = ±√(1 − 2 sin²θ)` (the sign of TPm). Every
+/// axis then sees a large component, which is what makes the check sensitive to the
+/// cross-sensitivities. Requires θ < 45°.
+pub fn check_positions_g(theta_deg: f64) -> [Vec3<f64>; 6] {
+    let s = libm::sin(theta_deg * core::f64::consts::PI / 180.0);
+    let main = libm::sqrt((1.0 - 2.0 * s * s).max(0.0));
+    let mut out = [[0.0; 3]; 6];
+    for (m, tp) in TILTER_POSITIONS_G.iter().enumerate() {
+        let a = tp.iter().position(|&x| x != 0.0).unwrap_or(0);
+        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        out[m][a] = tp[a] * main;
+        out[m][b] = s;
+        out[m][c] = if m % 2 == 0 { s } else { -s };
+    }
+    out
+}

@@ -35,7 +35,7 @@ pub mod paper;
 pub mod temperature;
 pub mod vectors;
 
-pub use compensate::{Calibration, CalibrationError, Form, Method, Sample, Status};
+pub use compensate::{Calibration, CalibrationError, CalibrationParams, Form, Method, Sample, Status};
 pub use float::Float;
 pub use linalg::{Mat3, Vec3};
 pub use model::Constants;

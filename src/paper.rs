@@ -3,7 +3,8 @@
 //! test vectors build from them. Values are copied digit for digit from the paper; the host
 //! tests cross-check them against `shared/data/paper-constants.csv`.
 
-use crate::compensate::{Calibration, CalibrationError, Method};
+use crate::compensate::{Calibration, CalibrationError, CalibrationParams, Method};
+use crate::float::Float;
 use crate::ident;
 use crate::model::Constants;
 use crate::temperature::TempModel;
@@ -80,7 +81,12 @@ pub fn quadratic_truth() -> Result<TempModel<f64>, ident::FitError> {
     ident::poly_from_constants(T0_C, &TABLE_CONSTANTS[0], &off_nominal_points(), 2)
 }
 
+/// The parameters of a calibration of the paper's unit with the given model and method.
+pub fn params(model: TempModel<f64>, method: Method) -> CalibrationParams {
+    CalibrationParams { constants: TABLE_CONSTANTS[0], t0_c: T0_C, model, method, temp_range_c: TEMP_RANGE_C }
+}
+
 /// A validated calibration of the paper's unit with the given model and method.
-pub fn calibration(model: TempModel<f64>, method: Method) -> Result<Calibration<f64>, CalibrationError> {
-    Calibration::new(TABLE_CONSTANTS[0], T0_C, model, method, TEMP_RANGE_C)
+pub fn calibration<F: Float>(model: TempModel<f64>, method: Method) -> Result<Calibration<F>, CalibrationError> {
+    Calibration::new(&params(model, method))
 }

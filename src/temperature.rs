@@ -187,9 +187,10 @@ impl<F: Float> TempModel<F> {
     /// Converts between float types.
     pub fn cast<G: Float>(&self) -> TempModel<G> {
         match self {
-            TempModel::Poly { order, coef } => {
-                TempModel::Poly { order: *order, coef: [coef[0].cast(), coef[1].cast(), coef[2].cast(), coef[3].cast()] }
-            }
+            TempModel::Poly { order, coef } => TempModel::Poly {
+                order: *order,
+                coef: [coef[0].cast(), coef[1].cast(), coef[2].cast(), coef[3].cast()],
+            },
             TempModel::Pwl { n_knots, knots_c, at_knot } => {
                 let mut k = [G::ZERO; MAX_KNOTS];
                 let mut a = [CoefDelta::zero(); MAX_KNOTS];

@@ -24,7 +24,7 @@ pub const RECORD_BYTES: usize = 36;
 /// Size of one result record.
 pub const RESULT_BYTES: usize = 16;
 /// Number of calibration variants.
-pub const VARIANTS: usize = 8;
+pub const VARIANTS: usize = 10;
 
 /// Temperature model of a variant.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -35,19 +35,19 @@ pub enum VariantModel {
     Quadratic,
 }
 
-/// Model and method of each variant: 0 uncorrected; 1–3 two-range with method 1, method 2
-/// simplified, method 2 full; 4–6 the same with the quadratic; 7 uncalibrated.
+/// Model and method of each variant: 0 uncorrected; 1–4 two-range with method 1, method 2
+/// simplified, full, linearized; 5–8 the same with the quadratic; 9 uncalibrated.
 pub fn variant_method(index: usize) -> Option<(VariantModel, Method)> {
-    let m = [
+    const M: [Method; 4] = [
         Method::CoefficientCorrection,
         Method::OutputCorrection(Form::Simplified),
         Method::OutputCorrection(Form::Full),
+        Method::OutputCorrection(Form::Linearized),
     ];
     match index {
-        0 => Some((VariantModel::TwoRange, Method::Uncorrected)),
-        1..=3 => Some((VariantModel::TwoRange, m[index - 1])),
-        4..=6 => Some((VariantModel::Quadratic, m[index - 4])),
-        7 => Some((VariantModel::TwoRange, Method::Uncorrected)),
+        0 | 9 => Some((VariantModel::TwoRange, Method::Uncorrected)),
+        1..=4 => M.get(index - 1).map(|&m| (VariantModel::TwoRange, m)),
+        5..=8 => M.get(index - 5).map(|&m| (VariantModel::Quadratic, m)),
         _ => None,
     }
 }
@@ -63,10 +63,8 @@ pub fn calibrations() -> [Calibration<f32>; VARIANTS] {
             VariantModel::TwoRange => paper::two_range_model(),
             VariantModel::Quadratic => paper::quadratic_truth(),
         };
-        if let Ok(model) = model {
-            if let Ok(cal) = paper::calibration(model, method).and_then(|c| c.cast::<f32>()) {
-                *slot = cal;
-            }
+        if let Ok(cal) = model.map_err(|_| ()).and_then(|m| paper::calibration::<f32>(m, method).map_err(|_| ())) {
+            *slot = cal;
         }
     }
     out
@@ -104,10 +102,7 @@ impl Record {
             variant: u32_at(b, 0),
             u_v: [f32_at(b, 4), f32_at(b, 8), f32_at(b, 12)],
             temp_c: f32_at(b, 16),
-            expected: Sample {
-                accel_g: [f32_at(b, 20), f32_at(b, 24), f32_at(b, 28)],
-                status: Status(u32_at(b, 32)),
-            },
+            expected: Sample { accel_g: [f32_at(b, 20), f32_at(b, 24), f32_at(b, 28)], status: Status(u32_at(b, 32)) },
         }
     }
 
