@@ -1,1 +1,396 @@
-fn main() {}
+//! Project tasks: `cargo xtask test` (everything CI checks) and `cargo xtask demo`.
+//!
+//! The Cortex-M4F binaries are built with rustup's toolchain when it has the
+//! `thumbv7em-none-eabihf` target installed. Otherwise Debian's Rust (`rustc-web`, linked into
+//! rustup as the `debian` toolchain) builds them with `-Zbuild-std=core`; the packages it needs
+//! are installed with apt when missing. Firmware builds use their own target directory
+//! (`target/thumb`), so host and target builds never invalidate each other.
+
+use std::env;
+use std::ffi::{OsStr, OsString};
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitCode, Stdio};
+use std::time::{Duration, Instant};
+
+const THUMB: &str = "thumbv7em-none-eabihf";
+/// Target directory of the firmware builds, relative to the repository root.
+const THUMB_TARGET_DIR: &str = "target/thumb";
+/// Test vectors the firmware replays (its path is fixed in the firmware).
+const VECTORS_IN: &str = "target/fw-vectors/in.bin";
+/// QEMU runner (also cargo's `runner` for the thumb target).
+const RUNNER: &str = "tools/qemu-run.sh";
+/// Debian packages of the fallback toolchain and of the QEMU run.
+const DEBIAN_PACKAGES: [&str; 7] =
+    ["rustc-web", "cargo-web", "rust-web-src", "rust-web-clippy", "rustfmt-web", "lld", "qemu-system-arm"];
+/// Variables a parent cargo/rustup sets that must not leak into a child of another toolchain.
+const TOOLCHAIN_VARS: [&str; 6] =
+    ["RUSTUP_TOOLCHAIN", "RUSTC", "RUSTDOC", "CARGO", "RUSTC_WORKSPACE_WRAPPER", "CLIPPY_ARGS"];
+/// Default limit on one QEMU run; override with `XTASK_QEMU_TIMEOUT` (seconds).
+const QEMU_TIMEOUT_S: u64 = 300;
+
+type Result<T = ()> = std::result::Result<T, String>;
+/// A step of a task.
+type StepFn = fn(&mut Xtask) -> Result;
+
+fn main() -> ExitCode {
+    let args: Vec<String> = env::args().skip(1).collect();
+    let mut x = Xtask::new();
+    let ok = match args.first().map(String::as_str) {
+        Some("test") => x.test(),
+        Some("demo") => x.demo(),
+        _ => {
+            eprintln!("usage: cargo xtask <test|demo>");
+            eprintln!("  test   fmt, clippy, host tests, thumb clippy, vectors, firmware build + link check, QEMU run");
+            eprintln!("  demo   build and run the demo in QEMU");
+            return ExitCode::from(2);
+        }
+    };
+    if ok { ExitCode::SUCCESS } else { ExitCode::FAILURE }
+}
+
+/// How the thumb binaries are built.
+#[derive(Clone, Copy, Debug)]
+enum Toolchain {
+    /// rustup's active toolchain, which has the thumbv7em target.
+    Rustup,
+    /// Debian's Rust with `-Zbuild-std=core`: `cargo +debian` through rustup, or
+    /// `/usr/bin/cargo` without rustup.
+    Debian { via_rustup: bool },
+}
+
+struct Xtask {
+    root: PathBuf,
+    toolchain: Option<Toolchain>,
+    /// Prepended to PATH for children (where `cargo install` put defmt-print).
+    extra_path: Option<PathBuf>,
+    passed: Vec<(String, Duration)>,
+}
+
+impl Xtask {
+    fn new() -> Self {
+        let manifest_dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let root = manifest_dir.parent().unwrap_or(manifest_dir).to_path_buf();
+        Xtask { root, toolchain: None, extra_path: None, passed: Vec::new() }
+    }
+
+    // ---- tasks -------------------------------------------------------------------------
+
+    fn test(&mut self) -> bool {
+        let started = Instant::now();
+        let steps: [(&str, StepFn); 8] = [
+            ("fmt", |x| x.run(x.host_cargo(["fmt", "--all", "--check"]))),
+            ("clippy (host)", |x| {
+                x.run(x.host_cargo(["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"]))
+            }),
+            ("test (host)", |x| x.run(x.host_cargo(["test", "--workspace"]))),
+            ("toolchain", Xtask::setup_toolchain),
+            ("clippy (thumb)", |x| {
+                x.run(
+                    x.thumb_cargo("clippy", ["--features", "firmware-log", "--lib", "--bins", "--", "-D", "warnings"])?,
+                )
+            }),
+            ("vectors", Xtask::gen_vectors),
+            ("build firmware + link check", |x| {
+                x.build_firmware()?;
+                x.build_linkcheck()
+            }),
+            ("qemu", |x| x.run_qemu(&x.elf("firmware"))),
+        ];
+        let mut failed = None;
+        for (i, (name, f)) in steps.iter().enumerate() {
+            if !self.step(i + 1, name, *f) {
+                failed = Some(*name);
+                break;
+            }
+        }
+        self.summary(started);
+        match failed {
+            None => {
+                println!("xtask test: {} passed, 0 failed", self.passed.len());
+                true
+            }
+            Some(name) => {
+                println!("xtask test: {} passed, 1 failed (step '{name}')", self.passed.len());
+                false
+            }
+        }
+    }
+
+    fn demo(&mut self) -> bool {
+        let started = Instant::now();
+        let ok = self.step(1, "toolchain", Xtask::setup_toolchain) && self.step(2, "demo", demo_body);
+        self.summary(started);
+        ok
+    }
+
+    // ---- steps -------------------------------------------------------------------------
+
+    /// Runs one step with a header and its wall time; false if it failed.
+    fn step(&mut self, n: usize, name: &str, f: StepFn) -> bool {
+        println!("\n==> [{n}] {name}");
+        let t = Instant::now();
+        let r = f(self);
+        let dt = t.elapsed();
+        match r {
+            Ok(()) => {
+                println!("<== [{n}] {name}: ok ({:.1} s)", dt.as_secs_f64());
+                self.passed.push((name.to_string(), dt));
+                true
+            }
+            Err(e) => {
+                eprintln!("<== [{n}] {name}: FAILED after {:.1} s\nerror: step '{name}' failed: {e}", dt.as_secs_f64());
+                false
+            }
+        }
+    }
+
+    fn summary(&self, started: Instant) {
+        println!("\nstep times:");
+        for (name, dt) in &self.passed {
+            println!("  {:>7.1} s  {name}", dt.as_secs_f64());
+        }
+        println!("  {:>7.1} s  total", started.elapsed().as_secs_f64());
+    }
+
+    /// Picks the thumb toolchain and installs what it and the QEMU run need.
+    fn setup_toolchain(&mut self) -> Result {
+        let has_rustup = probe(Command::new("rustup").arg("--version"));
+        let rustup_target = has_rustup
+            && output(Command::new("rustup").args(["target", "list", "--installed"]))
+                .is_ok_and(|o| o.lines().any(|l| l.trim() == THUMB));
+        let tc = if rustup_target {
+            println!("using rustup's toolchain (target {THUMB} installed)");
+            if !on_path("qemu-system-arm") {
+                apt_install(&["qemu-system-arm"])?;
+            }
+            Toolchain::Rustup
+        } else {
+            println!("rustup has no {THUMB} target: using Debian's Rust with -Zbuild-std=core");
+            let missing: Vec<&str> = DEBIAN_PACKAGES.iter().copied().filter(|p| !dpkg_installed(p)).collect();
+            if !missing.is_empty() {
+                apt_install(&missing)?;
+            }
+            if has_rustup {
+                let list = output(Command::new("rustup").args(["toolchain", "list"]))?;
+                if !list.lines().any(|l| l.split_whitespace().next() == Some("debian")) {
+                    self.run(cmd("rustup", ["toolchain", "link", "debian", "/usr"]))?;
+                }
+            }
+            Toolchain::Debian { via_rustup: has_rustup }
+        };
+        self.toolchain = Some(tc);
+        self.ensure_defmt_print()
+    }
+
+    /// Installs defmt-print with the host cargo unless it is on PATH (or in cargo's bin dir).
+    fn ensure_defmt_print(&mut self) -> Result {
+        if on_path("defmt-print") {
+            return Ok(());
+        }
+        let cargo_bin = cargo_home().map(|h| h.join("bin"));
+        if cargo_bin.as_ref().is_some_and(|b| b.join("defmt-print").is_file()) {
+            self.extra_path = cargo_bin;
+            return Ok(());
+        }
+        self.run(self.host_cargo(["install", "defmt-print", "--locked"]))?;
+        self.extra_path = cargo_bin;
+        Ok(())
+    }
+
+    fn gen_vectors(&mut self) -> Result {
+        self.run(self.host_cargo(["run", "--release", "-p", "host-tests", "--bin", "gen-vectors", "--", VECTORS_IN]))
+    }
+
+    fn build_firmware(&mut self) -> Result {
+        self.run(self.thumb_cargo("build", ["--release", "--features", "firmware-log", "--bin", "firmware"])?)
+    }
+
+    /// The release link of `linkcheck` fails iff a panic is reachable from its code.
+    fn build_linkcheck(&mut self) -> Result {
+        let c = self.thumb_cargo("build", ["--release", "--features", "firmware", "--bin", "linkcheck"])?;
+        self.run(c).map_err(|e| {
+            format!(
+                "{e}\n       (`undefined symbol: a_panic_is_reachable` above means a panic is reachable in the core)"
+            )
+        })
+    }
+
+    /// Runs an ELF in QEMU from the repository root through the runner script.
+    fn run_qemu(&self, elf: &Path) -> Result {
+        let limit = env::var("XTASK_QEMU_TIMEOUT").ok().and_then(|s| s.parse().ok()).unwrap_or(QEMU_TIMEOUT_S);
+        let mut c = self.command(self.root.join(RUNNER));
+        c.arg(elf).stdin(Stdio::null());
+        run_with_timeout(c, Duration::from_secs(limit))
+    }
+
+    // ---- commands ----------------------------------------------------------------------
+
+    /// A command run from the repository root, with the extra PATH entry.
+    fn command(&self, program: impl AsRef<OsStr>) -> Command {
+        let mut c = Command::new(program);
+        c.current_dir(&self.root);
+        if let Some(p) = &self.extra_path {
+            let mut paths = vec![p.clone()];
+            paths.extend(env::split_paths(&env::var_os("PATH").unwrap_or_default()));
+            if let Ok(joined) = env::join_paths(paths) {
+                c.env("PATH", joined);
+            }
+        }
+        c
+    }
+
+    /// The host cargo: the toolchain `cargo xtask` itself runs with.
+    fn host_cargo<I: IntoIterator<Item = S>, S: AsRef<OsStr>>(&self, args: I) -> Command {
+        let mut c = self.command("cargo");
+        for v in TOOLCHAIN_VARS.iter().filter(|v| **v != "RUSTUP_TOOLCHAIN") {
+            c.env_remove(v);
+        }
+        c.args(args);
+        c
+    }
+
+    /// cargo for the thumb target on the root package: `cargo <sub> --package bins-comp
+    /// --target … --target-dir target/thumb`, plus
+    /// `-Zbuild-std=core` and the lld linker under Debian's toolchain.
+    fn thumb_cargo<I: IntoIterator<Item = S>, S: AsRef<OsStr>>(&self, sub: &str, args: I) -> Result<Command> {
+        let tc = self.toolchain.ok_or("internal: toolchain step has not run")?;
+        let mut c = match tc {
+            Toolchain::Rustup => self.host_cargo([sub]),
+            Toolchain::Debian { via_rustup } => {
+                let mut c = if via_rustup { self.command("cargo") } else { self.command("/usr/bin/cargo") };
+                for v in TOOLCHAIN_VARS {
+                    c.env_remove(v);
+                }
+                if via_rustup {
+                    c.arg("+debian");
+                }
+                c.arg(sub).arg("-Zbuild-std=core");
+                c.env("RUSTC_BOOTSTRAP", "1");
+                c.env("CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER", "ld.lld");
+                c
+            }
+        };
+        c.args(["--package", "bins-comp", "--target", THUMB, "--target-dir", THUMB_TARGET_DIR]);
+        c.args(args);
+        Ok(c)
+    }
+
+    fn elf(&self, bin: &str) -> PathBuf {
+        self.root.join(THUMB_TARGET_DIR).join(THUMB).join("release").join(bin)
+    }
+
+    /// Echoes and runs a command; an error names it and its exit status.
+    fn run(&self, mut c: Command) -> Result {
+        println!("$ {}", show(&c));
+        let status = c.status().map_err(|e| format!("cannot start `{}`: {e}", show(&c)))?;
+        if status.success() { Ok(()) } else { Err(format!("`{}` exited with {status}", show(&c))) }
+    }
+}
+
+// ---- the demo ---------------------------------------------------------------------------
+
+/// The demo's scenario, run by `cargo xtask demo` after the toolchain step.
+///
+/// Placeholder until the demo exists: replays the test vectors in the firmware under QEMU.
+fn demo_body(x: &mut Xtask) -> Result {
+    x.gen_vectors()?;
+    x.build_firmware()?;
+    x.run_qemu(&x.elf("firmware"))
+}
+
+// ---- helpers ----------------------------------------------------------------------------
+
+fn cmd<I: IntoIterator<Item = S>, S: AsRef<OsStr>>(program: &str, args: I) -> Command {
+    let mut c = Command::new(program);
+    c.args(args);
+    c
+}
+
+/// True if the command starts and succeeds (output discarded).
+fn probe(c: &mut Command) -> bool {
+    c.stdout(Stdio::null()).stderr(Stdio::null()).status().is_ok_and(|s| s.success())
+}
+
+/// The command's stdout, or an error naming it.
+fn output(c: &mut Command) -> Result<String> {
+    let o = c.stderr(Stdio::inherit()).output().map_err(|e| format!("cannot start `{}`: {e}", show(c)))?;
+    if !o.status.success() {
+        return Err(format!("`{}` exited with {}", show(c), o.status));
+    }
+    Ok(String::from_utf8_lossy(&o.stdout).into_owned())
+}
+
+fn on_path(program: &str) -> bool {
+    env::var_os("PATH").is_some_and(|p| env::split_paths(&p).any(|d| d.join(program).is_file()))
+}
+
+fn cargo_home() -> Option<PathBuf> {
+    env::var_os("CARGO_HOME").map(PathBuf::from).or_else(|| env::var_os("HOME").map(|h| Path::new(&h).join(".cargo")))
+}
+
+fn dpkg_installed(package: &str) -> bool {
+    Command::new("dpkg").args(["-s", package]).stderr(Stdio::null()).output().is_ok_and(|o| {
+        o.status.success() && String::from_utf8_lossy(&o.stdout).contains("Status: install ok installed")
+    })
+}
+
+/// `apt-get update` + `apt-get install`, through sudo unless running as root.
+fn apt_install(packages: &[&str]) -> Result {
+    if !on_path("apt-get") {
+        return Err(format!("missing {} and no apt-get to install them: install them by hand", packages.join(" ")));
+    }
+    let root = output(Command::new("id").arg("-u")).is_ok_and(|u| u.trim() == "0");
+    let apt = |args: &[&str]| -> Result {
+        let mut c = if root { Command::new("apt-get") } else { cmd("sudo", ["apt-get"]) };
+        c.env("DEBIAN_FRONTEND", "noninteractive").args(args);
+        println!("$ {}", show(&c));
+        let status = c.status().map_err(|e| format!("cannot start `{}`: {e}", show(&c)))?;
+        if status.success() { Ok(()) } else { Err(format!("`{}` exited with {status}", show(&c))) }
+    };
+    apt(&["update"])?;
+    let mut args = vec!["install", "-y", "--no-install-recommends"];
+    args.extend_from_slice(packages);
+    apt(&args)
+}
+
+/// Runs the command in its own process group, killing the group after `limit`.
+fn run_with_timeout(mut c: Command, limit: Duration) -> Result {
+    use std::os::unix::process::CommandExt;
+    println!("$ {}", show(&c));
+    c.process_group(0);
+    let mut child = c.spawn().map_err(|e| format!("cannot start `{}`: {e}", show(&c)))?;
+    let deadline = Instant::now() + limit;
+    loop {
+        match child.try_wait().map_err(|e| e.to_string())? {
+            Some(status) if status.success() => return Ok(()),
+            Some(status) => return Err(format!("`{}` exited with {status}", show(&c))),
+            None if Instant::now() >= deadline => {
+                let group = format!("-{}", child.id());
+                let _ = Command::new("kill").args(["-KILL", "--", &group]).status();
+                let _ = child.wait();
+                return Err(format!("`{}` timed out after {} s (XTASK_QEMU_TIMEOUT)", show(&c), limit.as_secs()));
+            }
+            None => std::thread::sleep(Duration::from_millis(20)),
+        }
+    }
+}
+
+/// A shell-like rendering of a command with the variables it sets.
+fn show(c: &Command) -> String {
+    let mut parts: Vec<String> = c
+        .get_envs()
+        .filter_map(|(k, v)| v.map(|v| (k, v)))
+        .filter(|(k, _)| *k != "PATH")
+        .map(|(k, v)| format!("{}={}", k.to_string_lossy(), v.to_string_lossy()))
+        .collect();
+    parts.push(relative(c.get_program()));
+    parts.extend(c.get_args().map(relative));
+    parts.join(" ")
+}
+
+fn relative(s: &OsStr) -> String {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_default();
+    let p = Path::new(s);
+    let s: OsString = p.strip_prefix(&root).map(|r| r.as_os_str().to_owned()).unwrap_or_else(|_| s.to_owned());
+    s.to_string_lossy().into_owned()
+}
