@@ -255,15 +255,16 @@ impl<F: Float> Calibration<F> {
             }
         }
         let n_f: Mat3<F> = linalg::cast_mat(&n);
-        let n_diag_lo = [0, 1, 2].map(|i| F::of(n[i][i] - n_f[i][i].to_f64()));
+        let lo_at = |i: usize| F::of(n[i][i] - n_f[i][i].to_f64());
+        let n_diag_lo = [lo_at(0), lo_at(1), lo_at(2)];
         Ok(Calibration {
             params: *p,
             t0_c: F::of(p.t0_c),
             constants: constants.cast(),
             n_g_per_v: n_f,
-            n_diag_split: [0, 1, 2].map(|i| float::split(n_f[i][i])),
+            n_diag_split: [float::split(n_f[0][0]), float::split(n_f[1][1]), float::split(n_f[2][2])],
             n_diag_lo,
-            inv_diag: [0, 1, 2].map(|i| F::of(1.0 / k[i][i])),
+            inv_diag: [F::of(1.0 / k[0][0]), F::of(1.0 / k[1][1]), F::of(1.0 / k[2][2])],
             model: p.model.cast(),
             method: p.method,
             temp_min_c: F::of(lo),

@@ -168,16 +168,25 @@ pub fn pwl_from_constants<F: Float>(
         }
         // Insertion into the sorted knot list; a repeated temperature is ambiguous.
         let mut pos = n;
-        while pos > 0 && knots_c[pos - 1] > *t {
-            knots_c[pos] = knots_c[pos - 1];
-            at_knot[pos] = at_knot[pos - 1];
+        while pos > 0 {
+            let (Some(&k), Some(&d)) = (knots_c.get(pos - 1), at_knot.get(pos - 1)) else { break };
+            if !(k > *t) {
+                break;
+            }
+            if let (Some(ks), Some(ds)) = (knots_c.get_mut(pos), at_knot.get_mut(pos)) {
+                *ks = k;
+                *ds = d;
+            }
             pos -= 1;
         }
-        if pos > 0 && knots_c[pos - 1] == *t {
+        if pos > 0 && knots_c.get(pos - 1) == Some(t) {
             return Err(FitError::Singular);
         }
-        knots_c[pos] = *t;
-        at_knot[pos] = coef_delta(c0, c)?;
+        let delta = coef_delta(c0, c)?;
+        if let (Some(ks), Some(ds)) = (knots_c.get_mut(pos), at_knot.get_mut(pos)) {
+            *ks = *t;
+            *ds = delta;
+        }
         n += 1;
     }
     if n < 2 {
