@@ -22,10 +22,12 @@
 //! | [`ident`] | identification: six-position T(10), least squares, T(11)/T(12) |
 //! | [`paper`] | the temperature paper's Tables T1/T2/T3 as constants |
 //! | [`vectors`] | the test-vector record shared by the host and the firmware |
+//! | [`blob`] | the calibration blob: byte format, parser, encoder, CRC-32, physical limits |
 #![no_std]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod blob;
 pub mod compensate;
 pub mod float;
 pub mod ident;

@@ -217,9 +217,15 @@ impl Xtask {
 
     /// Runs an ELF in QEMU from the repository root through the runner script.
     fn run_qemu(&self, elf: &Path) -> Result {
+        self.run_qemu_in(elf, &self.root)
+    }
+
+    /// Runs an ELF in QEMU with `cwd` as its working directory: the firmware's semihosting
+    /// paths (`target/fw-vectors/…`) are relative to it.
+    fn run_qemu_in(&self, elf: &Path, cwd: &Path) -> Result {
         let limit = env::var("XTASK_QEMU_TIMEOUT").ok().and_then(|s| s.parse().ok()).unwrap_or(QEMU_TIMEOUT_S);
         let mut c = self.command(self.root.join(RUNNER));
-        c.arg(elf).stdin(Stdio::null());
+        c.arg(elf).current_dir(cwd).stdin(Stdio::null());
         run_with_timeout(c, Duration::from_secs(limit))
     }
 
@@ -292,10 +298,19 @@ impl Xtask {
 /// The demo's scenario, run by `cargo xtask demo` after the toolchain step.
 ///
 /// Placeholder until the demo exists: replays the test vectors in the firmware under QEMU.
+///
+/// The paper's unit in the six check positions at −10, +20 and +45 °C (true constants: the
+/// quadratic through Tables T1/T2; calibration: the paper's two-range model), compensated by
+/// the firmware in QEMU; the host then checks the results bit for bit and prints the table.
 fn demo_body(x: &mut Xtask) -> Result {
-    x.gen_vectors()?;
+    let dir = x.root.join("target/demo");
+    let input = dir.join("target/fw-vectors/in.bin");
+    let output = dir.join("target/fw-vectors/out.bin");
+    let (inp, out) = (input.to_string_lossy().into_owned(), output.to_string_lossy().into_owned());
+    x.run(x.host_cargo(["run", "--release", "-q", "-p", "host-tests", "--bin", "gen-vectors", "--", "--demo", &inp]))?;
     x.build_firmware()?;
-    x.run_qemu(&x.elf("firmware"))
+    x.run_qemu_in(&x.elf("firmware"), &dir)?;
+    x.run(x.host_cargo(["run", "--release", "-q", "-p", "host-tests", "--bin", "demo-report", "--", &inp, &out]))
 }
 
 // ---- helpers ----------------------------------------------------------------------------

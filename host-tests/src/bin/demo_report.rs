@@ -60,7 +60,13 @@ fn main() {
             }
             println!("  CP{}         {}", p + 1, cells.join(""));
         }
-        println!("  max |Δg|    {}\n", worst.map(|w| format!("{:>10.3}", w * 1e3)).join(""));
+        println!("  max |Δg|    {}", worst.map(|w| format!("{:>10.3}", w * 1e3)).join(""));
+        if worst[0] > 1e-6 {
+            let factor =
+                worst.map(|w| if w > 0.0 { format!("{:>9.1}×", worst[0] / w) } else { format!("{:>10}", "-") });
+            println!("  reduction   {}", factor.join(""));
+        }
+        println!();
     }
     println!("firmware vs host f32: {} of {} results bit-identical", rows.len() - mismatches, rows.len());
     if mismatches > 0 {

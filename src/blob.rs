@@ -1,0 +1,1160 @@
+//! The calibration blob: the one byte format in which a calibration travels from the host
+//! tool to the CALIB flash region. This module owns that format (specified in
+//! `docs/calibration-blob.md`), its parser, its encoder, its CRC-32 and the physical limits a
+//! flashed calibration must respect.
+//!
+//! The parser is zero-copy over `&[u8]`, allocates nothing and cannot panic; every way a blob
+//! can be wrong is a typed [`BlobError`] naming the field (as the calibration file spells it,
+//! see [`Field`]) and the byte offset where that applies. A blob that parses is a calibration
+//! [`Calibration::new`] accepts: [`parse`] runs its checks too.
+//!
+//! # Layout (format version 1, all integers and floats little-endian)
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 4 | magic `"BCAL"` |
+//! | 4 | 2 | format version (1) |
+//! | 6 | 2 | section count n (≤ [`MAX_SECTIONS`]) |
+//! | 8 | 4 | total length L, CRC included ([`MIN_BLOB_BYTES`]..=[`MAX_BLOB_BYTES`]) |
+//! | 12 | 4 | reserved, zero |
+//! | 16 | 12·n | section table: id u16, flags u16, offset u32, length u32 |
+//! | … | … | section payloads, inside `[16 + 12·n, L − 4)`, not overlapping |
+//! | L − 4 | 4 | CRC-32 (IEEE, reflected) of bytes `[0, L − 4)` |
+//!
+//! Checks run in this order: length ≥ header, magic, version, declared length, CRC, then the
+//! header's reserved word, the section table and the sections. So a corrupted blob is
+//! reported as such (bad magic, bad version, a length error or a CRC mismatch) before any of
+//! its contents is interpreted.
+
+use crate::compensate::{Calibration, CalibrationError, CalibrationParams, Form, Method};
+use crate::float::Float;
+use crate::model::Constants;
+use crate::temperature::{CoefDelta, MAX_KNOTS, MAX_POLY_ORDER, TempModel};
+
+/// The first four bytes of every blob.
+pub const MAGIC: [u8; 4] = *b"BCAL";
+/// The format version this parser reads and this encoder writes. It changes only for an
+/// incompatible change of the header, the section table or an existing section; new content
+/// comes as new sections (see [`FLAG_REQUIRED`]).
+pub const FORMAT_VERSION: u16 = 1;
+/// Size of the fixed header.
+pub const HEADER_BYTES: usize = 16;
+/// Size of one section-table entry.
+pub const ENTRY_BYTES: usize = 12;
+/// Size of the trailing CRC.
+pub const CRC_BYTES: usize = 4;
+/// Smallest possible declared length: a header and a CRC.
+pub const MIN_BLOB_BYTES: usize = HEADER_BYTES + CRC_BYTES;
+/// Largest blob: the size of the CALIB flash region.
+pub const MAX_BLOB_BYTES: usize = 4096;
+/// Most sections a blob may have.
+pub const MAX_SECTIONS: usize = 16;
+/// Longest text (serial, tool version) in bytes; text is printable ASCII (0x20..=0x7E).
+pub const MAX_TEXT_BYTES: usize = 32;
+/// Section flag: a parser that does not know the section's id must reject the blob. Unknown
+/// sections without it are skipped. All other flag bits are reserved and must be zero.
+pub const FLAG_REQUIRED: u16 = 1 << 0;
+
+/// Section ids. Id 0 is never assigned.
+pub mod section {
+    /// The 12 constants at T0 and T0 (required).
+    pub const CONSTANTS: u16 = 0x0001;
+    /// The temperature model and its coefficients (required).
+    pub const TEMP_MODEL: u16 = 0x0002;
+    /// The compensation method and, for method 2, its form (required).
+    pub const METHOD: u16 = 0x0003;
+    /// The calibrated temperature range (required).
+    pub const TEMP_RANGE: u16 = 0x0004;
+    /// Reserved for the vibration-error coefficients (a later version).
+    pub const VIBRATION: u16 = 0x0005;
+    /// Reserved for the flight-phase profiles (a later version).
+    pub const FLIGHT_PHASES: u16 = 0x0006;
+    /// The unit's serial number, printable ASCII (optional).
+    pub const SERIAL: u16 = 0x0101;
+    /// The calibration date (optional).
+    pub const CAL_DATE: u16 = 0x0102;
+    /// The version of the tool that produced the calibration, printable ASCII (optional).
+    pub const TOOL_VERSION: u16 = 0x0103;
+    /// Every id this version of the parser understands.
+    pub const KNOWN: [u16; 7] = [CONSTANTS, TEMP_MODEL, METHOD, TEMP_RANGE, SERIAL, CAL_DATE, TOOL_VERSION];
+    /// The ids a version-1 blob must contain.
+    pub const MANDATORY: [u16; 4] = [CONSTANTS, TEMP_MODEL, METHOD, TEMP_RANGE];
+}
+
+/// Size of the constants section: T0, K row-major, U0 (13 × f64).
+pub const CONSTANTS_BYTES: usize = 13 * 8;
+/// Size of the method section.
+pub const METHOD_BYTES: usize = 8;
+/// Size of the temperature-range section: min, max (2 × f64).
+pub const TEMP_RANGE_BYTES: usize = 16;
+/// Size of the calibration-date section: year u16, month u8, day u8.
+pub const CAL_DATE_BYTES: usize = 4;
+/// Size of the temperature-model section's own header: kind u8, count u8, 6 reserved bytes.
+pub const MODEL_HEADER_BYTES: usize = 8;
+/// Size of one coefficient set in the model section: ΔU0 (3 × f64), then ΔK/K row-major
+/// (9 × f64), the order of [`CoefDelta::to_array`].
+pub const COEF_SET_BYTES: usize = 12 * 8;
+
+/// Model-section kind code of [`TempModel::Poly`].
+pub const KIND_POLY: u8 = 1;
+/// Model-section kind code of [`TempModel::Pwl`].
+pub const KIND_PWL: u8 = 2;
+
+/// Physical limits a calibration must respect to be flashed. Anything outside is a unit, a
+/// fit or a file gone wrong, not a calibration.
+pub mod limits {
+    /// Smallest |K_ii| [V/g].
+    pub const SCALE_FACTOR_MIN_V_PER_G: f64 = 1e-3;
+    /// Largest |K_ii| [V/g].
+    pub const SCALE_FACTOR_MAX_V_PER_G: f64 = 1e3;
+    /// Largest |K_ij| (i ≠ j) as a fraction of |K_ii| of the same row.
+    pub const CROSS_RATIO_MAX: f64 = 0.5;
+    /// Largest |U0_i| [V].
+    pub const U0_MAX_V: f64 = 100.0;
+    /// Lowest T0, range end or knot [°C].
+    pub const TEMP_MIN_C: f64 = -100.0;
+    /// Highest T0, range end or knot [°C].
+    pub const TEMP_MAX_C: f64 = 200.0;
+    /// Largest change of U0 one temperature term may make [V] (see [`super::Field::limit`]).
+    pub const DU0_MAX_V: f64 = 100.0;
+    /// Largest relative change of a scale factor one temperature term may make [1].
+    pub const REL_SCALE_MAX: f64 = 1.0;
+    /// Earliest calibration year.
+    pub const YEAR_MIN: u16 = 1970;
+    /// Latest calibration year.
+    pub const YEAR_MAX: u16 = 9999;
+}
+
+/// A value of the calibration, named as the calibration file (TOML) spells it. Indices are
+/// zero-based; `row`/`col`/`axis` 0, 1, 2 are x, y, z.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Field {
+    /// `t0_C`
+    T0,
+    /// `k_V_per_g[row][col]`
+    K {
+        /// Accelerometer (row of K).
+        row: u8,
+        /// Axis (column of K).
+        col: u8,
+    },
+    /// `u0_V[axis]`
+    U0 {
+        /// Accelerometer.
+        axis: u8,
+    },
+    /// `temp_range_C[end]` (0 = min, 1 = max)
+    TempRange {
+        /// 0 = min, 1 = max.
+        end: u8,
+    },
+    /// `temperature_model.kind`
+    ModelKind,
+    /// The number of `temperature_model.term` entries (the polynomial order).
+    PolyOrder,
+    /// The number of `temperature_model.knot` entries.
+    KnotCount,
+    /// `temperature_model.knot[knot].t_C`
+    Knot {
+        /// Knot index.
+        knot: u8,
+    },
+    /// `temperature_model.knot[knot].du0_V[axis]`
+    KnotDu0 {
+        /// Knot index.
+        knot: u8,
+        /// Accelerometer.
+        axis: u8,
+    },
+    /// `temperature_model.knot[knot].rel_k[row][col]`
+    KnotRelK {
+        /// Knot index.
+        knot: u8,
+        /// Row of K.
+        row: u8,
+        /// Column of K.
+        col: u8,
+    },
+    /// `temperature_model.term[term].alpha_V_per_Cn[axis]` (coefficient of ΔT^(term+1))
+    TermAlpha {
+        /// Term index (power − 1).
+        term: u8,
+        /// Accelerometer.
+        axis: u8,
+    },
+    /// `temperature_model.term[term].rel_k_per_Cn[row][col]` (coefficient of ΔT^(term+1))
+    TermRelK {
+        /// Term index (power − 1).
+        term: u8,
+        /// Row of K.
+        row: u8,
+        /// Column of K.
+        col: u8,
+    },
+    /// `method.kind`
+    Method,
+    /// `method.form`
+    Form,
+    /// `serial`
+    Serial,
+    /// `calibration_date`
+    CalDate,
+    /// `tool_version`
+    ToolVersion,
+}
+
+impl Field {
+    /// The key in the calibration file, without indices (e.g. `"k_V_per_g"`).
+    pub const fn name(&self) -> &'static str {
+        match self {
+            Field::T0 => "t0_C",
+            Field::K { .. } => "k_V_per_g",
+            Field::U0 { .. } => "u0_V",
+            Field::TempRange { .. } => "temp_range_C",
+            Field::ModelKind => "temperature_model.kind",
+            Field::PolyOrder => "temperature_model.term",
+            Field::KnotCount => "temperature_model.knot",
+            Field::Knot { .. } => "temperature_model.knot.t_C",
+            Field::KnotDu0 { .. } => "temperature_model.knot.du0_V",
+            Field::KnotRelK { .. } => "temperature_model.knot.rel_k",
+            Field::TermAlpha { .. } => "temperature_model.term.alpha_V_per_Cn",
+            Field::TermRelK { .. } => "temperature_model.term.rel_k_per_Cn",
+            Field::Method => "method.kind",
+            Field::Form => "method.form",
+            Field::Serial => "serial",
+            Field::CalDate => "calibration_date",
+            Field::ToolVersion => "tool_version",
+        }
+    }
+
+    /// What the field must satisfy, in words (see [`limits`]).
+    pub const fn limit(&self) -> &'static str {
+        match self {
+            Field::T0 | Field::TempRange { .. } | Field::Knot { .. } => "finite, within [-100, 200] °C",
+            Field::K { row, col } if *row == *col => "finite, |K_ii| within [1e-3, 1e3] V/g",
+            Field::K { .. } => "finite, |K_ij| <= 0.5·|K_ii| of the same row",
+            Field::U0 { .. } => "finite, |U0| <= 100 V",
+            Field::ModelKind => "poly or pwl",
+            Field::PolyOrder => "1 to 4 terms",
+            Field::KnotCount => "2 to 8 knots",
+            Field::KnotDu0 { .. } => "finite, |ΔU0| <= 100 V at the knot",
+            Field::KnotRelK { row, col, .. } if *row == *col => "finite, |ΔK_ii/K_ii| <= 1 at the knot",
+            Field::KnotRelK { .. } => "finite, |K_ij·ΔK_ij/K_ij| <= 0.5·|K_ii| at the knot",
+            Field::TermAlpha { .. } => "finite, |α_n|·ΔT_max^n <= 100 V over the valid range",
+            Field::TermRelK { row, col, .. } if *row == *col => "finite, |β_n|·ΔT_max^n <= 1 over the valid range",
+            Field::TermRelK { .. } => "finite, |K_ij·γ_n|·ΔT_max^n <= 0.5·|K_ii| over the valid range",
+            Field::Method => "uncorrected, coefficient-correction or output-correction",
+            Field::Form => "full, simplified or linearized for output-correction; none otherwise",
+            Field::Serial | Field::ToolVersion => "1 to 32 printable ASCII characters",
+            Field::CalDate => "a calendar date, year 1970 to 9999",
+        }
+    }
+}
+
+impl core::fmt::Display for Field {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Field::K { row, col } => write!(f, "k_V_per_g[{row}][{col}]"),
+            Field::U0 { axis } => write!(f, "u0_V[{axis}]"),
+            Field::TempRange { end } => write!(f, "temp_range_C[{end}]"),
+            Field::Knot { knot } => write!(f, "temperature_model.knot[{knot}].t_C"),
+            Field::KnotDu0 { knot, axis } => write!(f, "temperature_model.knot[{knot}].du0_V[{axis}]"),
+            Field::KnotRelK { knot, row, col } => write!(f, "temperature_model.knot[{knot}].rel_k[{row}][{col}]"),
+            Field::TermAlpha { term, axis } => write!(f, "temperature_model.term[{term}].alpha_V_per_Cn[{axis}]"),
+            Field::TermRelK { term, row, col } => {
+                write!(f, "temperature_model.term[{term}].rel_k_per_Cn[{row}][{col}]")
+            }
+            other => f.write_str(other.name()),
+        }
+    }
+}
+
+/// Why a blob was rejected (or could not be written). Offsets are byte offsets from the start
+/// of the blob.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum BlobError {
+    /// Fewer bytes than the header, or than the header's declared length.
+    Truncated {
+        /// Bytes needed.
+        needed: usize,
+        /// Bytes present.
+        got: usize,
+    },
+    /// The first four bytes are not [`MAGIC`] (erased or foreign flash).
+    BadMagic,
+    /// A format version this parser does not read.
+    UnsupportedVersion(u16),
+    /// The declared total length is outside [`MIN_BLOB_BYTES`]..=[`MAX_BLOB_BYTES`].
+    BadLength(u32),
+    /// More bytes than the declared length.
+    LengthMismatch {
+        /// Declared length.
+        declared: usize,
+        /// Bytes present.
+        actual: usize,
+    },
+    /// The CRC does not match the contents.
+    CrcMismatch {
+        /// CRC stored in the blob.
+        stored: u32,
+        /// CRC of the contents.
+        computed: u32,
+    },
+    /// A reserved byte or flag bit is not zero.
+    ReservedNotZero {
+        /// Offset of the byte (or of the flags word).
+        offset: usize,
+    },
+    /// The section count exceeds [`MAX_SECTIONS`] or the table does not fit.
+    BadSectionCount(u16),
+    /// A section's payload lies outside the payload area.
+    SectionOutOfBounds {
+        /// Section id.
+        id: u16,
+        /// Offset of its table entry.
+        offset: usize,
+    },
+    /// Two sections' payloads overlap.
+    OverlappingSections {
+        /// Id of the earlier table entry.
+        first: u16,
+        /// Id of the later table entry.
+        second: u16,
+    },
+    /// A section id appears twice.
+    DuplicateSection {
+        /// Section id.
+        id: u16,
+        /// Offset of the second table entry.
+        offset: usize,
+    },
+    /// A section this parser does not know is flagged [`FLAG_REQUIRED`].
+    UnknownRequiredSection {
+        /// Section id.
+        id: u16,
+        /// Offset of its table entry.
+        offset: usize,
+    },
+    /// A section the format version requires is absent.
+    MissingSection(u16),
+    /// A section's length does not fit its contents.
+    SectionLength {
+        /// Section id.
+        id: u16,
+        /// Offset of the section's payload.
+        offset: usize,
+        /// Its length.
+        len: usize,
+    },
+    /// A value is not finite or outside its physical range (see [`Field::limit`]).
+    OutOfRange {
+        /// The value.
+        field: Field,
+        /// Offset of its first byte.
+        offset: usize,
+    },
+    /// An enumeration code (model kind, method, form) is unknown or does not fit.
+    BadCode {
+        /// The field.
+        field: Field,
+        /// Offset of the code byte.
+        offset: usize,
+        /// The code.
+        code: u8,
+    },
+    /// Polynomial order outside 1..=4.
+    UnsupportedOrder {
+        /// The order.
+        order: u8,
+        /// Offset of the order byte.
+        offset: usize,
+    },
+    /// Knot count outside 2..=8.
+    KnotCount {
+        /// The count.
+        count: u8,
+        /// Offset of the count byte.
+        offset: usize,
+    },
+    /// A knot temperature is not above the previous one.
+    KnotsNotIncreasing {
+        /// Index of the offending knot.
+        knot: u8,
+        /// Offset of its temperature.
+        offset: usize,
+    },
+    /// The temperature range is empty or does not contain T0.
+    BadRange {
+        /// Offset of the range section's payload.
+        offset: usize,
+    },
+    /// K at T0 is singular or ill-conditioned.
+    SingularK,
+    /// K(T) becomes singular, or a scale factor leaves [1/2, 2]× its T0 value, inside the
+    /// valid temperature range.
+    SingularInRange,
+    /// Any other rejection by [`Calibration::new`].
+    Calibration(CalibrationError),
+    /// The encoder's output buffer is too small.
+    BufferTooSmall {
+        /// Bytes needed.
+        needed: usize,
+    },
+}
+
+impl From<CalibrationError> for BlobError {
+    fn from(e: CalibrationError) -> Self {
+        match e {
+            CalibrationError::SingularK => BlobError::SingularK,
+            CalibrationError::SingularInRange => BlobError::SingularInRange,
+            other => BlobError::Calibration(other),
+        }
+    }
+}
+
+impl core::fmt::Display for BlobError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            BlobError::Truncated { needed, got } => write!(f, "truncated: {got} bytes, {needed} needed"),
+            BlobError::BadMagic => write!(f, "bad magic at byte 0x0000: not a calibration blob"),
+            BlobError::UnsupportedVersion(v) => {
+                write!(f, "unsupported format version {v} at byte 0x0004 (this parser reads {FORMAT_VERSION})")
+            }
+            BlobError::BadLength(n) => {
+                write!(f, "declared length {n} at byte 0x0008 outside [{MIN_BLOB_BYTES}, {MAX_BLOB_BYTES}]")
+            }
+            BlobError::LengthMismatch { declared, actual } => {
+                write!(f, "length mismatch: header at byte 0x0008 declares {declared} bytes, {actual} present")
+            }
+            BlobError::CrcMismatch { stored, computed } => {
+                write!(f, "CRC mismatch: stored 0x{stored:08x}, computed 0x{computed:08x}")
+            }
+            BlobError::ReservedNotZero { offset } => write!(f, "reserved bits not zero at byte 0x{offset:04x}"),
+            BlobError::BadSectionCount(n) => {
+                write!(f, "section count {n} at byte 0x0006 too large (at most {MAX_SECTIONS}, table inside the blob)")
+            }
+            BlobError::SectionOutOfBounds { id, offset } => {
+                write!(f, "section 0x{id:04x} (entry at byte 0x{offset:04x}) lies outside the payload area")
+            }
+            BlobError::OverlappingSections { first, second } => {
+                write!(f, "sections 0x{first:04x} and 0x{second:04x} overlap")
+            }
+            BlobError::DuplicateSection { id, offset } => {
+                write!(f, "duplicate section 0x{id:04x} (entry at byte 0x{offset:04x})")
+            }
+            BlobError::UnknownRequiredSection { id, offset } => {
+                write!(f, "unknown required section 0x{id:04x} (entry at byte 0x{offset:04x})")
+            }
+            BlobError::MissingSection(id) => write!(f, "missing required section 0x{id:04x}"),
+            BlobError::SectionLength { id, offset, len } => {
+                write!(f, "section 0x{id:04x} at byte 0x{offset:04x}: length {len} does not fit its contents")
+            }
+            BlobError::OutOfRange { field, offset } => {
+                write!(f, "{field} at byte 0x{offset:04x} out of range (must be {})", field.limit())
+            }
+            BlobError::BadCode { field, offset, code } => {
+                write!(f, "{field} at byte 0x{offset:04x}: code {code} invalid (must be {})", field.limit())
+            }
+            BlobError::UnsupportedOrder { order, offset } => write!(
+                f,
+                "temperature_model.term at byte 0x{offset:04x}: polynomial order {order} unsupported (1 to {MAX_POLY_ORDER})"
+            ),
+            BlobError::KnotCount { count, offset } => {
+                write!(f, "temperature_model.knot at byte 0x{offset:04x}: {count} knots unsupported (2 to {MAX_KNOTS})")
+            }
+            BlobError::KnotsNotIncreasing { knot, offset } => {
+                write!(f, "temperature_model.knot[{knot}].t_C at byte 0x{offset:04x}: knots not strictly increasing")
+            }
+            BlobError::BadRange { offset } => {
+                write!(f, "temp_range_C at byte 0x{offset:04x}: must satisfy min < max and contain t0_C")
+            }
+            BlobError::SingularK => write!(f, "k_V_per_g: K at T0 is singular or ill-conditioned"),
+            BlobError::SingularInRange => write!(
+                f,
+                "temperature_model: K(T) becomes singular, or a scale factor leaves [1/2, 2]x its T0 value, inside temp_range_C"
+            ),
+            BlobError::Calibration(e) => write!(f, "calibration rejected: {e}"),
+            BlobError::BufferTooSmall { needed } => write!(f, "output buffer too small: {needed} bytes needed"),
+        }
+    }
+}
+
+impl core::error::Error for BlobError {}
+
+// ---- CRC-32 -------------------------------------------------------------------------------
+
+/// The byte-wise table of the reflected CRC-32 polynomial 0xEDB88320 (1 KiB of flash).
+const CRC_TABLE: [u32; 256] = {
+    let mut t = [0u32; 256];
+    let mut i = 0;
+    while i < 256 {
+        let mut c = i as u32;
+        let mut k = 0;
+        while k < 8 {
+            c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+            k += 1;
+        }
+        t[i] = c;
+        i += 1;
+    }
+    t
+};
+
+/// CRC-32 as in IEEE 802.3, zlib and PNG: reflected, polynomial 0xEDB88320, initial value and
+/// final XOR 0xFFFFFFFF. `crc32(b"123456789") == 0xCBF43926`.
+pub fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &b in bytes {
+        // A `u8` index into a 256-entry table: always in bounds.
+        c = CRC_TABLE[usize::from(c as u8 ^ b)] ^ (c >> 8);
+    }
+    !c
+}
+
+// ---- little-endian readers ----------------------------------------------------------------
+
+fn u16_at(b: &[u8], off: usize) -> Option<u16> {
+    b.get(off..off.checked_add(2)?)?.try_into().ok().map(u16::from_le_bytes)
+}
+
+fn u32_at(b: &[u8], off: usize) -> Option<u32> {
+    b.get(off..off.checked_add(4)?)?.try_into().ok().map(u32::from_le_bytes)
+}
+
+fn f64_at(b: &[u8], off: usize) -> Option<f64> {
+    b.get(off..off.checked_add(8)?)?.try_into().ok().map(f64::from_le_bytes)
+}
+
+// ---- container ------------------------------------------------------------------------------
+
+/// One entry of the section table.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SectionEntry {
+    /// Section id (see [`section`]).
+    pub id: u16,
+    /// Flags ([`FLAG_REQUIRED`]).
+    pub flags: u16,
+    /// Offset of the payload from the start of the blob.
+    pub offset: u32,
+    /// Length of the payload.
+    pub len: u32,
+}
+
+impl SectionEntry {
+    fn start(&self) -> usize {
+        self.offset as usize
+    }
+    fn end(&self) -> usize {
+        self.offset as usize + self.len as usize
+    }
+}
+
+/// A blob whose header, CRC and section table are valid: a view over its bytes, giving each
+/// section's payload. What the sections say is checked by [`parse`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Blob<'a> {
+    bytes: &'a [u8],
+    entries: [SectionEntry; MAX_SECTIONS],
+    count: usize,
+}
+
+impl<'a> Blob<'a> {
+    /// Checks the container: length, magic, version, declared length, CRC, reserved header
+    /// word and section table (bounds, overlaps, duplicates, unknown required sections).
+    /// `bytes` must be exactly the blob (see [`parse_region`] for a flash region).
+    pub fn new(bytes: &'a [u8]) -> Result<Self, BlobError> {
+        let got = bytes.len();
+        if got < HEADER_BYTES {
+            return Err(BlobError::Truncated { needed: HEADER_BYTES, got });
+        }
+        if bytes.get(0..4) != Some(&MAGIC[..]) {
+            return Err(BlobError::BadMagic);
+        }
+        let version = u16_at(bytes, 4).unwrap_or(0);
+        if version != FORMAT_VERSION {
+            return Err(BlobError::UnsupportedVersion(version));
+        }
+        let declared32 = u32_at(bytes, 8).unwrap_or(0);
+        let declared = declared32 as usize;
+        if !(MIN_BLOB_BYTES..=MAX_BLOB_BYTES).contains(&declared) {
+            return Err(BlobError::BadLength(declared32));
+        }
+        if got < declared {
+            return Err(BlobError::Truncated { needed: declared, got });
+        }
+        if got > declared {
+            return Err(BlobError::LengthMismatch { declared, actual: got });
+        }
+        let body_end = declared - CRC_BYTES;
+        let stored = u32_at(bytes, body_end).unwrap_or(0);
+        let computed = crc32(bytes.get(..body_end).unwrap_or(&[]));
+        if stored != computed {
+            return Err(BlobError::CrcMismatch { stored, computed });
+        }
+        if u32_at(bytes, 12) != Some(0) {
+            return Err(BlobError::ReservedNotZero { offset: 12 });
+        }
+        let count16 = u16_at(bytes, 6).unwrap_or(u16::MAX);
+        let count = count16 as usize;
+        let table_end = HEADER_BYTES + ENTRY_BYTES * count;
+        if count > MAX_SECTIONS || table_end > body_end {
+            return Err(BlobError::BadSectionCount(count16));
+        }
+        let mut entries = [SectionEntry::default(); MAX_SECTIONS];
+        for k in 0..count {
+            let at = HEADER_BYTES + ENTRY_BYTES * k;
+            let e = SectionEntry {
+                id: u16_at(bytes, at).unwrap_or(0),
+                flags: u16_at(bytes, at + 2).unwrap_or(0),
+                offset: u32_at(bytes, at + 4).unwrap_or(u32::MAX),
+                len: u32_at(bytes, at + 8).unwrap_or(u32::MAX),
+            };
+            if e.flags & !FLAG_REQUIRED != 0 {
+                return Err(BlobError::ReservedNotZero { offset: at + 2 });
+            }
+            // Offsets and lengths are u32 and usize is at least 32 bits on every supported
+            // target, but the sum is computed checked anyway.
+            let end = (e.offset as usize).checked_add(e.len as usize);
+            if (e.offset as usize) < table_end || end.is_none_or(|end| end > body_end) {
+                return Err(BlobError::SectionOutOfBounds { id: e.id, offset: at });
+            }
+            for prev in entries.iter().take(k) {
+                if prev.id == e.id {
+                    return Err(BlobError::DuplicateSection { id: e.id, offset: at });
+                }
+                if e.len > 0 && prev.len > 0 && e.start() < prev.end() && prev.start() < e.end() {
+                    return Err(BlobError::OverlappingSections { first: prev.id, second: e.id });
+                }
+            }
+            if e.flags & FLAG_REQUIRED != 0 && !section::KNOWN.contains(&e.id) {
+                return Err(BlobError::UnknownRequiredSection { id: e.id, offset: at });
+            }
+            if let Some(slot) = entries.get_mut(k) {
+                *slot = e;
+            }
+        }
+        Ok(Blob { bytes, entries, count })
+    }
+
+    /// The whole blob.
+    pub fn bytes(&self) -> &'a [u8] {
+        self.bytes
+    }
+
+    /// The section table, in table order.
+    pub fn sections(&self) -> &[SectionEntry] {
+        self.entries.get(..self.count).unwrap_or(&[])
+    }
+
+    /// The entry of section `id`, if present.
+    pub fn entry(&self, id: u16) -> Option<SectionEntry> {
+        self.sections().iter().find(|e| e.id == id).copied()
+    }
+
+    /// The payload of section `id`, if present.
+    pub fn section(&self, id: u16) -> Option<&'a [u8]> {
+        let e = self.entry(id)?;
+        self.bytes.get(e.start()..e.end())
+    }
+}
+
+// ---- contents -------------------------------------------------------------------------------
+
+/// A calibration date.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CalDate {
+    /// Year (1970..=9999).
+    pub year: u16,
+    /// Month (1..=12).
+    pub month: u8,
+    /// Day of the month.
+    pub day: u8,
+}
+
+impl CalDate {
+    /// True for a real calendar date within the format's years.
+    pub fn is_valid(&self) -> bool {
+        let y = self.year;
+        let leap = (y.is_multiple_of(4) && !y.is_multiple_of(100)) || y.is_multiple_of(400);
+        let days = match self.month {
+            1 | 3 | 5 | 7 | 8 | 10 | 12 => 31,
+            4 | 6 | 9 | 11 => 30,
+            2 if leap => 29,
+            2 => 28,
+            _ => return false,
+        };
+        (limits::YEAR_MIN..=limits::YEAR_MAX).contains(&self.year) && (1..=days).contains(&self.day)
+    }
+}
+
+/// The traceability data of a blob. Empty text and `None` mean "absent" (the sections are
+/// optional).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Meta<'a> {
+    /// The unit's serial number.
+    pub serial: &'a str,
+    /// When the unit was calibrated.
+    pub date: Option<CalDate>,
+    /// The tool (and its version) that produced the calibration.
+    pub tool_version: &'a str,
+}
+
+/// A fully checked blob: the calibration parameters, the traceability data and the container
+/// (for sections added by later versions, e.g. [`section::VIBRATION`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParsedCalibration<'a> {
+    /// What [`Calibration::new`] needs; it has accepted these.
+    pub params: CalibrationParams,
+    /// Serial, date, tool version.
+    pub meta: Meta<'a>,
+    /// The container.
+    pub blob: Blob<'a>,
+}
+
+impl ParsedCalibration<'_> {
+    /// The calibration in the working precision. [`parse`] has already run the same checks in
+    /// `f64` (they do not depend on `F`), so this does not fail for a parsed blob.
+    pub fn calibration<F: Float>(&self) -> Result<Calibration<F>, BlobError> {
+        Calibration::new(&self.params).map_err(BlobError::from)
+    }
+}
+
+/// A section's payload and where it starts in the blob.
+#[derive(Clone, Copy)]
+struct Payload<'a> {
+    id: u16,
+    bytes: &'a [u8],
+    base: usize,
+}
+
+impl<'a> Payload<'a> {
+    fn get(blob: &Blob<'a>, id: u16) -> Option<Self> {
+        let e = blob.entry(id)?;
+        Some(Payload { id, bytes: blob.section(id)?, base: e.start() })
+    }
+
+    fn require(blob: &Blob<'a>, id: u16) -> Result<Self, BlobError> {
+        Payload::get(blob, id).ok_or(BlobError::MissingSection(id))
+    }
+
+    fn expect_len(&self, len: usize) -> Result<(), BlobError> {
+        if self.bytes.len() == len { Ok(()) } else { Err(self.length_error()) }
+    }
+
+    fn length_error(&self) -> BlobError {
+        BlobError::SectionLength { id: self.id, offset: self.base, len: self.bytes.len() }
+    }
+
+    fn byte(&self, at: usize) -> u8 {
+        self.bytes.get(at).copied().unwrap_or(0)
+    }
+
+    /// The f64 at `at` if `ok` accepts it, else [`BlobError::OutOfRange`] naming `field`.
+    fn value(&self, at: usize, field: Field, ok: impl Fn(f64) -> bool) -> Result<f64, BlobError> {
+        match f64_at(self.bytes, at) {
+            Some(x) if x.is_finite() && ok(x) => Ok(x),
+            _ => Err(BlobError::OutOfRange { field, offset: self.base + at }),
+        }
+    }
+
+    fn reserved_zero(&self, range: core::ops::Range<usize>) -> Result<(), BlobError> {
+        for at in range {
+            if self.byte(at) != 0 {
+                return Err(BlobError::ReservedNotZero { offset: self.base + at });
+            }
+        }
+        Ok(())
+    }
+
+    fn text(&self, field: Field) -> Result<&'a str, BlobError> {
+        let b = self.bytes;
+        if b.is_empty() || b.len() > MAX_TEXT_BYTES || !b.iter().all(|c| (0x20..=0x7e).contains(c)) {
+            return Err(BlobError::OutOfRange { field, offset: self.base });
+        }
+        core::str::from_utf8(b).map_err(|_| BlobError::OutOfRange { field, offset: self.base })
+    }
+}
+
+fn in_temp_limits(t: f64) -> bool {
+    (limits::TEMP_MIN_C..=limits::TEMP_MAX_C).contains(&t)
+}
+
+/// |K_ii| within the scale-factor limits.
+fn scale_ok(k_ii: f64) -> bool {
+    (limits::SCALE_FACTOR_MIN_V_PER_G..=limits::SCALE_FACTOR_MAX_V_PER_G).contains(&k_ii.abs())
+}
+
+/// A change of the constants (one knot, or one polynomial term at its largest |ΔT|, `scale`
+/// = ΔT_max^n) is plausible: see [`Field::limit`].
+fn read_coef_set(
+    p: &Payload<'_>,
+    at: usize,
+    k: &[[f64; 3]; 3],
+    scale: f64,
+    field_du0: impl Fn(u8) -> Field,
+    field_rel: impl Fn(u8, u8) -> Field,
+) -> Result<CoefDelta<f64>, BlobError> {
+    let mut a = [0.0; 12];
+    for (n, slot) in a.iter_mut().enumerate() {
+        let off = at + 8 * n;
+        *slot = if n < 3 {
+            p.value(off, field_du0(n as u8), |x| x.abs() * scale <= limits::DU0_MAX_V)?
+        } else {
+            let (i, j) = ((n - 3) / 3, (n - 3) % 3);
+            let (k_ij, k_ii) = (k[i][j], k[i][i]);
+            if i == j {
+                p.value(off, field_rel(i as u8, j as u8), |x| x.abs() * scale <= limits::REL_SCALE_MAX)?
+            } else {
+                p.value(off, field_rel(i as u8, j as u8), |x| {
+                    (k_ij * x).abs() * scale <= limits::CROSS_RATIO_MAX * k_ii.abs()
+                })?
+            }
+        };
+    }
+    Ok(CoefDelta::from_array(&a))
+}
+
+/// Checks a blob completely and returns its calibration: the container ([`Blob::new`]), every
+/// section of format version 1, each value against its physical range ([`limits`]), and
+/// finally [`Calibration::new`]'s checks. `bytes` must be exactly the blob.
+pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
+    let blob = Blob::new(bytes)?;
+    for id in section::MANDATORY {
+        Payload::require(&blob, id)?;
+    }
+
+    // Constants at T0.
+    let p = Payload::require(&blob, section::CONSTANTS)?;
+    p.expect_len(CONSTANTS_BYTES)?;
+    let t0_c = p.value(0, Field::T0, in_temp_limits)?;
+    let mut k = [[0.0; 3]; 3];
+    for i in 0..3 {
+        k[i][i] = p.value(8 + 8 * (4 * i), Field::K { row: i as u8, col: i as u8 }, scale_ok)?;
+    }
+    for i in 0..3 {
+        for j in 0..3 {
+            if i != j {
+                let k_ii = k[i][i];
+                k[i][j] = p.value(8 + 8 * (3 * i + j), Field::K { row: i as u8, col: j as u8 }, |x| {
+                    x.abs() <= limits::CROSS_RATIO_MAX * k_ii.abs()
+                })?;
+            }
+        }
+    }
+    let mut u0_v = [0.0; 3];
+    for (i, u) in u0_v.iter_mut().enumerate() {
+        *u = p.value(80 + 8 * i, Field::U0 { axis: i as u8 }, |x| x.abs() <= limits::U0_MAX_V)?;
+    }
+
+    // Temperature range.
+    let p = Payload::require(&blob, section::TEMP_RANGE)?;
+    p.expect_len(TEMP_RANGE_BYTES)?;
+    let lo = p.value(0, Field::TempRange { end: 0 }, in_temp_limits)?;
+    let hi = p.value(8, Field::TempRange { end: 1 }, in_temp_limits)?;
+    if !(lo < hi && lo <= t0_c && t0_c <= hi) {
+        return Err(BlobError::BadRange { offset: p.base });
+    }
+
+    // Temperature model.
+    let p = Payload::require(&blob, section::TEMP_MODEL)?;
+    if p.bytes.len() < MODEL_HEADER_BYTES {
+        return Err(p.length_error());
+    }
+    let kind = p.byte(0);
+    let count = p.byte(1);
+    let model = match kind {
+        KIND_POLY => {
+            let order = count as usize;
+            if !(1..=MAX_POLY_ORDER).contains(&order) {
+                return Err(BlobError::UnsupportedOrder { order: count, offset: p.base + 1 });
+            }
+            p.reserved_zero(2..MODEL_HEADER_BYTES)?;
+            p.expect_len(MODEL_HEADER_BYTES + COEF_SET_BYTES * order)?;
+            let span = (lo - t0_c).abs().max((hi - t0_c).abs());
+            let mut coef = [CoefDelta::zero(); MAX_POLY_ORDER];
+            let mut scale = 1.0;
+            for (n, c) in coef.iter_mut().enumerate().take(order) {
+                scale *= span;
+                let t = n as u8;
+                *c = read_coef_set(
+                    &p,
+                    MODEL_HEADER_BYTES + COEF_SET_BYTES * n,
+                    &k,
+                    scale,
+                    |axis| Field::TermAlpha { term: t, axis },
+                    |row, col| Field::TermRelK { term: t, row, col },
+                )?;
+            }
+            TempModel::Poly { order: count, coef }
+        }
+        KIND_PWL => {
+            let n = count as usize;
+            if !(2..=MAX_KNOTS).contains(&n) {
+                return Err(BlobError::KnotCount { count, offset: p.base + 1 });
+            }
+            p.reserved_zero(2..MODEL_HEADER_BYTES)?;
+            p.expect_len(MODEL_HEADER_BYTES + (8 + COEF_SET_BYTES) * n)?;
+            let mut knots_c = [0.0; MAX_KNOTS];
+            for (i, slot) in knots_c.iter_mut().enumerate().take(n) {
+                *slot = p.value(MODEL_HEADER_BYTES + 8 * i, Field::Knot { knot: i as u8 }, in_temp_limits)?;
+            }
+            for i in 1..n {
+                if let (Some(a), Some(b)) = (knots_c.get(i - 1), knots_c.get(i))
+                    && !(b > a)
+                {
+                    return Err(BlobError::KnotsNotIncreasing {
+                        knot: i as u8,
+                        offset: p.base + MODEL_HEADER_BYTES + 8 * i,
+                    });
+                }
+            }
+            let mut at_knot = [CoefDelta::zero(); MAX_KNOTS];
+            let sets = MODEL_HEADER_BYTES + 8 * n;
+            for (i, c) in at_knot.iter_mut().enumerate().take(n) {
+                let kn = i as u8;
+                *c = read_coef_set(
+                    &p,
+                    sets + COEF_SET_BYTES * i,
+                    &k,
+                    1.0,
+                    |axis| Field::KnotDu0 { knot: kn, axis },
+                    |row, col| Field::KnotRelK { knot: kn, row, col },
+                )?;
+            }
+            TempModel::Pwl { n_knots: count, knots_c, at_knot }
+        }
+        code => return Err(BlobError::BadCode { field: Field::ModelKind, offset: p.base, code }),
+    };
+
+    // Method.
+    let p = Payload::require(&blob, section::METHOD)?;
+    p.expect_len(METHOD_BYTES)?;
+    let (m, form) = (p.byte(0), p.byte(1));
+    let method = match (m, form) {
+        (0, 0) => Method::Uncorrected,
+        (1, 0) => Method::CoefficientCorrection,
+        (2, 1) => Method::OutputCorrection(Form::Full),
+        (2, 2) => Method::OutputCorrection(Form::Simplified),
+        (2, 3) => Method::OutputCorrection(Form::Linearized),
+        (0..=2, code) => return Err(BlobError::BadCode { field: Field::Form, offset: p.base + 1, code }),
+        (code, _) => return Err(BlobError::BadCode { field: Field::Method, offset: p.base, code }),
+    };
+    p.reserved_zero(2..METHOD_BYTES)?;
+
+    // Traceability.
+    let mut meta = Meta::default();
+    if let Some(p) = Payload::get(&blob, section::SERIAL) {
+        meta.serial = p.text(Field::Serial)?;
+    }
+    if let Some(p) = Payload::get(&blob, section::TOOL_VERSION) {
+        meta.tool_version = p.text(Field::ToolVersion)?;
+    }
+    if let Some(p) = Payload::get(&blob, section::CAL_DATE) {
+        p.expect_len(CAL_DATE_BYTES)?;
+        let date = CalDate { year: u16_at(p.bytes, 0).unwrap_or(0), month: p.byte(2), day: p.byte(3) };
+        if !date.is_valid() {
+            return Err(BlobError::OutOfRange { field: Field::CalDate, offset: p.base });
+        }
+        meta.date = Some(date);
+    }
+
+    let params =
+        CalibrationParams { constants: Constants { k_v_per_g: k, u0_v }, t0_c, model, method, temp_range_c: (lo, hi) };
+    Calibration::<f64>::new(&params)?;
+    Ok(ParsedCalibration { params, meta, blob })
+}
+
+/// Parses the blob at the start of a flash region (e.g. the whole CALIB region): the blob's
+/// own declared length selects the bytes, the rest of the region (erased flash) is ignored.
+pub fn parse_region(region: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
+    let declared = u32_at(region, 8)
+        .map(|n| n as usize)
+        .filter(|n| (HEADER_BYTES..=region.len()).contains(n))
+        .unwrap_or(region.len());
+    parse(region.get(..declared).unwrap_or(region))
+}
+
+// ---- encoder ---------------------------------------------------------------------------------
+
+/// The ids, flags and payload lengths the encoder writes for `params` and `meta`, in id
+/// order; unused slots have id 0.
+fn layout(params: &CalibrationParams, meta: &Meta<'_>) -> ([SectionEntry; MAX_SECTIONS], usize) {
+    let model_len = match params.model {
+        TempModel::Poly { order, .. } => MODEL_HEADER_BYTES + COEF_SET_BYTES * order as usize,
+        TempModel::Pwl { n_knots, .. } => MODEL_HEADER_BYTES + (8 + COEF_SET_BYTES) * n_knots as usize,
+    };
+    let all = [
+        (section::CONSTANTS, FLAG_REQUIRED, CONSTANTS_BYTES, true),
+        (section::TEMP_MODEL, FLAG_REQUIRED, model_len, true),
+        (section::METHOD, FLAG_REQUIRED, METHOD_BYTES, true),
+        (section::TEMP_RANGE, FLAG_REQUIRED, TEMP_RANGE_BYTES, true),
+        (section::SERIAL, 0, meta.serial.len(), !meta.serial.is_empty()),
+        (section::CAL_DATE, 0, CAL_DATE_BYTES, meta.date.is_some()),
+        (section::TOOL_VERSION, 0, meta.tool_version.len(), !meta.tool_version.is_empty()),
+    ];
+    let mut out = [SectionEntry::default(); MAX_SECTIONS];
+    let mut n = 0;
+    for (id, flags, len, present) in all {
+        if present && let Some(slot) = out.get_mut(n) {
+            *slot = SectionEntry { id, flags, offset: 0, len: len.min(u32::MAX as usize) as u32 };
+            n += 1;
+        }
+    }
+    (out, n)
+}
+
+fn align8(x: usize) -> usize {
+    x.div_ceil(8) * 8
+}
+
+/// A bounds-checked writer over the output buffer.
+struct Writer<'a> {
+    out: &'a mut [u8],
+}
+
+impl Writer<'_> {
+    fn put(&mut self, at: usize, bytes: &[u8]) -> Result<(), BlobError> {
+        let needed = at.saturating_add(bytes.len());
+        match self.out.get_mut(at..needed) {
+            Some(dst) => {
+                dst.copy_from_slice(bytes);
+                Ok(())
+            }
+            None => Err(BlobError::BufferTooSmall { needed }),
+        }
+    }
+    fn f64s(&mut self, at: usize, xs: &[f64]) -> Result<(), BlobError> {
+        for (n, x) in xs.iter().enumerate() {
+            self.put(at + 8 * n, &x.to_le_bytes())?;
+        }
+        Ok(())
+    }
+}
+
+/// Writes `params` and `meta` as a version-1 blob into `out` and returns its length. Sections
+/// are written in id order at 8-byte-aligned offsets, padding zero; the mandatory ones carry
+/// [`FLAG_REQUIRED`], the traceability ones (omitted when empty) do not.
+///
+/// The written blob is then checked by [`parse`], so the encoder refuses exactly what the
+/// firmware would refuse, with the same error (offsets refer to the written blob). Polynomial
+/// coefficients above the order and knots beyond the count are not stored (they are zero
+/// after parsing).
+pub fn encode(params: &CalibrationParams, meta: &Meta<'_>, out: &mut [u8]) -> Result<usize, BlobError> {
+    match params.model {
+        TempModel::Poly { order, .. } if !(1..=MAX_POLY_ORDER).contains(&(order as usize)) => {
+            return Err(BlobError::UnsupportedOrder { order, offset: 0 });
+        }
+        TempModel::Pwl { n_knots, .. } if !(2..=MAX_KNOTS).contains(&(n_knots as usize)) => {
+            return Err(BlobError::KnotCount { count: n_knots, offset: 0 });
+        }
+        _ => {}
+    }
+    let (mut entries, n) = layout(params, meta);
+    let mut at = align8(HEADER_BYTES + ENTRY_BYTES * n);
+    for e in entries.iter_mut().take(n) {
+        e.offset = at as u32;
+        // Text too long to store: refused here, before it could overflow the region.
+        let field = match e.id {
+            section::SERIAL => Some(Field::Serial),
+            section::TOOL_VERSION => Some(Field::ToolVersion),
+            _ => None,
+        };
+        if let Some(field) = field
+            && e.len as usize > MAX_TEXT_BYTES
+        {
+            return Err(BlobError::OutOfRange { field, offset: at });
+        }
+        at = align8(at + e.len as usize);
+    }
+    let total = at + CRC_BYTES;
+    if total > MAX_BLOB_BYTES || total > out.len() {
+        return Err(BlobError::BufferTooSmall { needed: total });
+    }
+    let mut w = Writer { out };
+    if let Some(region) = w.out.get_mut(..total) {
+        region.fill(0);
+    }
+    w.put(0, &MAGIC)?;
+    w.put(4, &FORMAT_VERSION.to_le_bytes())?;
+    w.put(6, &(n as u16).to_le_bytes())?;
+    w.put(8, &(total as u32).to_le_bytes())?;
+    for (k, e) in entries.iter().take(n).enumerate() {
+        let t = HEADER_BYTES + ENTRY_BYTES * k;
+        w.put(t, &e.id.to_le_bytes())?;
+        w.put(t + 2, &e.flags.to_le_bytes())?;
+        w.put(t + 4, &e.offset.to_le_bytes())?;
+        w.put(t + 8, &e.len.to_le_bytes())?;
+        let at = e.offset as usize;
+        match e.id {
+            section::CONSTANTS => {
+                let c = &params.constants;
+                w.f64s(at, &[params.t0_c])?;
+                for i in 0..3 {
+                    w.f64s(at + 8 + 24 * i, &c.k_v_per_g[i])?;
+                }
+                w.f64s(at + 80, &c.u0_v)?;
+            }
+            section::TEMP_MODEL => match &params.model {
+                TempModel::Poly { order, coef } => {
+                    w.put(at, &[KIND_POLY, *order])?;
+                    for (n, c) in coef.iter().take(*order as usize).enumerate() {
+                        w.f64s(at + MODEL_HEADER_BYTES + COEF_SET_BYTES * n, &c.to_array())?;
+                    }
+                }
+                TempModel::Pwl { n_knots, knots_c, at_knot } => {
+                    let nk = *n_knots as usize;
+                    w.put(at, &[KIND_PWL, *n_knots])?;
+                    w.f64s(at + MODEL_HEADER_BYTES, knots_c.get(..nk).unwrap_or(&[]))?;
+                    for (i, c) in at_knot.iter().take(nk).enumerate() {
+                        w.f64s(at + MODEL_HEADER_BYTES + 8 * nk + COEF_SET_BYTES * i, &c.to_array())?;
+                    }
+                }
+            },
+            section::METHOD => {
+                let code = match params.method {
+                    Method::Uncorrected => [0, 0],
+                    Method::CoefficientCorrection => [1, 0],
+                    Method::OutputCorrection(Form::Full) => [2, 1],
+                    Method::OutputCorrection(Form::Simplified) => [2, 2],
+                    Method::OutputCorrection(Form::Linearized) => [2, 3],
+                };
+                w.put(at, &code)?;
+            }
+            section::TEMP_RANGE => w.f64s(at, &[params.temp_range_c.0, params.temp_range_c.1])?,
+            section::SERIAL => w.put(at, meta.serial.as_bytes())?,
+            section::TOOL_VERSION => w.put(at, meta.tool_version.as_bytes())?,
+            section::CAL_DATE => {
+                if let Some(d) = meta.date {
+                    w.put(at, &d.year.to_le_bytes())?;
+                    w.put(at + 2, &[d.month, d.day])?;
+                }
+            }
+            _ => {}
+        }
+    }
+    let body_end = total - CRC_BYTES;
+    let crc = crc32(w.out.get(..body_end).unwrap_or(&[]));
+    w.put(body_end, &crc.to_le_bytes())?;
+    parse(w.out.get(..total).unwrap_or(&[]))?;
+    Ok(total)
+}
+
+/// Recomputes and stores the CRC of a blob whose header declares its length (for tools that
+/// patch a blob, and for tests that build invalid contents under a valid CRC). Returns false
+/// when the declared length does not fit `bytes`.
+pub fn reseal(bytes: &mut [u8]) -> bool {
+    let Some(declared) = u32_at(bytes, 8).map(|n| n as usize) else { return false };
+    if !(MIN_BLOB_BYTES..=bytes.len()).contains(&declared) {
+        return false;
+    }
+    let body_end = declared - CRC_BYTES;
+    let crc = crc32(bytes.get(..body_end).unwrap_or(&[]));
+    match bytes.get_mut(body_end..declared) {
+        Some(dst) => {
+            dst.copy_from_slice(&crc.to_le_bytes());
+            true
+        }
+        None => false,
+    }
+}
