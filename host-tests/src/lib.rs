@@ -3,9 +3,9 @@
 
 use bins_comp::{Constants, Mat3, Vec3};
 
-/// Path of a file in the shared project data (`../shared/data` from the repository root).
+/// Path of a file in the repository's `data/` folder (the papers' tables as CSV).
 pub fn shared_data(name: &str) -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(name)
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data").join(name)
 }
 
 /// Reads `paper-constants.csv`: (temperature, constants) per row.
