@@ -1,7 +1,7 @@
 //! The temperature paper's unit: Tables T1/T2 (constants at −40, +20, +70 °C) and Table T3
 //! (its two-range temperature coefficients), plus the calibrations the demo and the firmware
 //! test vectors build from them. Values are copied digit for digit from the paper; the host
-//! tests cross-check them against `shared/data/paper-constants.csv`.
+//! tests cross-check them against `data/paper-constants.csv`.
 
 use crate::compensate::{Calibration, CalibrationError, CalibrationParams, Method};
 use crate::float::Float;
