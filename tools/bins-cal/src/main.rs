@@ -1,1 +1,42 @@
-fn main() {}
+//! `bins-cal`: the host tools of the compensation core. One subcommand per task, each in its
+//! own module under `cmd/`:
+//!
+//! | subcommand | module | does |
+//! |---|---|---|
+//! | `blob encode\|decode\|check` | [`cmd::blob`] | calibration file (TOML) ⇄ calibration blob, checks |
+//!
+//! Errors are printed as one line, `bins-cal: error: …`, naming the file and the key or byte
+//! offset; the exit status is 1 (2 for a usage error).
+
+mod cmd;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(name = "bins-cal", version, about = "Calibration tools for the triaxial accelerometer")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// The calibration blob flashed into the CALIB region.
+    Blob(cmd::blob::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Blob(args) => cmd::blob::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // `{:#}` prints the whole context chain on one line.
+            eprintln!("bins-cal: error: {}", format!("{e:#}").replace('\n', " "));
+            ExitCode::FAILURE
+        }
+    }
+}

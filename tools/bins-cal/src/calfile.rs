@@ -1,0 +1,422 @@
+//! The calibration file: one unit's calibration as TOML, with units in the key names (see
+//! `docs/calibration-blob.md`). Owns its serde types, the structural checks that name the
+//! offending key, and the conversions to and from [`CalibrationParams`] and the blob.
+//!
+//! Physical checks are not duplicated here: [`CalibrationFile::to_blob`] runs the core's
+//! encoder, which parses its own output, so a file is accepted exactly when the firmware would
+//! accept its blob. Errors from there name the field with the same key path as this file.
+
+use bins_comp::blob::{self, BlobError, CalDate, Meta};
+use bins_comp::temperature::{MAX_KNOTS, MAX_POLY_ORDER};
+use bins_comp::{CalibrationParams, CoefDelta, Constants, Form, Method, TempModel};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use toml::value::{Date, Datetime};
+
+/// A calibration file as written on disk.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrationFile {
+    /// The unit's serial number (1–32 printable ASCII characters).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub serial: Option<String>,
+    /// The calibration date (a TOML local date, e.g. `2024-01-15`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration_date: Option<Datetime>,
+    /// The tool that produced the calibration; filled in by the encoder when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tool_version: Option<String>,
+    /// T0 [°C].
+    #[serde(rename = "t0_C")]
+    pub t0_c: f64,
+    /// Calibrated temperature range [°C]: `[min, max]`.
+    #[serde(rename = "temp_range_C")]
+    pub temp_range_c: [f64; 2],
+    /// K at T0 [V/g], row-major.
+    #[serde(rename = "k_V_per_g")]
+    pub k_v_per_g: [[f64; 3]; 3],
+    /// U0 at T0 [V].
+    #[serde(rename = "u0_V")]
+    pub u0_v: [f64; 3],
+    /// Compensation method.
+    pub method: MethodSpec,
+    /// Temperature model.
+    pub temperature_model: ModelSpec,
+}
+
+/// `[method]`
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MethodSpec {
+    /// `kind`
+    pub kind: MethodKind,
+    /// `form`, for `output-correction` only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub form: Option<FormKind>,
+}
+
+/// `method.kind`
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MethodKind {
+    /// No temperature correction.
+    Uncorrected,
+    /// Method 1.
+    CoefficientCorrection,
+    /// Method 2.
+    OutputCorrection,
+}
+
+/// `method.form`
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FormKind {
+    /// T(5)/T(6).
+    Full,
+    /// T(7)/T(8).
+    Simplified,
+    /// −N·(ΔK·â + ΔU0).
+    Linearized,
+}
+
+/// `temperature_model.kind`
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModelKind {
+    /// Polynomial T(3): `[[temperature_model.term]]` tables.
+    Poly,
+    /// Piecewise-linear T(4): `[[temperature_model.knot]]` tables.
+    Pwl,
+}
+
+/// `[temperature_model]`
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelSpec {
+    /// `kind`
+    pub kind: ModelKind,
+    /// Piecewise-linear knots, increasing.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub knot: Vec<KnotSpec>,
+    /// Polynomial terms, power 1, 2, … in order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub term: Vec<TermSpec>,
+}
+
+/// `[[temperature_model.knot]]`: the change of the constants at one knot, relative to T0.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KnotSpec {
+    /// Knot temperature [°C].
+    #[serde(rename = "t_C")]
+    pub t_c: f64,
+    /// ΔU0 at the knot [V].
+    #[serde(rename = "du0_V")]
+    pub du0_v: [f64; 3],
+    /// ΔK_ij/K_ij at the knot [1].
+    pub rel_k: [[f64; 3]; 3],
+}
+
+/// `[[temperature_model.term]]`: the coefficients of ΔTⁿ.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TermSpec {
+    /// n.
+    pub power: u8,
+    /// α_n [V/°Cⁿ].
+    #[serde(rename = "alpha_V_per_Cn")]
+    pub alpha_v_per_cn: [f64; 3],
+    /// β_n on the diagonal, γ_n off it [1/°Cⁿ].
+    #[serde(rename = "rel_k_per_Cn")]
+    pub rel_k_per_cn: [[f64; 3]; 3],
+}
+
+/// Why a calibration file was rejected: the key and what is wrong with it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CalFileError {
+    /// Not TOML, a missing or unknown key, or a value of the wrong type.
+    #[error("{0}")]
+    Syntax(String),
+    /// A key whose value is structurally wrong.
+    #[error("{key}: {message}")]
+    Key {
+        /// Dotted key path, with array indices.
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A value the blob format refuses (physical range, singular K, …).
+    #[error("{}", describe(.0))]
+    Blob(BlobError),
+}
+
+fn key_error(key: impl Into<String>, message: impl Into<String>) -> CalFileError {
+    CalFileError::Key { key: key.into(), message: message.into() }
+}
+
+/// A blob error as a calibration-file user reads it: value errors name the key and its limit
+/// but not the byte offset (which refers to the encoded blob, not the file).
+pub fn describe(e: &BlobError) -> String {
+    match e {
+        BlobError::OutOfRange { field, .. } => format!("{field} out of range (must be {})", field.limit()),
+        BlobError::KnotsNotIncreasing { knot, .. } => {
+            format!("temperature_model.knot[{knot}].t_C: knots not strictly increasing")
+        }
+        BlobError::BadRange { .. } => "temp_range_C: must satisfy min < max and contain t0_C".to_string(),
+        other => other.to_string(),
+    }
+}
+
+/// The traceability data of a calibration, owned.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct OwnedMeta {
+    /// Serial ("" = absent).
+    pub serial: String,
+    /// Date.
+    pub date: Option<CalDate>,
+    /// Tool version ("" = absent).
+    pub tool_version: String,
+}
+
+impl OwnedMeta {
+    /// Borrowed view for the encoder.
+    pub fn as_meta(&self) -> Meta<'_> {
+        Meta { serial: &self.serial, date: self.date, tool_version: &self.tool_version }
+    }
+}
+
+impl CalibrationFile {
+    /// Parses TOML text.
+    pub fn from_toml(text: &str) -> Result<Self, CalFileError> {
+        toml::from_str(text).map_err(|e| CalFileError::Syntax(one_line(&e.to_string())))
+    }
+
+    /// Reads and parses a file; errors name the file.
+    pub fn read(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        Self::from_toml(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+    }
+
+    /// The file as TOML text, with a header comment.
+    pub fn to_toml(&self) -> String {
+        let body = toml::to_string(self).unwrap_or_else(|e| format!("# cannot serialise: {e}\n"));
+        format!(
+            "# Calibration of one triaxial accelerometer unit (bins-cal calibration file).\n\
+             # Format and limits: docs/calibration-blob.md. Units are in the key names.\n\n{}",
+            matrices_by_row(&body)
+        )
+    }
+
+    /// The core's parameters and the traceability data. Checks the structure (method and
+    /// form, model kind and its tables, term powers, date) and names the key at fault;
+    /// physical ranges are checked by [`to_blob`](Self::to_blob).
+    pub fn to_params(&self) -> Result<(CalibrationParams, OwnedMeta), CalFileError> {
+        let method = match (self.method.kind, self.method.form) {
+            (MethodKind::Uncorrected, None) => Method::Uncorrected,
+            (MethodKind::CoefficientCorrection, None) => Method::CoefficientCorrection,
+            (MethodKind::OutputCorrection, Some(f)) => Method::OutputCorrection(match f {
+                FormKind::Full => Form::Full,
+                FormKind::Simplified => Form::Simplified,
+                FormKind::Linearized => Form::Linearized,
+            }),
+            (MethodKind::OutputCorrection, None) => {
+                return Err(key_error("method.form", "required for kind = \"output-correction\""));
+            }
+            (_, Some(_)) => return Err(key_error("method.form", "allowed only for kind = \"output-correction\"")),
+        };
+        let m = &self.temperature_model;
+        let model = match m.kind {
+            ModelKind::Poly => {
+                if !m.knot.is_empty() {
+                    return Err(key_error("temperature_model.knot", "not allowed with kind = \"poly\""));
+                }
+                if !(1..=MAX_POLY_ORDER).contains(&m.term.len()) {
+                    return Err(key_error(
+                        "temperature_model.term",
+                        format!("{} terms; a polynomial has 1 to {MAX_POLY_ORDER}", m.term.len()),
+                    ));
+                }
+                let mut coef = [CoefDelta::zero(); MAX_POLY_ORDER];
+                for (n, (t, c)) in m.term.iter().zip(coef.iter_mut()).enumerate() {
+                    if t.power as usize != n + 1 {
+                        return Err(key_error(
+                            format!("temperature_model.term[{n}].power"),
+                            format!("{}, expected {} (terms in order of power)", t.power, n + 1),
+                        ));
+                    }
+                    *c = CoefDelta { du0_v: t.alpha_v_per_cn, rel_k: t.rel_k_per_cn };
+                }
+                TempModel::Poly { order: m.term.len() as u8, coef }
+            }
+            ModelKind::Pwl => {
+                if !m.term.is_empty() {
+                    return Err(key_error("temperature_model.term", "not allowed with kind = \"pwl\""));
+                }
+                if !(2..=MAX_KNOTS).contains(&m.knot.len()) {
+                    return Err(key_error(
+                        "temperature_model.knot",
+                        format!("{} knots; a piecewise-linear model has 2 to {MAX_KNOTS}", m.knot.len()),
+                    ));
+                }
+                let mut knots_c = [0.0; MAX_KNOTS];
+                let mut at_knot = [CoefDelta::zero(); MAX_KNOTS];
+                for (i, k) in m.knot.iter().enumerate() {
+                    knots_c[i] = k.t_c;
+                    at_knot[i] = CoefDelta { du0_v: k.du0_v, rel_k: k.rel_k };
+                }
+                TempModel::Pwl { n_knots: m.knot.len() as u8, knots_c, at_knot }
+            }
+        };
+        let date = match &self.calibration_date {
+            None => None,
+            Some(dt) => match (dt.date, dt.time, dt.offset) {
+                (Some(d), None, None) => Some(CalDate { year: d.year, month: d.month, day: d.day }),
+                _ => return Err(key_error("calibration_date", "must be a local date (YYYY-MM-DD), no time")),
+            },
+        };
+        let params = CalibrationParams {
+            constants: Constants { k_v_per_g: self.k_v_per_g, u0_v: self.u0_v },
+            t0_c: self.t0_c,
+            model,
+            method,
+            temp_range_c: (self.temp_range_c[0], self.temp_range_c[1]),
+        };
+        let meta = OwnedMeta {
+            serial: self.serial.clone().unwrap_or_default(),
+            date,
+            tool_version: self.tool_version.clone().unwrap_or_else(|| crate::TOOL_VERSION.to_string()),
+        };
+        if self.serial.as_deref() == Some("") {
+            return Err(key_error("serial", "empty; omit the key instead"));
+        }
+        if self.tool_version.as_deref() == Some("") {
+            return Err(key_error("tool_version", "empty; omit the key instead"));
+        }
+        Ok((params, meta))
+    }
+
+    /// The blob: [`to_params`](Self::to_params), then the core's encoder (which checks
+    /// everything the firmware checks).
+    pub fn to_blob(&self) -> Result<Vec<u8>, CalFileError> {
+        let (params, meta) = self.to_params()?;
+        let mut buf = [0u8; blob::MAX_BLOB_BYTES];
+        let n = blob::encode(&params, &meta.as_meta(), &mut buf).map_err(CalFileError::Blob)?;
+        Ok(buf[..n].to_vec())
+    }
+
+    /// The file for parameters and traceability data (the inverse of
+    /// [`to_params`](Self::to_params)).
+    pub fn from_params(params: &CalibrationParams, meta: &Meta<'_>) -> Self {
+        let method = match params.method {
+            Method::Uncorrected => MethodSpec { kind: MethodKind::Uncorrected, form: None },
+            Method::CoefficientCorrection => MethodSpec { kind: MethodKind::CoefficientCorrection, form: None },
+            Method::OutputCorrection(f) => MethodSpec {
+                kind: MethodKind::OutputCorrection,
+                form: Some(match f {
+                    Form::Full => FormKind::Full,
+                    Form::Simplified => FormKind::Simplified,
+                    Form::Linearized => FormKind::Linearized,
+                }),
+            },
+        };
+        let temperature_model = match &params.model {
+            TempModel::Poly { order, coef } => ModelSpec {
+                kind: ModelKind::Poly,
+                knot: Vec::new(),
+                term: coef
+                    .iter()
+                    .take(*order as usize)
+                    .enumerate()
+                    .map(|(n, c)| TermSpec { power: n as u8 + 1, alpha_v_per_cn: c.du0_v, rel_k_per_cn: c.rel_k })
+                    .collect(),
+            },
+            TempModel::Pwl { n_knots, knots_c, at_knot } => ModelSpec {
+                kind: ModelKind::Pwl,
+                knot: knots_c
+                    .iter()
+                    .zip(at_knot)
+                    .take(*n_knots as usize)
+                    .map(|(&t_c, c)| KnotSpec { t_c, du0_v: c.du0_v, rel_k: c.rel_k })
+                    .collect(),
+                term: Vec::new(),
+            },
+        };
+        let text = |s: &str| (!s.is_empty()).then(|| s.to_string());
+        CalibrationFile {
+            serial: text(meta.serial),
+            calibration_date: meta.date.map(|d| Datetime {
+                date: Some(Date { year: d.year, month: d.month, day: d.day }),
+                time: None,
+                offset: None,
+            }),
+            tool_version: text(meta.tool_version),
+            t0_c: params.t0_c,
+            temp_range_c: [params.temp_range_c.0, params.temp_range_c.1],
+            k_v_per_g: params.constants.k_v_per_g,
+            u0_v: params.constants.u0_v,
+            method,
+            temperature_model,
+        }
+    }
+
+    /// The file a blob holds; the blob is fully checked first.
+    pub fn from_blob(bytes: &[u8]) -> Result<Self, BlobError> {
+        let parsed = blob::parse(bytes)?;
+        Ok(Self::from_params(&parsed.params, &parsed.meta))
+    }
+}
+
+/// Puts each row of a 3×3 matrix value (`key = [[…], […], […]]`) on its own line.
+fn matrices_by_row(body: &str) -> String {
+    let mut out = String::with_capacity(body.len() + 256);
+    for line in body.lines() {
+        let split = line.split_once(" = [[").and_then(|(key, rest)| Some((key, rest.strip_suffix("]]")?)));
+        match split {
+            Some((key, inner)) if !key.contains('"') && inner.split("], [").count() == 3 => {
+                out.push_str(key);
+                out.push_str(" = [\n");
+                for row in inner.split("], [") {
+                    out.push_str("    [");
+                    out.push_str(row);
+                    out.push_str("],\n");
+                }
+                out.push_str("]\n");
+            }
+            _ => {
+                out.push_str(line);
+                out.push('\n');
+            }
+        }
+    }
+    out
+}
+
+/// Joins the TOML parser's multi-line message (position, source excerpt, reason) into one
+/// line that keeps the offending source line, e.g.
+/// "TOML parse error at line 6, column 8: `t0_C = "x"`: invalid type: string "x", expected f64".
+fn one_line(s: &str) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    for line in s.lines().map(str::trim).filter(|l| !l.is_empty()) {
+        if line.starts_with('|') {
+            continue; // the caret line
+        }
+        match line.split_once(" |") {
+            Some((n, src)) if !n.is_empty() && n.chars().all(|c| c.is_ascii_digit()) => {
+                parts.push(format!("`{}`", src.trim()));
+            }
+            _ => parts.push(line.to_string()),
+        }
+    }
+    parts.join(": ")
+}
+
+/// The calibration file's name of a method, e.g. `output-correction/simplified`.
+pub fn method_name(m: Method) -> &'static str {
+    match m {
+        Method::Uncorrected => "uncorrected",
+        Method::CoefficientCorrection => "coefficient-correction",
+        Method::OutputCorrection(Form::Full) => "output-correction/full",
+        Method::OutputCorrection(Form::Simplified) => "output-correction/simplified",
+        Method::OutputCorrection(Form::Linearized) => "output-correction/linearized",
+    }
+}

@@ -1,0 +1,21 @@
+//! # bins-cal: host tools of the compensation core
+//!
+//! The library half of the `bins-cal` command: the human-readable calibration file and the
+//! helpers the commands share. The binary (`src/main.rs`) holds one module per subcommand.
+//!
+//! | module | owns |
+//! |---|---|
+//! | [`calfile`] | the calibration file (TOML): types, checks naming the key, conversion to and from the core's parameters and the blob |
+//! | [`ihex`] | Intel HEX output |
+//! | [`memmap`] | the CALIB region's address, read from `memory.x` |
+//! | [`fsio`] | writing outputs atomically (temporary file + rename) |
+#![deny(missing_docs)]
+
+pub mod calfile;
+pub mod fsio;
+pub mod ihex;
+pub mod memmap;
+
+/// The tool's name and version, as stored in a blob's tool-version section when the
+/// calibration file names none.
+pub const TOOL_VERSION: &str = concat!("bins-cal ", env!("CARGO_PKG_VERSION"));
