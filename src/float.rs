@@ -2,7 +2,8 @@
 //! on the target and as `f64` on the host (the reference).
 //!
 //! Only operations whose results are identical on x86-64 (SSE) and on the Cortex-M4F FPU are
-//! used: IEEE add, subtract, multiply, divide and `libm`'s correctly rounded square root. No
+//! used: IEEE add, subtract, multiply, divide, `libm`'s correctly rounded square root and
+//! `libm`'s software `acos`, `exp`, `erfc` (built from the same basic operations). No
 //! fused multiply-add is ever requested, so the host's `f32` results equal the target's bit for
 //! bit.
 
@@ -46,6 +47,13 @@ pub trait Float:
     fn max(self, other: Self) -> Self;
     /// The smaller of two values; a NaN operand yields the other one.
     fn min(self, other: Self) -> Self;
+    /// Arc cosine [rad] (`libm`, software; identical on host and target).
+    fn acos(self) -> Self;
+    /// Exponential (`libm`, software; identical on host and target).
+    fn exp(self) -> Self;
+    /// Complementary error function `1 − erf(x)` (`libm`, software; identical on host and
+    /// target).
+    fn erfc(self) -> Self;
 }
 
 impl Float for f32 {
@@ -81,6 +89,18 @@ impl Float for f32 {
     fn min(self, other: Self) -> Self {
         libm::fminf(self, other)
     }
+    #[inline(always)]
+    fn acos(self) -> Self {
+        libm::acosf(self)
+    }
+    #[inline(always)]
+    fn exp(self) -> Self {
+        libm::expf(self)
+    }
+    #[inline(always)]
+    fn erfc(self) -> Self {
+        libm::erfcf(self)
+    }
 }
 
 impl Float for f64 {
@@ -115,6 +135,18 @@ impl Float for f64 {
     #[inline(always)]
     fn min(self, other: Self) -> Self {
         libm::fmin(self, other)
+    }
+    #[inline(always)]
+    fn acos(self) -> Self {
+        libm::acos(self)
+    }
+    #[inline(always)]
+    fn exp(self) -> Self {
+        libm::exp(self)
+    }
+    #[inline(always)]
+    fn erfc(self) -> Self {
+        libm::erfc(self)
     }
 }
 

@@ -22,6 +22,8 @@
 //! | [`ident`] | identification: six-position T(10), least squares, T(11)/T(12) |
 //! | [`paper`] | the temperature paper's Tables T1/T2/T3 as constants |
 //! | [`vectors`] | the test-vector record shared by the host and the firmware |
+//! | [`vibration`] | vibration error V(1)–V(23): conversion function, paper and exact VE, online moments, shake-table identification |
+//! | [`pipeline`] | the per-sample step with vibration-error subtraction |
 //! | [`blob`] | the calibration blob: byte format, parser, encoder, CRC-32, physical limits |
 #![no_std]
 #![forbid(unsafe_code)]
@@ -34,11 +36,15 @@ pub mod ident;
 pub mod linalg;
 pub mod model;
 pub mod paper;
+pub mod pipeline;
 pub mod temperature;
 pub mod vectors;
+pub mod vibration;
 
 pub use compensate::{Calibration, CalibrationError, CalibrationParams, Form, Method, Sample, Status};
 pub use float::Float;
 pub use linalg::{Mat3, Vec3};
 pub use model::Constants;
+pub use pipeline::{Pipeline, PipelineState, VibrationSource};
 pub use temperature::{CoefDelta, TempModel};
+pub use vibration::{ConversionFunction, Variant, Vibration, VibrationConfig, VibrationParams};

@@ -1,0 +1,160 @@
+//! The per-sample step with vibration-error subtraction: temperature compensation by
+//! [`Calibration::compensate`], then the predicted VE of each accelerometer (§7) subtracted
+//! from its axis. The configuration ([`Pipeline`]: calibration and VE model) is immutable;
+//! the running state ([`PipelineState`]: the online moment window) is separate and mutable.
+//!
+//! # Where the vibration comes from
+//!
+//! [`VibrationSource`] selects, per sample, what the VE is computed for:
+//!
+//! - `None`: nothing is subtracted.
+//! - `Profile(i)`: flight-phase profile `i` of the configuration (Tables V2/V3-like), with the
+//!   configuration's [`Variant`](crate::vibration::Variant). The compensated sample is a mean
+//!   over the vibration, `y = a_p + VE(a_p)` per axis; `a_p` is solved for
+//!   ([`solve_static_g`](crate::vibration::solve_static_g), a fixed number of Newton steps)
+//!   and `VE(a_p)` subtracted, so `y − VE = a_p`.
+//! - `Online`: the moments of the last `W` compensated samples ([`MomentWindow`]), for a
+//!   system that samples fast enough to see the vibration, referred back to the acceleration
+//!   by the gain of each conversion function at the window mean
+//!   ([`output_gains`](VibrationConfig::output_gains); the AL-15 at 6 g magnifies the
+//!   vibration by 2.5 %, which would overstate the VE by 5 %); the exact moment form is used
+//!   and `a_p` is solved from the window mean the same way. The window is fed on every step,
+//!   whatever the source, so it is ready when selected.
+//!
+//! # Policies
+//!
+//! - No estimate (window not full, unknown profile): nothing subtracted, flagged
+//!   [`Status::VIBRATION_ESTIMATE_NOT_READY`].
+//! - Static acceleration beyond ±[`MAX_STATIC_G`](crate::vibration::MAX_STATIC_G) on an
+//!   axis, or an online σ beyond [`MAX_LEVEL_G`]: clamped to the limit for the VE, flagged
+//!   [`Status::VIBRATION_OUT_OF_RANGE`]. Profiles beyond the limit are rejected at load.
+//! - Invalid calibration (output in volts) or a non-finite input: nothing subtracted and the
+//!   sample is kept out of the window.
+//!
+//! Allocation-free, panic-free and bounded time: one compensation, one window update (O(1)),
+//! three VE solutions of five evaluations each (a few dozen operations and, in the exact
+//! variant, one `acos` or `exp`/`erfc` each).
+
+use crate::compensate::{Calibration, Sample, Status};
+use crate::float::Float;
+use crate::linalg::Vec3;
+use crate::vibration::window::MomentWindow;
+use crate::vibration::{MAX_LEVEL_G, VibrationConfig};
+
+/// What the VE of a sample is computed for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VibrationSource {
+    /// No vibration compensation.
+    None,
+    /// The configuration's flight-phase profile with this index.
+    Profile(u8),
+    /// The online moment window.
+    Online,
+}
+
+/// The configuration of the per-sample step: calibration and VE model. Immutable after boot.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pipeline<F> {
+    cal: Calibration<F>,
+    vib: VibrationConfig<F>,
+}
+
+/// The running state of the per-sample step: the online moment window over `W` samples.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PipelineState<F, const W: usize> {
+    /// Moments of the last `W` compensated samples.
+    pub window: MomentWindow<F, W>,
+}
+
+impl<F: Float, const W: usize> Default for PipelineState<F, W> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<F: Float, const W: usize> PipelineState<F, W> {
+    /// The state at power-on: empty window.
+    pub fn new() -> Self {
+        PipelineState { window: MomentWindow::new() }
+    }
+}
+
+impl<F: Float> Pipeline<F> {
+    /// Joins a calibration and a VE configuration.
+    pub fn new(cal: Calibration<F>, vib: VibrationConfig<F>) -> Self {
+        Pipeline { cal, vib }
+    }
+
+    /// The calibration.
+    pub fn calibration(&self) -> &Calibration<F> {
+        &self.cal
+    }
+
+    /// The VE configuration.
+    pub fn vibration(&self) -> &VibrationConfig<F> {
+        &self.vib
+    }
+
+    /// The per-sample step: signals `u_v` [V] and temperature `temp_c` [°C] to specific
+    /// force [g] with the VE for `source` subtracted, and status.
+    #[inline]
+    pub fn step<const W: usize>(
+        &self,
+        state: &mut PipelineState<F, W>,
+        u_v: Vec3<F>,
+        temp_c: F,
+        source: VibrationSource,
+    ) -> Sample<F> {
+        self.step_with_ve(state, u_v, temp_c, source).0
+    }
+
+    /// [`step`](Self::step), also returning the VE [g] that was subtracted from each axis.
+    pub fn step_with_ve<const W: usize>(
+        &self,
+        state: &mut PipelineState<F, W>,
+        u_v: Vec3<F>,
+        temp_c: F,
+        source: VibrationSource,
+    ) -> (Sample<F>, Vec3<F>) {
+        let mut s = self.cal.compensate(u_v, temp_c);
+        let usable = self.cal.is_valid() && !s.status.contains(Status::NONFINITE_INPUT);
+        if usable {
+            state.window.push(&s.accel_g);
+        }
+        let mut ve = [F::ZERO; 3];
+        if usable {
+            match source {
+                VibrationSource::None => {}
+                VibrationSource::Profile(i) => match self.vib.profile(i as usize) {
+                    Some(v) => {
+                        let (e, clamped) = self.vib.correction_for_output_g(v, &s.accel_g);
+                        if clamped {
+                            s.status.insert(Status::VIBRATION_OUT_OF_RANGE);
+                        }
+                        ve = e;
+                    }
+                    None => s.status.insert(Status::VIBRATION_ESTIMATE_NOT_READY),
+                },
+                VibrationSource::Online => match state.window.moments() {
+                    Some(mut m) => {
+                        m.unscale(&self.vib.output_gains(&m));
+                        let sigma_clamped = m.clamp_sigma(F::of(MAX_LEVEL_G));
+                        let (e, clamped) = self.vib.correction_from_moments_g(&m, &m.mean_g);
+                        if sigma_clamped || clamped {
+                            s.status.insert(Status::VIBRATION_OUT_OF_RANGE);
+                        }
+                        ve = e;
+                    }
+                    None => s.status.insert(Status::VIBRATION_ESTIMATE_NOT_READY),
+                },
+            }
+        }
+        if !(ve[0].is_finite() && ve[1].is_finite() && ve[2].is_finite()) {
+            ve = [F::ZERO; 3];
+        }
+        for (a, e) in s.accel_g.iter_mut().zip(ve) {
+            *a -= e;
+        }
+        (s, ve)
+    }
+}

@@ -1,0 +1,285 @@
+//! Online estimate of the vibration from the compensated samples, for systems that sample
+//! fast enough to see it: running moments of each axis (mean, second to fourth central
+//! moments, mean absolute value) and the cross covariances over a sliding window of the last
+//! `W` samples, in a fixed ring buffer (no allocation, O(1) per sample).
+//!
+//! # Numerics
+//!
+//! The sums are taken of deviations `d = x − c` from a centre `c` near the window mean, so a
+//! large static acceleration (10 g) does not swamp a small vibration (0.01 g) by cancellation
+//! in `f32`. The running sums are updated by adding the new sample's powers and subtracting
+//! the oldest's; the rounding errors this leaves would grow without bound, so a second set of
+//! sums is accumulated from scratch over each pass of `W` samples and replaces the running set
+//! when the pass completes (it then covers exactly the ring's contents). The error of the
+//! running sums is thus that of at most `2W` additions, whatever the run length, and the
+//! centre is moved to the latest window mean at every replacement.
+
+use super::{AccelAxes, Axis, VibMoments};
+use crate::float::Float;
+use crate::linalg::Vec3;
+
+/// Power sums of the deviations from a centre.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Sums<F> {
+    s1: Vec3<F>,
+    s2: Vec3<F>,
+    s3: Vec3<F>,
+    s4: Vec3<F>,
+    /// Σ(|x| − |c|).
+    abs: Vec3<F>,
+    /// Σ d_x d_y, Σ d_y d_z, Σ d_z d_x.
+    cross: Vec3<F>,
+}
+
+impl<F: Float> Sums<F> {
+    const ZERO: Sums<F> = Sums {
+        s1: [F::ZERO; 3],
+        s2: [F::ZERO; 3],
+        s3: [F::ZERO; 3],
+        s4: [F::ZERO; 3],
+        abs: [F::ZERO; 3],
+        cross: [F::ZERO; 3],
+    };
+
+    /// Adds (`sign` = 1) or removes (`sign` = −1) sample `x` under centre `c`.
+    #[inline(always)]
+    fn update(&mut self, x: &Vec3<F>, c: &Vec3<F>, sign: F) {
+        let mut d = [F::ZERO; 3];
+        for i in 0..3 {
+            d[i] = x[i] - c[i];
+            let d2 = d[i] * d[i];
+            self.s1[i] += sign * d[i];
+            self.s2[i] += sign * d2;
+            self.s3[i] += sign * d2 * d[i];
+            self.s4[i] += sign * d2 * d2;
+            self.abs[i] += sign * (x[i].abs() - c[i].abs());
+        }
+        self.cross[0] += sign * d[0] * d[1];
+        self.cross[1] += sign * d[1] * d[2];
+        self.cross[2] += sign * d[2] * d[0];
+    }
+}
+
+/// Moments of the last `W` samples, per unit axis x, y, z.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WindowMoments<F> {
+    /// Window mean [g]: the static acceleration `a_p`.
+    pub mean_g: Vec3<F>,
+    /// Variance `⟨ã²⟩` [g²].
+    pub var_g2: Vec3<F>,
+    /// Third central moment `⟨ã³⟩` [g³].
+    pub m3_g3: Vec3<F>,
+    /// Fourth central moment `⟨ã⁴⟩` [g⁴].
+    pub m4_g4: Vec3<F>,
+    /// Covariances `⟨ã_x ã_y⟩`, `⟨ã_y ã_z⟩`, `⟨ã_z ã_x⟩` [g²].
+    pub cov_g2: Vec3<F>,
+    /// `⟨|a|⟩ − |⟨a⟩|` [g]: the rectification of the absolute value that drives the
+    /// asymmetry term.
+    pub abs_excess_g: Vec3<F>,
+}
+
+impl<F: Float> WindowMoments<F> {
+    /// The moments seen by accelerometer `axis` (IA central moments, IA·OA and IA·PA
+    /// covariances) and its IA `⟨|a3|⟩ − |⟨a3⟩|`.
+    pub fn on_accel(&self, axis: Axis) -> (VibMoments<F>, F) {
+        let pick = |v: &Vec3<F>| AccelAxes::from_unit(v, axis).ia;
+        // cov(IA, OA) and cov(IA, PA) from the cyclic pairs xy, yz, zx.
+        let (cov_oa, cov_pa) = match axis {
+            Axis::X => (self.cov_g2[2], self.cov_g2[0]),
+            Axis::Y => (self.cov_g2[0], self.cov_g2[1]),
+            Axis::Z => (self.cov_g2[1], self.cov_g2[2]),
+        };
+        let m = VibMoments {
+            m2_g2: pick(&self.var_g2),
+            m3_g3: pick(&self.m3_g3),
+            m4_g4: pick(&self.m4_g4),
+            cov_oa_g2: cov_oa,
+            cov_pa_g2: cov_pa,
+        };
+        (m, pick(&self.abs_excess_g))
+    }
+
+    /// Refers moments of the output back to the acceleration: the output of an axis is
+    /// `g·ã` (`g` = that axis's gain, see
+    /// [`VibrationConfig::output_gains`](super::VibrationConfig::output_gains)), so moments of
+    /// order k are divided by `g^k` and covariances by `g_i g_j`. Gains that are not positive
+    /// and finite are ignored.
+    pub fn unscale(&mut self, gains: &Vec3<F>) {
+        let mut r = [F::ONE; 3];
+        for i in 0..3 {
+            if gains[i] > F::ZERO && gains[i].is_finite() {
+                r[i] = F::ONE / gains[i];
+            }
+            self.var_g2[i] *= r[i] * r[i];
+            self.m3_g3[i] *= r[i] * r[i] * r[i];
+            self.m4_g4[i] *= r[i] * r[i] * r[i] * r[i];
+            self.abs_excess_g[i] *= r[i];
+        }
+        self.cov_g2[0] *= r[0] * r[1];
+        self.cov_g2[1] *= r[1] * r[2];
+        self.cov_g2[2] *= r[2] * r[0];
+    }
+
+    /// Limits the vibration to `max_sigma_g` per axis: an axis whose σ exceeds it has its
+    /// moments of order k scaled by `s^k` (`s = max/σ`) and its covariances by `s`, which keeps
+    /// the shape of the distribution. Returns true when anything was clamped.
+    pub fn clamp_sigma(&mut self, max_sigma_g: F) -> bool {
+        let mut scale = [F::ONE; 3];
+        let mut clamped = false;
+        for i in 0..3 {
+            let sigma = self.var_g2[i].sqrt();
+            if sigma > max_sigma_g {
+                clamped = true;
+                let s = max_sigma_g / sigma;
+                scale[i] = s;
+                self.var_g2[i] *= s * s;
+                self.m3_g3[i] *= s * s * s;
+                self.m4_g4[i] *= s * s * s * s;
+                self.abs_excess_g[i] *= s;
+            }
+        }
+        self.cov_g2[0] *= scale[0] * scale[1];
+        self.cov_g2[1] *= scale[1] * scale[2];
+        self.cov_g2[2] *= scale[2] * scale[0];
+        clamped
+    }
+}
+
+/// Sliding-window moment estimator over the last `W` samples (configuration-free state; `W`
+/// is the window length in samples). Choose `W` to span many vibration periods: the estimate
+/// of a sine's variance over a window of P periods is within about `1/(2πP)` of `a²/2`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MomentWindow<F, const W: usize> {
+    ring: [Vec3<F>; W],
+    /// Next slot to overwrite.
+    head: usize,
+    /// Samples held (≤ W).
+    filled: usize,
+    /// Samples added to `fresh` since the last replacement.
+    pass: usize,
+    /// Centre of `live`.
+    c_live: Vec3<F>,
+    /// Centre of `fresh`.
+    c_next: Vec3<F>,
+    /// Running sums over the ring's contents.
+    live: Sums<F>,
+    /// Sums over the current pass.
+    fresh: Sums<F>,
+}
+
+impl<F: Float, const W: usize> Default for MomentWindow<F, W> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<F: Float, const W: usize> MomentWindow<F, W> {
+    /// An empty window.
+    pub fn new() -> Self {
+        MomentWindow {
+            ring: [[F::ZERO; 3]; W],
+            head: 0,
+            filled: 0,
+            pass: 0,
+            c_live: [F::ZERO; 3],
+            c_next: [F::ZERO; 3],
+            live: Sums::ZERO,
+            fresh: Sums::ZERO,
+        }
+    }
+
+    /// Empties the window.
+    pub fn reset(&mut self) {
+        self.head = 0;
+        self.filled = 0;
+        self.pass = 0;
+        self.live = Sums::ZERO;
+        self.fresh = Sums::ZERO;
+    }
+
+    /// Samples currently held (reaches `W` and stays there).
+    pub fn len(&self) -> usize {
+        self.filled
+    }
+
+    /// True before the first sample.
+    pub fn is_empty(&self) -> bool {
+        self.filled == 0
+    }
+
+    /// True once `W` samples have been pushed (and `W > 0`).
+    pub fn is_full(&self) -> bool {
+        W > 0 && self.filled == W
+    }
+
+    /// Adds one sample [g] (x, y, z); the oldest drops out once the window is full. A sample
+    /// with a non-finite element is ignored (returns false). O(1), allocation- and panic-free.
+    pub fn push(&mut self, x: &Vec3<F>) -> bool {
+        if !(x[0].is_finite() && x[1].is_finite() && x[2].is_finite()) {
+            return false;
+        }
+        let Some(slot) = self.ring.get_mut(self.head) else { return false };
+        if self.filled == 0 {
+            self.c_live = *x;
+            self.c_next = *x;
+        }
+        let old = *slot;
+        *slot = *x;
+        self.live.update(x, &self.c_live, F::ONE);
+        if self.filled == W {
+            self.live.update(&old, &self.c_live, -F::ONE);
+        } else {
+            self.filled += 1;
+        }
+        self.fresh.update(x, &self.c_next, F::ONE);
+        self.head += 1;
+        if self.head >= W {
+            self.head = 0;
+        }
+        self.pass += 1;
+        if self.pass >= W {
+            // `fresh` now covers exactly the ring: it replaces the drifted running sums, and
+            // the next pass is centred on the current window mean.
+            self.live = self.fresh;
+            self.c_live = self.c_next;
+            let inv_n = F::ONE / F::of(W as f64);
+            for i in 0..3 {
+                self.c_next[i] = self.c_live[i] + self.live.s1[i] * inv_n;
+            }
+            self.fresh = Sums::ZERO;
+            self.pass = 0;
+        }
+        true
+    }
+
+    /// The moments of the window, or `None` until it is full.
+    pub fn moments(&self) -> Option<WindowMoments<F>> {
+        if !self.is_full() {
+            return None;
+        }
+        let inv_n = F::ONE / F::of(W as f64);
+        let s = &self.live;
+        let mut m = WindowMoments::default();
+        let mut mu = [F::ZERO; 3];
+        for i in 0..3 {
+            // Raw moments of d = x − c, then central moments about the mean offset μ.
+            let u = s.s1[i] * inv_n;
+            let r2 = s.s2[i] * inv_n;
+            let r3 = s.s3[i] * inv_n;
+            let r4 = s.s4[i] * inv_n;
+            let u2 = u * u;
+            mu[i] = u;
+            let mean = self.c_live[i] + u;
+            m.mean_g[i] = mean;
+            m.var_g2[i] = (r2 - u2).max(F::ZERO);
+            m.m3_g3[i] = r3 - F::of(3.0) * u * r2 + F::of(2.0) * u2 * u;
+            m.m4_g4[i] = (r4 - F::of(4.0) * u * r3 + F::of(6.0) * u2 * r2 - F::of(3.0) * u2 * u2).max(F::ZERO);
+            // ⟨|x|⟩ − |mean| = Σ(|x| − |c|)/n + |c| − |mean| ≥ 0 (Jensen).
+            m.abs_excess_g[i] = (s.abs[i] * inv_n + (self.c_live[i].abs() - mean.abs())).max(F::ZERO);
+        }
+        m.cov_g2[0] = s.cross[0] * inv_n - mu[0] * mu[1];
+        m.cov_g2[1] = s.cross[1] * inv_n - mu[1] * mu[2];
+        m.cov_g2[2] = s.cross[2] * inv_n - mu[2] * mu[0];
+        Some(m)
+    }
+}
