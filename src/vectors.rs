@@ -14,10 +14,16 @@
 //!
 //! The result the firmware writes back is the last 16 bytes of the same layout
 //! ([`RESULT_BYTES`]): `accel_g` and status.
+//!
+//! Variant indices from [`VIB_VARIANT_BASE`] on run the per-sample step with vibration-error
+//! subtraction ([`Pipeline`]) instead, see [`vibration_variant`].
 
 use crate::compensate::{Calibration, Form, Method, Sample, Status};
+use crate::float::Float;
 use crate::linalg::Vec3;
 use crate::paper;
+use crate::pipeline::{Pipeline, PipelineState, VibrationSource};
+use crate::vibration::{Variant, VibrationConfig, VibrationParams, tables};
 
 /// Size of one input record.
 pub const RECORD_BYTES: usize = 36;
@@ -68,6 +74,35 @@ pub fn calibrations() -> [Calibration<f32>; VARIANTS] {
         }
     }
     out
+}
+
+/// First variant index of the vibration records: `VIB_VARIANT_BASE + k` (k < 8) compensates
+/// with variant 1 (two-range model, method 1) and subtracts the exact VE of flight profile k
+/// ([`tables::flight_profiles`], AL-15 conversion functions on all three axes);
+/// `VIB_VARIANT_BASE + 8 + k` the same with the paper's formulas. Profile 7 does not exist,
+/// so its records carry [`Status::VIBRATION_ESTIMATE_NOT_READY`].
+pub const VIB_VARIANT_BASE: u32 = 32;
+/// Number of vibration variants.
+pub const VIB_VARIANTS: u32 = 16;
+
+/// The VE formulas and profile index of a vibration variant, `None` for other indices.
+pub fn vibration_variant(index: u32) -> Option<(Variant, u8)> {
+    let k = index.checked_sub(VIB_VARIANT_BASE)?;
+    match k {
+        0..=7 => Some((Variant::Exact, k as u8)),
+        8..=15 => Some((Variant::Paper, (k - 8) as u8)),
+        _ => None,
+    }
+}
+
+/// The VE configuration of the vibration variants: AL-15 on all three accelerometers, the
+/// flight profiles of Tables V2/V3; [`VibrationConfig::none`] if it failed to build.
+pub fn vibration_config<F: Float>(variant: Variant) -> VibrationConfig<F> {
+    let mut p = VibrationParams::new([tables::AL15; 3], variant);
+    let (profiles, n) = tables::flight_profiles();
+    p.profiles = profiles;
+    p.n_profiles = n;
+    VibrationConfig::new(&p).unwrap_or(VibrationConfig::none())
 }
 
 /// One decoded input record.
@@ -130,6 +165,12 @@ impl Record {
 /// Runs a record's inputs through its variant; an unknown variant gives the uncalibrated
 /// result.
 pub fn evaluate(cals: &[Calibration<f32>; VARIANTS], rec: &Record) -> Sample<f32> {
+    if let Some((variant, profile)) = vibration_variant(rec.variant) {
+        let cal = cals.get(1).copied().unwrap_or(Calibration::uncalibrated());
+        let pipeline = Pipeline::new(cal, vibration_config(variant));
+        let mut state = PipelineState::<f32, 1>::new();
+        return pipeline.step(&mut state, rec.u_v, rec.temp_c, VibrationSource::Profile(profile));
+    }
     match cals.get(rec.variant as usize) {
         Some(cal) => cal.compensate(rec.u_v, rec.temp_c),
         None => Calibration::<f32>::uncalibrated().compensate(rec.u_v, rec.temp_c),

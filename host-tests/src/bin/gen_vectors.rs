@@ -54,6 +54,24 @@ fn test_set(cals: &[Calibration<f32>; VARIANTS]) -> Vec<Record> {
         let variant = (uniform() * VARIANTS as f64) as u32;
         out.push(record(cals, variant, truth_signals(&f, t), t as f32));
     }
+    // Vibration-error subtraction: every vibration variant (exact and paper formulas, each
+    // flight profile and one missing profile) over accelerations up to and beyond the VE
+    // model's 10 g range, in and out of the calibrated temperature range.
+    for variant in vectors::VIB_VARIANT_BASE..vectors::VIB_VARIANT_BASE + vectors::VIB_VARIANTS {
+        for f in [
+            [0.0, 0.0, 1.0],
+            [9.5, -0.3, 0.2],
+            [-7.0, 4.0, -2.0],
+            [0.3, 0.2, -0.1],
+            [-1.0, 9.9, 0.5],
+            [11.0, -10.5, 0.0],
+        ] {
+            for t in [-40.0, 20.0, 45.0, 85.0] {
+                out.push(record(cals, variant, truth_signals(&f, t), t as f32));
+            }
+        }
+        out.push(record(cals, variant, [f32::NAN, 0.1, -0.1], 20.0));
+    }
     // The status policies' special inputs, on every variant and one unknown variant.
     let specials: [([f32; 3], f32); 8] = [
         ([f32::NAN, 0.1, -0.1], 20.0),
