@@ -6,12 +6,14 @@
 //! | module | owns |
 //! |---|---|
 //! | [`calfile`] | the calibration file (TOML): types, checks naming the key, conversion to and from the core's parameters and the blob |
+//! | [`constants_table`] | tables of the constants at several temperatures (CSV) |
 //! | [`ihex`] | Intel HEX output |
 //! | [`memmap`] | the CALIB region's address, read from `memory.x` |
 //! | [`fsio`] | writing outputs atomically (temporary file + rename) |
 #![deny(missing_docs)]
 
 pub mod calfile;
+pub mod constants_table;
 pub mod fsio;
 pub mod ihex;
 pub mod memmap;

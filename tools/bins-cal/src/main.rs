@@ -4,6 +4,8 @@
 //! | subcommand | module | does |
 //! |---|---|---|
 //! | `blob encode\|decode\|check` | [`cmd::blob`] | calibration file (TOML) ⇄ calibration blob, checks |
+//! | `tempco` | [`cmd::tempco`] | temperature coefficients from constants at several temperatures |
+//! | `vibration` | [`cmd::vibration`] | the VE table of a conversion function in an environment |
 //!
 //! Errors are printed as one line, `bins-cal: error: …`, naming the file and the key or byte
 //! offset; the exit status is 1 (2 for a usage error).
@@ -24,12 +26,18 @@ struct Cli {
 enum Command {
     /// The calibration blob flashed into the CALIB region.
     Blob(cmd::blob::Args),
+    /// Temperature coefficients T(11)/T(12) from constants measured at several temperatures.
+    Tempco(cmd::tempco::Args),
+    /// The vibration error of a conversion function in a vibration environment (Tables V4/V5).
+    Vibration(cmd::vibration::Args),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Blob(args) => cmd::blob::run(args),
+        Command::Tempco(args) => cmd::tempco::run(args),
+        Command::Vibration(args) => cmd::vibration::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

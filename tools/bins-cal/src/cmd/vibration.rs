@@ -1,0 +1,224 @@
+//! `bins-cal vibration`: the vibration error of a conversion function V(2) in a vibration
+//! environment — V(13) (harmonic) and V(14) (random) split as V(15)/V(16) — in the paper's
+//! variant (reproduces Tables V4/V5) or the exact one. Each environment entry gives ranges
+//! (low, high); the table shows the VE at both ends.
+
+use anyhow::{Context, anyhow, bail};
+use bins_comp::vibration::{AccelAxes, AccelVibration, ConversionFunction, Variant, VeTerms, ve_terms};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `bins-cal vibration`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Conversion-function coefficients (CSV in the units of Table V1: a0_mg, K1_V_per_g,
+    /// delta_1A_ppm, k2_ug_per_g2 … k5_ug_per_g5, m1_mg_per_g, m2_mg_per_g, m31_ug_per_g2,
+    /// m32_ug_per_g2), one accelerometer per row.
+    #[arg(long)]
+    cf: PathBuf,
+    /// Vibration environment (TOML: `a_p3_g`, `[[harmonic]]` and `[[random]]` entries).
+    #[arg(long)]
+    env: PathBuf,
+    /// `paper` (V(13)/V(14) as printed) or `exact` (true time means).
+    #[arg(long, default_value = "paper")]
+    variant: String,
+}
+
+/// The environment file.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct Env {
+    /// Static acceleration along IA at which the multiplicative parts are evaluated [g]
+    /// (the paper: the range limit, 10 g).
+    pub a_p3_g: f64,
+    /// Harmonic entries.
+    #[serde(default)]
+    pub harmonic: Vec<HarmonicEntry>,
+    /// Broadband random entries.
+    #[serde(default)]
+    pub random: Vec<RandomEntry>,
+}
+
+/// A harmonic environment V(3): amplitude ranges along IA, OA, PA (in phase).
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct HarmonicEntry {
+    /// Row label.
+    pub label: String,
+    /// Amplitude along IA (low, high) [g].
+    pub ia_amp_g: [f64; 2],
+    /// Amplitude along OA (low, high) [g].
+    pub oa_amp_g: [f64; 2],
+    /// Amplitude along PA (low, high) [g].
+    pub pa_amp_g: [f64; 2],
+}
+
+/// A random environment V(4)–V(6): flat density over a band, the same along IA, OA, PA and
+/// fully correlated.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct RandomEntry {
+    /// Row label.
+    pub label: String,
+    /// Band (f_low, f_up) [Hz].
+    #[serde(rename = "band_Hz")]
+    pub band_hz: [f64; 2],
+    /// Spectral density range (low, high) [g²/Hz].
+    #[serde(rename = "psd_g2_per_Hz")]
+    pub psd_g2_per_hz: [f64; 2],
+}
+
+/// Reads conversion functions from a Table V1-style CSV (errors name file, line, column).
+pub fn read_cf(path: &Path) -> anyhow::Result<Vec<(f64, ConversionFunction<f64>)>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.starts_with('#') && !l.trim().is_empty());
+    let (_, header) = lines.next().ok_or_else(|| anyhow!("{}: no header row", path.display()))?;
+    let header: Vec<&str> = header.split(',').map(str::trim).collect();
+    // (column, scale to g units)
+    let cols: [(&str, f64); 11] = [
+        ("a0_mg", 1e-3),
+        ("K1_V_per_g", 1.0),
+        ("delta_1A_ppm", 1e-6),
+        ("k2_ug_per_g2", 1e-6),
+        ("k3_ug_per_g3", 1e-6),
+        ("k4_ug_per_g4", 1e-6),
+        ("k5_ug_per_g5", 1e-6),
+        ("m1_mg_per_g", 1e-3),
+        ("m2_mg_per_g", 1e-3),
+        ("m31_ug_per_g2", 1e-6),
+        ("m32_ug_per_g2", 1e-6),
+    ];
+    let idx: Vec<usize> = cols
+        .iter()
+        .map(|(name, _)| {
+            header.iter().position(|h| h == name).ok_or_else(|| anyhow!("{}: missing column `{name}`", path.display()))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let mut out = Vec::new();
+    for (n, line) in lines {
+        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        if cells.len() != header.len() {
+            bail!("{}: line {}: {} cells, the header has {}", path.display(), n + 1, cells.len(), header.len());
+        }
+        let mut v = [0.0; 11];
+        for (k, (&c, (name, scale))) in idx.iter().zip(cols.iter()).enumerate() {
+            let x: f64 = cells[c].parse().ok().filter(|x: &f64| x.is_finite()).ok_or_else(|| {
+                anyhow!("{}: line {}, column `{name}`: `{}` is not a number", path.display(), n + 1, cells[c])
+            })?;
+            v[k] = x * scale;
+        }
+        let cf = ConversionFunction {
+            a0_g: v[0],
+            delta_1a: v[2],
+            k2_g_per_g2: v[3],
+            k3_g_per_g3: v[4],
+            k4_g_per_g4: v[5],
+            k5_g_per_g5: v[6],
+            m1_g_per_g: v[7],
+            m2_g_per_g: v[8],
+            m31_g_per_g2: v[9],
+            m32_g_per_g2: v[10],
+        };
+        out.push((v[1], cf));
+    }
+    if out.is_empty() {
+        bail!("{}: no data rows", path.display());
+    }
+    Ok(out)
+}
+
+/// Reads an environment file (errors name the file and the key).
+pub fn read_env(path: &Path) -> anyhow::Result<Env> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    let env: Env = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e.message()))?;
+    let bad = |what: &str| Err(anyhow!("{}: {what}", path.display()));
+    if !(env.a_p3_g.is_finite() && env.a_p3_g.abs() <= 100.0) {
+        return bad("`a_p3_g` must be a finite acceleration within ±100 g");
+    }
+    for h in &env.harmonic {
+        for (k, r) in [("ia_amp_g", h.ia_amp_g), ("oa_amp_g", h.oa_amp_g), ("pa_amp_g", h.pa_amp_g)] {
+            if !(r.iter().all(|x| x.is_finite() && *x >= 0.0) && r[0] <= r[1]) {
+                return bad(&format!("harmonic `{}`: `{k}` must be a range [low, high] of amplitudes ≥ 0", h.label));
+            }
+        }
+    }
+    for r in &env.random {
+        if !(r.band_hz.iter().all(|x| x.is_finite() && *x >= 0.0) && r.band_hz[0] < r.band_hz[1]) {
+            return bad(&format!("random `{}`: `band_Hz` must be [low, high] with low < high", r.label));
+        }
+        if !(r.psd_g2_per_hz.iter().all(|x| x.is_finite() && *x >= 0.0) && r.psd_g2_per_hz[0] <= r.psd_g2_per_hz[1]) {
+            return bad(&format!("random `{}`: `psd_g2_per_Hz` must be a range [low, high] ≥ 0", r.label));
+        }
+    }
+    if env.harmonic.is_empty() && env.random.is_empty() {
+        return bad("no [[harmonic]] or [[random]] entry");
+    }
+    Ok(env)
+}
+
+/// One table row: label and the terms at the low and high ends.
+pub type Row = (String, VeTerms<f64>, VeTerms<f64>);
+
+/// The VE table of `cf` in `env`.
+pub fn table(cf: &ConversionFunction<f64>, env: &Env, variant: Variant) -> Vec<Row> {
+    let mut rows = Vec::new();
+    for h in &env.harmonic {
+        let at = |k: usize| {
+            let amp = AccelAxes { ia: h.ia_amp_g[k], oa: h.oa_amp_g[k], pa: h.pa_amp_g[k] };
+            ve_terms(cf, variant, &AccelVibration::Harmonic(amp), env.a_p3_g)
+        };
+        rows.push((h.label.clone(), at(0), at(1)));
+    }
+    for r in &env.random {
+        let at = |k: usize| {
+            let s = (r.psd_g2_per_hz[k] * (r.band_hz[1] - r.band_hz[0])).sqrt();
+            ve_terms(cf, variant, &AccelVibration::Random(AccelAxes { ia: s, oa: s, pa: s }), env.a_p3_g)
+        };
+        rows.push((r.label.clone(), at(0), at(1)));
+    }
+    rows
+}
+
+/// Runs `bins-cal vibration`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let variant = match args.variant.as_str() {
+        "paper" => Variant::Paper,
+        "exact" => Variant::Exact,
+        v => bail!("--variant `{v}`: expected `paper` or `exact`"),
+    };
+    let cfs = read_cf(&args.cf)?;
+    let env = read_env(&args.env)?;
+    let a = env.a_p3_g;
+    for (n, (k1, cf)) in cfs.iter().enumerate() {
+        println!(
+            "accelerometer {} (K1 = {k1} V/g), {} variant, a_p3 = {a} g; each cell low … high",
+            n + 1,
+            args.variant
+        );
+        println!(
+            "{:<24}{:>22}{:>22}{:>22}{:>22}{:>22}{:>22}{:>22}",
+            "environment",
+            "Δ0(1) µg",
+            "Δ0(2) µg",
+            "Δ0(3) µg",
+            "δ(1)a_p3 mg",
+            "δ(2)a_p3² mg",
+            "δ(3)a_p3³ mg",
+            "total mg"
+        );
+        for (label, lo, hi) in table(cf, &env, variant) {
+            let cell = |f: &dyn Fn(&VeTerms<f64>) -> f64| format!("{:>10.4} … {:<9.4}", f(&lo), f(&hi));
+            println!(
+                "{label:<24}{:>22}{:>22}{:>22}{:>22}{:>22}{:>22}{:>22}",
+                cell(&|t| t.d0_1_g * 1e6),
+                cell(&|t| t.d0_2_g * 1e6),
+                cell(&|t| t.d0_3_g * 1e6),
+                cell(&|t| t.delta1_g_per_g * a * 1e3),
+                cell(&|t| t.delta2_g_per_g2 * a * a * 1e3),
+                cell(&|t| t.delta3_g_per_g3 * a * a * a * 1e3),
+                cell(&|t| t.total_g(a) * 1e3),
+            );
+        }
+    }
+    Ok(())
+}
