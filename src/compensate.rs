@@ -51,6 +51,10 @@ impl Status {
     /// The vibration level (σ or amplitude above 10 g) or the static acceleration along an
     /// input axis (above 10 g, V(17)) was outside the VE model's range: clamped to it.
     pub const VIBRATION_OUT_OF_RANGE: Status = Status(1 << 5);
+    /// An input of this sample was not freshly measured: a sensor driver failed, and the
+    /// signals were held or NaN, or the temperature poll failed or the temperature is stale
+    /// (see [`drivers`](crate::drivers)).
+    pub const SENSOR_FAULT: Status = Status(1 << 8);
 
     /// True when every bit of `other` is set.
     pub const fn contains(self, other: Status) -> bool {

@@ -25,12 +25,14 @@
 //! | [`vibration`] | vibration error V(1)–V(23): conversion function, paper and exact VE, online moments, shake-table identification |
 //! | [`pipeline`] | the per-sample step with vibration-error subtraction |
 //! | [`blob`] | the calibration blob: byte format, parser, encoder, CRC-32, physical limits |
+//! | [`drivers`] | sensor drivers (ADS131M04 ADC, TMP117 temperature) over embedded-hal, and the sample source's fault policy |
 #![no_std]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
 pub mod blob;
 pub mod compensate;
+pub mod drivers;
 pub mod float;
 pub mod ident;
 pub mod linalg;
