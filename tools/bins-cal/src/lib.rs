@@ -10,6 +10,8 @@
 //! | [`ihex`] | Intel HEX output |
 //! | [`memmap`] | the CALIB region's address, read from `memory.x` |
 //! | [`fsio`] | writing outputs atomically (temporary file + rename) |
+//! | [`recording`] | recording format v1: streaming reader and writer |
+//! | [`sim`] | the simulator: the unit's truth model on its rigs, scenario files |
 #![deny(missing_docs)]
 
 pub mod calfile;
@@ -17,6 +19,8 @@ pub mod constants_table;
 pub mod fsio;
 pub mod ihex;
 pub mod memmap;
+pub mod recording;
+pub mod sim;
 
 /// The tool's name and version, as stored in a blob's tool-version section when the
 /// calibration file names none.

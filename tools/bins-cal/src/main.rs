@@ -4,6 +4,7 @@
 //! | subcommand | module | does |
 //! |---|---|---|
 //! | `blob encode\|decode\|check` | [`cmd::blob`] | calibration file (TOML) ⇄ calibration blob, checks |
+//! | `simulate` | [`cmd::simulate`] | scenario file (TOML) → simulated recording (format v1) |
 //! | `tempco` | [`cmd::tempco`] | temperature coefficients from constants at several temperatures |
 //! | `vibration` | [`cmd::vibration`] | the VE table of a conversion function in an environment |
 //!
@@ -26,6 +27,8 @@ struct Cli {
 enum Command {
     /// The calibration blob flashed into the CALIB region.
     Blob(cmd::blob::Args),
+    /// Simulate a unit on its rigs (scenario file → recording).
+    Simulate(cmd::simulate::Args),
     /// Temperature coefficients T(11)/T(12) from constants measured at several temperatures.
     Tempco(cmd::tempco::Args),
     /// The vibration error of a conversion function in a vibration environment (Tables V4/V5).
@@ -36,6 +39,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Blob(args) => cmd::blob::run(args),
+        Command::Simulate(args) => cmd::simulate::run(args),
         Command::Tempco(args) => cmd::tempco::run(args),
         Command::Vibration(args) => cmd::vibration::run(args),
     };

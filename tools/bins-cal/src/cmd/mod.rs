@@ -1,5 +1,6 @@
 //! The subcommands, one module each.
 
 pub mod blob;
+pub mod simulate;
 pub mod tempco;
 pub mod vibration;

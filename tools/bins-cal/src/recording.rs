@@ -1,0 +1,936 @@
+//! Recording format v1 (`shared` spec `recording-format.md`, summarised in
+//! `docs/recording-format.md`): a streaming reader and a streaming writer.
+//!
+//! A recording is a UTF-8 CSV file: `#` comment lines, one header row, then one row per logged
+//! sample. Columns are found by header name; their order is free and unknown columns are kept
+//! (as text) and otherwise ignored. An empty cell in an optional column is "not known".
+//!
+//! The reader holds one line in memory at a time: [`Reader::read_row`] refills a caller-owned
+//! [`Row`] without allocating (the fast path for the 8.6-million-row day file), and the reader
+//! is also an [`Iterator`] of owned rows. Every error names the file, the line (1-based) and,
+//! where there is one, the column (1-based position and header name). A streaming reader
+//! cannot make "nothing is half-read" true by itself: a consumer must not act on the rows of a
+//! file before it has seen the end without an error (every tool here either accumulates first
+//! or writes its output atomically).
+//!
+//! The writer formats floats as the shortest decimal that parses back to the same `f64`
+//! (`ryu`), so write → read is exact; it refuses non-finite numbers and a time that does not
+//! increase, so it cannot produce a file the reader rejects.
+
+use bins_comp::vibration::Vibration;
+use std::fmt;
+use std::fs::File;
+use std::io::{self, BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+
+/// Header names of the columns the format defines, in the order the writer puts them.
+pub mod col {
+    /// Time since the start of the recording [s].
+    pub const T_S: &str = "t_s";
+    /// Output signal of the x accelerometer [V].
+    pub const UX_V: &str = "ux_V";
+    /// Output signal of the y accelerometer [V].
+    pub const UY_V: &str = "uy_V";
+    /// Output signal of the z accelerometer [V].
+    pub const UZ_V: &str = "uz_V";
+    /// The unit's temperature sensor [°C].
+    pub const TEMP_C: &str = "temp_C";
+    /// Static specific force along x [g].
+    pub const FX_G: &str = "fx_g";
+    /// Static specific force along y [g].
+    pub const FY_G: &str = "fy_g";
+    /// Static specific force along z [g].
+    pub const FZ_G: &str = "fz_g";
+    /// `none`, `sine` or `random`.
+    pub const VIB_KIND: &str = "vib_kind";
+    /// Vibration along x [g]: peak (sine) or RMS (random).
+    pub const VIB_X_G: &str = "vib_x_g";
+    /// Vibration along y [g].
+    pub const VIB_Y_G: &str = "vib_y_g";
+    /// Vibration along z [g].
+    pub const VIB_Z_G: &str = "vib_z_g";
+    /// Sine frequency, or the centre of the random band [Hz].
+    pub const VIB_HZ: &str = "vib_hz";
+    /// Random bandwidth Δf [Hz].
+    pub const VIB_BW_HZ: &str = "vib_bw_hz";
+    /// Chamber air temperature or set point [°C].
+    pub const CHAMBER_C: &str = "chamber_C";
+    /// Rig position label.
+    pub const POS: &str = "pos";
+    /// Time since power-on [s].
+    pub const POWER_S: &str = "power_s";
+}
+
+/// The five required columns.
+pub const REQUIRED: [&str; 5] = [col::T_S, col::UX_V, col::UY_V, col::UZ_V, col::TEMP_C];
+
+/// The reference columns (what the rig applied).
+pub const REFERENCE: [&str; 9] = [
+    col::FX_G,
+    col::FY_G,
+    col::FZ_G,
+    col::VIB_KIND,
+    col::VIB_X_G,
+    col::VIB_Y_G,
+    col::VIB_Z_G,
+    col::VIB_HZ,
+    col::VIB_BW_HZ,
+];
+
+/// `vib_kind`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VibKind {
+    /// No vibration.
+    None,
+    /// Harmonic: `vib_*_g` are peak amplitudes, `vib_hz` the frequency.
+    Sine,
+    /// Broadband random, fully correlated axes: `vib_*_g` are σ, `vib_hz` the band centre,
+    /// `vib_bw_hz` the bandwidth.
+    Random,
+}
+
+impl VibKind {
+    /// The cell text.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            VibKind::None => "none",
+            VibKind::Sine => "sine",
+            VibKind::Random => "random",
+        }
+    }
+
+    fn parse(s: &str) -> Option<Self> {
+        match s {
+            "none" => Some(VibKind::None),
+            "sine" => Some(VibKind::Sine),
+            "random" => Some(VibKind::Random),
+            _ => None,
+        }
+    }
+}
+
+/// One row of a recording. Optional cells are `None` when empty or when the file has no
+/// such column.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Row {
+    /// Line number in the file (1-based); 0 for a row not read from a file.
+    pub line: u64,
+    /// `t_s` [s].
+    pub t_s: f64,
+    /// `ux_V`, `uy_V`, `uz_V` [V].
+    pub u_v: [f64; 3],
+    /// `temp_C` [°C].
+    pub temp_c: f64,
+    /// `fx_g`, `fy_g`, `fz_g` [g].
+    pub f_g: [Option<f64>; 3],
+    /// `vib_kind`.
+    pub vib_kind: Option<VibKind>,
+    /// `vib_x_g`, `vib_y_g`, `vib_z_g` [g].
+    pub vib_g: [Option<f64>; 3],
+    /// `vib_hz` [Hz].
+    pub vib_hz: Option<f64>,
+    /// `vib_bw_hz` [Hz].
+    pub vib_bw_hz: Option<f64>,
+    /// `chamber_C` [°C].
+    pub chamber_c: Option<f64>,
+    /// `pos`.
+    pub pos: Option<String>,
+    /// `power_s` [s].
+    pub power_s: Option<f64>,
+    /// Cells of the columns the format does not define, in the order of
+    /// [`Reader::extra_columns`] (empty cells as empty strings).
+    pub extra: Vec<String>,
+}
+
+impl Row {
+    /// The static specific force [g] when all three components are known.
+    pub fn reference_f_g(&self) -> Option<[f64; 3]> {
+        match self.f_g {
+            [Some(x), Some(y), Some(z)] => Some([x, y, z]),
+            _ => None,
+        }
+    }
+
+    /// The vibration the rig applied, when known: `vib_kind` and the cells that kind needs
+    /// (`none`: nothing else; `sine`: amplitudes and `vib_hz`; `random`: σ, `vib_hz` and
+    /// `vib_bw_hz`, band = centre ± bw/2).
+    pub fn vibration(&self) -> Option<Vibration<f64>> {
+        match self.vib_kind? {
+            VibKind::None => Some(Vibration::None),
+            VibKind::Sine => {
+                let [Some(x), Some(y), Some(z)] = self.vib_g else { return None };
+                Some(Vibration::Harmonic { amp_g: [x, y, z], freq_hz: self.vib_hz? })
+            }
+            VibKind::Random => {
+                let [Some(x), Some(y), Some(z)] = self.vib_g else { return None };
+                let (c, bw) = (self.vib_hz?, self.vib_bw_hz?);
+                Some(Vibration::Random { sigma_g: [x, y, z], band_hz: (c - 0.5 * bw, c + 0.5 * bw) })
+            }
+        }
+    }
+
+    /// Sets the vibration reference cells from a core [`Vibration`] (the inverse of
+    /// [`vibration`](Self::vibration)).
+    pub fn set_vibration(&mut self, v: &Vibration<f64>) {
+        match v {
+            Vibration::None => {
+                self.vib_kind = Some(VibKind::None);
+                self.vib_g = [Some(0.0); 3];
+                self.vib_hz = None;
+                self.vib_bw_hz = None;
+            }
+            Vibration::Harmonic { amp_g, freq_hz } => {
+                self.vib_kind = Some(VibKind::Sine);
+                self.vib_g = amp_g.map(Some);
+                self.vib_hz = Some(*freq_hz);
+                self.vib_bw_hz = None;
+            }
+            Vibration::Random { sigma_g, band_hz } => {
+                self.vib_kind = Some(VibKind::Random);
+                self.vib_g = sigma_g.map(Some);
+                self.vib_hz = Some(0.5 * (band_hz.0 + band_hz.1));
+                self.vib_bw_hz = Some(band_hz.1 - band_hz.0);
+            }
+        }
+    }
+
+    /// Clears every reference cell (rig state not known).
+    pub fn clear_reference(&mut self) {
+        self.f_g = [None; 3];
+        self.vib_kind = None;
+        self.vib_g = [None; 3];
+        self.vib_hz = None;
+        self.vib_bw_hz = None;
+    }
+}
+
+/// What is wrong in a recording.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ErrorKind {
+    /// The file could not be opened, read or written.
+    Io(String),
+    /// No header row before the end of the file.
+    NoHeader,
+    /// A required column is not in the header.
+    MissingColumn(&'static str),
+    /// A header name appears twice.
+    DuplicateColumn(String),
+    /// An empty header name.
+    EmptyColumnName,
+    /// A data row with a different number of cells than the header.
+    CellCount {
+        /// Cells in the header.
+        expected: usize,
+        /// Cells in the row.
+        got: usize,
+    },
+    /// A cell of a numeric column that is not a finite decimal number.
+    NotANumber(String),
+    /// An empty cell in a required column.
+    EmptyRequired,
+    /// `vib_kind` other than `none`, `sine`, `random`.
+    BadVibKind(String),
+    /// `t_s` not greater than the previous row's.
+    TimeNotIncreasing {
+        /// The previous row's time [s].
+        previous: f64,
+        /// This row's time [s].
+        this: f64,
+    },
+    /// A line that is not UTF-8.
+    NotUtf8,
+    /// A quoted cell without its closing quote.
+    UnterminatedQuote,
+    /// The writer was given a value it cannot write (non-finite number, a comment or a cell
+    /// with a line break).
+    Unwritable(String),
+}
+
+/// An error in a recording: the file, the line (0 = not tied to a line), the column (position
+/// 1-based and header name) where there is one, and what is wrong.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Error {
+    /// The file (or stream name).
+    pub file: PathBuf,
+    /// Line number, 1-based; 0 when the error is not tied to a line.
+    pub line: u64,
+    /// Column position (1-based) and header name.
+    pub column: Option<(usize, String)>,
+    /// What is wrong.
+    pub kind: ErrorKind,
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file.display())?;
+        if self.line > 0 {
+            write!(f, ":{}", self.line)?;
+        }
+        if let Some((pos, name)) = &self.column {
+            write!(f, ": column {pos} `{name}`")?;
+        }
+        write!(f, ": ")?;
+        match &self.kind {
+            ErrorKind::Io(e) => write!(f, "{e}"),
+            ErrorKind::NoHeader => write!(f, "no header row (recording format v1 needs one)"),
+            ErrorKind::MissingColumn(c) => write!(f, "required column `{c}` missing from the header"),
+            ErrorKind::DuplicateColumn(c) => write!(f, "column `{c}` appears twice in the header"),
+            ErrorKind::EmptyColumnName => write!(f, "empty column name in the header"),
+            ErrorKind::CellCount { expected, got } => write!(f, "{got} cells, the header has {expected}"),
+            ErrorKind::NotANumber(s) => write!(f, "`{s}` is not a finite number"),
+            ErrorKind::EmptyRequired => write!(f, "empty cell in a required column"),
+            ErrorKind::BadVibKind(s) => write!(f, "`{s}` is not a vibration kind (none, sine, random)"),
+            ErrorKind::TimeNotIncreasing { previous, this } => {
+                write!(f, "time {this} s does not increase (previous row {previous} s)")
+            }
+            ErrorKind::NotUtf8 => write!(f, "line is not UTF-8"),
+            ErrorKind::UnterminatedQuote => write!(f, "quoted cell without a closing quote"),
+            ErrorKind::Unwritable(s) => write!(f, "cannot write {s}"),
+        }
+    }
+}
+
+impl std::error::Error for Error {}
+
+/// What a header position holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Field {
+    T,
+    U(usize),
+    Temp,
+    F(usize),
+    VibKind,
+    Vib(usize),
+    VibHz,
+    VibBw,
+    Chamber,
+    Pos,
+    Power,
+    Extra(usize),
+}
+
+fn field_of(name: &str) -> Option<Field> {
+    Some(match name {
+        col::T_S => Field::T,
+        col::UX_V => Field::U(0),
+        col::UY_V => Field::U(1),
+        col::UZ_V => Field::U(2),
+        col::TEMP_C => Field::Temp,
+        col::FX_G => Field::F(0),
+        col::FY_G => Field::F(1),
+        col::FZ_G => Field::F(2),
+        col::VIB_KIND => Field::VibKind,
+        col::VIB_X_G => Field::Vib(0),
+        col::VIB_Y_G => Field::Vib(1),
+        col::VIB_Z_G => Field::Vib(2),
+        col::VIB_HZ => Field::VibHz,
+        col::VIB_BW_HZ => Field::VibBw,
+        col::CHAMBER_C => Field::Chamber,
+        col::POS => Field::Pos,
+        col::POWER_S => Field::Power,
+        _ => return None,
+    })
+}
+
+/// Splits one CSV line into cells (RFC 4180 quoting within the line; a quoted cell cannot
+/// span lines). Cells are trimmed of surrounding spaces and tabs. Reuses `cells`' storage
+/// through `buf` (the unquoted text of all cells) and `bounds` (their ranges in it).
+fn split_line(line: &str, buf: &mut String, bounds: &mut Vec<(usize, usize)>) -> Result<(), ErrorKind> {
+    buf.clear();
+    bounds.clear();
+    let bytes = line.as_bytes();
+    let mut i = 0;
+    loop {
+        // One cell starting at i.
+        while i < bytes.len() && (bytes[i] == b' ' || bytes[i] == b'\t') {
+            i += 1;
+        }
+        let start = buf.len();
+        if i < bytes.len() && bytes[i] == b'"' {
+            i += 1;
+            loop {
+                let Some(q) = line[i..].find('"') else { return Err(ErrorKind::UnterminatedQuote) };
+                buf.push_str(&line[i..i + q]);
+                i += q + 1;
+                if i < bytes.len() && bytes[i] == b'"' {
+                    buf.push('"');
+                    i += 1;
+                } else {
+                    break;
+                }
+            }
+            while i < bytes.len() && bytes[i] != b',' {
+                i += 1;
+            }
+            bounds.push((start, buf.len()));
+        } else {
+            let end = line[i..].find(',').map_or(bytes.len(), |c| i + c);
+            buf.push_str(line[i..end].trim_end_matches([' ', '\t']));
+            bounds.push((start, buf.len()));
+            i = end;
+        }
+        if i >= bytes.len() {
+            return Ok(());
+        }
+        i += 1; // the comma
+    }
+}
+
+/// A streaming reader of recording format v1.
+pub struct Reader<R> {
+    src: R,
+    file: PathBuf,
+    line_no: u64,
+    comments: Vec<String>,
+    header: Vec<String>,
+    fields: Vec<Field>,
+    extra: Vec<String>,
+    has: [bool; 17],
+    raw: Vec<u8>,
+    cells: String,
+    bounds: Vec<(usize, usize)>,
+    prev_t: Option<f64>,
+    failed: bool,
+}
+
+impl Reader<BufReader<File>> {
+    /// Opens a file and reads its comments and header.
+    pub fn open(path: &Path) -> Result<Self, Error> {
+        let f = File::open(path).map_err(|e| Error {
+            file: path.to_path_buf(),
+            line: 0,
+            column: None,
+            kind: ErrorKind::Io(e.to_string()),
+        })?;
+        Reader::new(BufReader::with_capacity(1 << 16, f), path)
+    }
+}
+
+impl<R: BufRead> Reader<R> {
+    /// Reads the comment lines and the header from `src`; `name` is the file named in errors.
+    pub fn new(src: R, name: impl AsRef<Path>) -> Result<Self, Error> {
+        let mut r = Reader {
+            src,
+            file: name.as_ref().to_path_buf(),
+            line_no: 0,
+            comments: Vec::new(),
+            header: Vec::new(),
+            fields: Vec::new(),
+            extra: Vec::new(),
+            has: [false; 17],
+            raw: Vec::new(),
+            cells: String::new(),
+            bounds: Vec::new(),
+            prev_t: None,
+            failed: false,
+        };
+        loop {
+            if !r.next_line()? {
+                return Err(r.err(None, ErrorKind::NoHeader));
+            }
+            let line = r.line_str()?;
+            if let Some(c) = line.strip_prefix('#') {
+                let c = c.strip_prefix(' ').unwrap_or(c).to_string();
+                r.comments.push(c);
+                continue;
+            }
+            if line.trim().is_empty() {
+                continue;
+            }
+            break;
+        }
+        let line = r.line_str()?.to_string();
+        split_line(&line, &mut r.cells, &mut r.bounds).map_err(|k| r.err(None, k))?;
+        for (pos, &(a, b)) in r.bounds.iter().enumerate() {
+            let name = r.cells[a..b].to_string();
+            if name.is_empty() {
+                return Err(r.err(Some(pos), ErrorKind::EmptyColumnName));
+            }
+            if r.header.contains(&name) {
+                r.header.push(name.clone());
+                return Err(r.err(Some(pos), ErrorKind::DuplicateColumn(name)));
+            }
+            let field = match field_of(&name) {
+                Some(f) => f,
+                None => {
+                    r.extra.push(name.clone());
+                    Field::Extra(r.extra.len() - 1)
+                }
+            };
+            if let Some(i) = flag_index(field) {
+                r.has[i] = true;
+            }
+            r.fields.push(field);
+            r.header.push(name);
+        }
+        for req in REQUIRED {
+            if !r.header.iter().any(|h| h == req) {
+                return Err(r.err(None, ErrorKind::MissingColumn(req)));
+            }
+        }
+        Ok(r)
+    }
+
+    /// The comment lines before the header, without the `#` (and one following space).
+    pub fn comments(&self) -> &[String] {
+        &self.comments
+    }
+
+    /// The header names in file order.
+    pub fn header(&self) -> &[String] {
+        &self.header
+    }
+
+    /// The names of the columns the format does not define, in file order.
+    pub fn extra_columns(&self) -> &[String] {
+        &self.extra
+    }
+
+    /// True when the header has column `name`.
+    pub fn has_column(&self, name: &str) -> bool {
+        self.header.iter().any(|h| h == name)
+    }
+
+    /// True when the header has every reference column.
+    pub fn has_reference(&self) -> bool {
+        REFERENCE.iter().all(|c| self.has_column(c))
+    }
+
+    /// The file named in errors.
+    pub fn file(&self) -> &Path {
+        &self.file
+    }
+
+    /// The line number of the last line read (1-based).
+    pub fn line(&self) -> u64 {
+        self.line_no
+    }
+
+    fn err(&self, pos: Option<usize>, kind: ErrorKind) -> Error {
+        Error {
+            file: self.file.clone(),
+            line: self.line_no,
+            column: pos.map(|p| (p + 1, self.header.get(p).cloned().unwrap_or_default())),
+            kind,
+        }
+    }
+
+    /// Reads the next physical line into `raw` without its line ending; false at the end.
+    fn next_line(&mut self) -> Result<bool, Error> {
+        self.raw.clear();
+        let n = self.src.read_until(b'\n', &mut self.raw).map_err(|e| {
+            self.line_no += 1;
+            self.err(None, ErrorKind::Io(e.to_string()))
+        })?;
+        if n == 0 {
+            return Ok(false);
+        }
+        self.line_no += 1;
+        if self.raw.last() == Some(&b'\n') {
+            self.raw.pop();
+        }
+        if self.raw.last() == Some(&b'\r') {
+            self.raw.pop();
+        }
+        Ok(true)
+    }
+
+    fn line_str(&self) -> Result<&str, Error> {
+        std::str::from_utf8(&self.raw).map_err(|_| self.err(None, ErrorKind::NotUtf8))
+    }
+
+    /// Reads the next data row into `row` (reusing its storage); `Ok(false)` at the end of the
+    /// file. After an error the reader stays at the end.
+    pub fn read_row(&mut self, row: &mut Row) -> Result<bool, Error> {
+        if self.failed {
+            return Ok(false);
+        }
+        let r = self.read_row_inner(row);
+        if r.is_err() {
+            self.failed = true;
+        }
+        r
+    }
+
+    fn read_row_inner(&mut self, row: &mut Row) -> Result<bool, Error> {
+        if !self.next_line()? {
+            return Ok(false);
+        }
+        let line = std::str::from_utf8(&self.raw).map_err(|_| self.err(None, ErrorKind::NotUtf8))?;
+        // Splitting borrows `raw` and fills `cells`/`bounds`: move them out for the borrow.
+        let mut cells = std::mem::take(&mut self.cells);
+        let mut bounds = std::mem::take(&mut self.bounds);
+        let split = split_line(line, &mut cells, &mut bounds);
+        let result = match split {
+            Err(k) => Err(self.err(None, k)),
+            Ok(()) => self.fill(row, &cells, &bounds),
+        };
+        self.cells = cells;
+        self.bounds = bounds;
+        result?;
+        Ok(true)
+    }
+
+    fn fill(&mut self, row: &mut Row, cells: &str, bounds: &[(usize, usize)]) -> Result<(), Error> {
+        // Trailing empty cells of optional columns may be left out (CSV writers drop them;
+        // the real recording in `data/real/` does): they read as empty. Anything else with a
+        // cell count other than the header's is an error.
+        let short_ok = bounds.len() < self.fields.len()
+            && self.fields[bounds.len()..].iter().all(|f| flag_index(*f).is_none_or(|i| i > 4));
+        if bounds.len() != self.fields.len() && !short_ok {
+            return Err(self.err(None, ErrorKind::CellCount { expected: self.fields.len(), got: bounds.len() }));
+        }
+        row.line = self.line_no;
+        row.clear_reference();
+        row.chamber_c = None;
+        row.power_s = None;
+        let mut pos_buf = row.pos.take();
+        row.extra.resize(self.extra.len(), String::new());
+        for (f, _) in self.fields.iter().zip(0..).skip(bounds.len()) {
+            if let Field::Extra(i) = f {
+                row.extra[*i].clear();
+            }
+        }
+        let mut pos_set = false;
+        for (p, (&(a, b), &field)) in bounds.iter().zip(&self.fields).enumerate() {
+            let cell = &cells[a..b];
+            let num = |required: bool| -> Result<Option<f64>, Error> {
+                if cell.is_empty() {
+                    return if required { Err(self.err(Some(p), ErrorKind::EmptyRequired)) } else { Ok(None) };
+                }
+                match cell.parse::<f64>() {
+                    Ok(v) if v.is_finite() => Ok(Some(v)),
+                    _ => Err(self.err(Some(p), ErrorKind::NotANumber(cell.to_string()))),
+                }
+            };
+            match field {
+                Field::T => row.t_s = num(true)?.unwrap_or_default(),
+                Field::U(i) => row.u_v[i] = num(true)?.unwrap_or_default(),
+                Field::Temp => row.temp_c = num(true)?.unwrap_or_default(),
+                Field::F(i) => row.f_g[i] = num(false)?,
+                Field::VibKind => {
+                    row.vib_kind = if cell.is_empty() {
+                        None
+                    } else {
+                        Some(
+                            VibKind::parse(cell)
+                                .ok_or_else(|| self.err(Some(p), ErrorKind::BadVibKind(cell.to_string())))?,
+                        )
+                    }
+                }
+                Field::Vib(i) => row.vib_g[i] = num(false)?,
+                Field::VibHz => row.vib_hz = num(false)?,
+                Field::VibBw => row.vib_bw_hz = num(false)?,
+                Field::Chamber => row.chamber_c = num(false)?,
+                Field::Power => row.power_s = num(false)?,
+                Field::Pos => {
+                    if !cell.is_empty() {
+                        let mut s = pos_buf.take().unwrap_or_default();
+                        s.clear();
+                        s.push_str(cell);
+                        row.pos = Some(s);
+                        pos_set = true;
+                    }
+                }
+                Field::Extra(i) => {
+                    row.extra[i].clear();
+                    row.extra[i].push_str(cell);
+                }
+            }
+        }
+        if !pos_set {
+            row.pos = None;
+        }
+        if let Some(prev) = self.prev_t
+            && !(row.t_s > prev)
+        {
+            let p = self.fields.iter().position(|f| *f == Field::T);
+            return Err(self.err(p, ErrorKind::TimeNotIncreasing { previous: prev, this: row.t_s }));
+        }
+        self.prev_t = Some(row.t_s);
+        Ok(())
+    }
+}
+
+fn flag_index(f: Field) -> Option<usize> {
+    Some(match f {
+        Field::T => 0,
+        Field::U(i) => 1 + i,
+        Field::Temp => 4,
+        Field::F(i) => 5 + i,
+        Field::VibKind => 8,
+        Field::Vib(i) => 9 + i,
+        Field::VibHz => 12,
+        Field::VibBw => 13,
+        Field::Chamber => 14,
+        Field::Pos => 15,
+        Field::Power => 16,
+        Field::Extra(_) => return None,
+    })
+}
+
+impl<R: BufRead> Iterator for Reader<R> {
+    type Item = Result<Row, Error>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let mut row = Row::default();
+        match self.read_row(&mut row) {
+            Ok(true) => Some(Ok(row)),
+            Ok(false) => None,
+            Err(e) => Some(Err(e)),
+        }
+    }
+}
+
+/// Which optional columns a writer puts in the file (the required ones always).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Columns {
+    /// The nine reference columns.
+    pub reference: bool,
+    /// `chamber_C`.
+    pub chamber: bool,
+    /// `pos`.
+    pub pos: bool,
+    /// `power_s`.
+    pub power: bool,
+    /// Further columns, written from [`Row::extra`] in this order.
+    pub extra: Vec<String>,
+}
+
+impl Columns {
+    /// Every column the format defines, no extra ones.
+    pub fn all() -> Self {
+        Columns { reference: true, chamber: true, pos: true, power: true, extra: Vec::new() }
+    }
+
+    /// The header names in the order the writer uses.
+    pub fn names(&self) -> Vec<String> {
+        let mut v: Vec<String> = REQUIRED.iter().map(|s| s.to_string()).collect();
+        if self.reference {
+            v.extend(REFERENCE.iter().map(|s| s.to_string()));
+        }
+        if self.chamber {
+            v.push(col::CHAMBER_C.into());
+        }
+        if self.pos {
+            v.push(col::POS.into());
+        }
+        if self.power {
+            v.push(col::POWER_S.into());
+        }
+        v.extend(self.extra.iter().cloned());
+        v
+    }
+
+    /// The columns a reader's file has (for copying a recording).
+    pub fn of_reader<R>(r: &Reader<R>) -> Self {
+        Columns {
+            reference: REFERENCE.iter().any(|c| r.header.iter().any(|h| h == c)),
+            chamber: r.has[14],
+            pos: r.has[15],
+            power: r.has[16],
+            extra: r.extra.clone(),
+        }
+    }
+}
+
+/// A streaming writer of recording format v1.
+pub struct Writer<W: Write> {
+    out: W,
+    file: PathBuf,
+    columns: Columns,
+    line: Vec<u8>,
+    line_no: u64,
+    prev_t: Option<f64>,
+    rows: u64,
+    ryu: ryu::Buffer,
+}
+
+impl<W: Write> Writer<W> {
+    /// Writes the comment lines (each prefixed `# `) and the header; `name` is the file named
+    /// in errors.
+    pub fn new(out: W, name: impl AsRef<Path>, columns: Columns, comments: &[&str]) -> Result<Self, Error> {
+        let mut w = Writer {
+            out,
+            file: name.as_ref().to_path_buf(),
+            columns,
+            line: Vec::with_capacity(512),
+            line_no: 0,
+            prev_t: None,
+            rows: 0,
+            ryu: ryu::Buffer::new(),
+        };
+        for c in comments {
+            if c.contains(['\n', '\r']) {
+                return Err(w.err(None, ErrorKind::Unwritable(format!("comment with a line break: {c:?}"))));
+            }
+            w.line.clear();
+            w.line.extend_from_slice(b"# ");
+            w.line.extend_from_slice(c.as_bytes());
+            w.line.push(b'\n');
+            w.flush_line()?;
+        }
+        for (i, n) in w.columns.extra.iter().enumerate() {
+            if n.is_empty() || field_of(n).is_some() || w.columns.extra[..i].contains(n) || n.contains(['\n', '\r']) {
+                return Err(w.err(None, ErrorKind::Unwritable(format!("extra column name {n:?}"))));
+            }
+        }
+        let names = w.columns.names();
+        w.line.clear();
+        for (i, n) in names.iter().enumerate() {
+            if i > 0 {
+                w.line.push(b',');
+            }
+            push_text(&mut w.line, n);
+        }
+        w.line.push(b'\n');
+        w.flush_line()?;
+        Ok(w)
+    }
+
+    fn err(&self, column: Option<&str>, kind: ErrorKind) -> Error {
+        let column = column.map(|c| {
+            let pos = self.columns.names().iter().position(|n| n == c).map_or(0, |p| p + 1);
+            (pos, c.to_string())
+        });
+        Error { file: self.file.clone(), line: self.line_no + 1, column, kind }
+    }
+
+    fn flush_line(&mut self) -> Result<(), Error> {
+        if let Err(e) = self.out.write_all(&self.line) {
+            return Err(self.err(None, ErrorKind::Io(e.to_string())));
+        }
+        self.line_no += 1;
+        Ok(())
+    }
+
+    fn num(&mut self, name: &'static str, v: f64) -> Result<(), Error> {
+        if !v.is_finite() {
+            return Err(self.err(Some(name), ErrorKind::Unwritable(format!("non-finite value {v}"))));
+        }
+        self.line.push(b',');
+        self.line.extend_from_slice(self.ryu.format_finite(v).as_bytes());
+        Ok(())
+    }
+
+    fn opt(&mut self, name: &'static str, v: Option<f64>) -> Result<(), Error> {
+        match v {
+            Some(v) => self.num(name, v),
+            None => {
+                self.line.push(b',');
+                Ok(())
+            }
+        }
+    }
+
+    /// Appends one row. Columns not in use are ignored; `None` is written as an empty cell.
+    pub fn write_row(&mut self, row: &Row) -> Result<(), Error> {
+        if !row.t_s.is_finite() {
+            return Err(self.err(Some(col::T_S), ErrorKind::Unwritable(format!("non-finite time {}", row.t_s))));
+        }
+        if let Some(prev) = self.prev_t
+            && !(row.t_s > prev)
+        {
+            return Err(self.err(Some(col::T_S), ErrorKind::TimeNotIncreasing { previous: prev, this: row.t_s }));
+        }
+        self.line.clear();
+        self.line.extend_from_slice(self.ryu.format_finite(row.t_s).as_bytes());
+        self.num(col::UX_V, row.u_v[0])?;
+        self.num(col::UY_V, row.u_v[1])?;
+        self.num(col::UZ_V, row.u_v[2])?;
+        self.num(col::TEMP_C, row.temp_c)?;
+        if self.columns.reference {
+            self.opt(col::FX_G, row.f_g[0])?;
+            self.opt(col::FY_G, row.f_g[1])?;
+            self.opt(col::FZ_G, row.f_g[2])?;
+            self.line.push(b',');
+            if let Some(k) = row.vib_kind {
+                self.line.extend_from_slice(k.as_str().as_bytes());
+            }
+            self.opt(col::VIB_X_G, row.vib_g[0])?;
+            self.opt(col::VIB_Y_G, row.vib_g[1])?;
+            self.opt(col::VIB_Z_G, row.vib_g[2])?;
+            self.opt(col::VIB_HZ, row.vib_hz)?;
+            self.opt(col::VIB_BW_HZ, row.vib_bw_hz)?;
+        }
+        if self.columns.chamber {
+            self.opt(col::CHAMBER_C, row.chamber_c)?;
+        }
+        if self.columns.pos {
+            self.line.push(b',');
+            if let Some(p) = &row.pos {
+                if p.contains(['\n', '\r']) {
+                    return Err(
+                        self.err(Some(col::POS), ErrorKind::Unwritable(format!("cell with a line break: {p:?}")))
+                    );
+                }
+                push_text(&mut self.line, p);
+            }
+        }
+        if self.columns.power {
+            self.opt(col::POWER_S, row.power_s)?;
+        }
+        for i in 0..self.columns.extra.len() {
+            self.line.push(b',');
+            let cell = row.extra.get(i).map_or("", String::as_str);
+            if cell.contains(['\n', '\r']) {
+                let name = self.columns.extra[i].clone();
+                let pos = self.columns.names().iter().position(|n| *n == name).map_or(0, |p| p + 1);
+                return Err(Error {
+                    file: self.file.clone(),
+                    line: self.line_no + 1,
+                    column: Some((pos, name)),
+                    kind: ErrorKind::Unwritable(format!("cell with a line break: {cell:?}")),
+                });
+            }
+            push_text(&mut self.line, cell);
+        }
+        self.line.push(b'\n');
+        self.flush_line()?;
+        self.prev_t = Some(row.t_s);
+        self.rows += 1;
+        Ok(())
+    }
+
+    /// Rows written so far.
+    pub fn rows(&self) -> u64 {
+        self.rows
+    }
+
+    /// Flushes and returns the underlying writer.
+    pub fn finish(mut self) -> Result<W, Error> {
+        if let Err(e) = self.out.flush() {
+            return Err(self.err(None, ErrorKind::Io(e.to_string())));
+        }
+        Ok(self.out)
+    }
+}
+
+/// A text cell, quoted when it holds a comma, a quote or surrounding spaces.
+fn push_text(line: &mut Vec<u8>, s: &str) {
+    if s.contains([',', '"']) || s.starts_with([' ', '\t']) || s.ends_with([' ', '\t']) {
+        line.push(b'"');
+        for b in s.bytes() {
+            if b == b'"' {
+                line.push(b'"');
+            }
+            line.push(b);
+        }
+        line.push(b'"');
+    } else {
+        line.extend_from_slice(s.as_bytes());
+    }
+}
+
+/// Reads a whole recording into memory (for small files and tests); errors as [`Reader`].
+pub fn read_all(path: &Path) -> Result<(Vec<String>, Vec<Row>), Error> {
+    let mut r = Reader::open(path)?;
+    let comments = r.comments().to_vec();
+    let rows = r.by_ref().collect::<Result<Vec<_>, _>>()?;
+    Ok((comments, rows))
+}
+
+/// Converts an I/O error into a recording error naming `file`.
+pub fn io_error(file: &Path, e: io::Error) -> Error {
+    Error { file: file.to_path_buf(), line: 0, column: None, kind: ErrorKind::Io(e.to_string()) }
+}

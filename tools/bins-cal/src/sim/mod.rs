@@ -1,0 +1,246 @@
+//! The simulator: a digital twin of one unit on its rigs, writing recording format v1.
+//!
+//! | module | owns |
+//! |---|---|
+//! | [`unit`] | the truth model: T(1) constants with their temperature model (the core's), V(2) nonlinearity, warm-up, noise |
+//! | [`thermal`] | chamber → case → die lags, self-heating, thermistor placement and lag, hysteresis |
+//! | [`rectify`] | rectified means of V(2) over sine and Gaussian vibration by quadrature |
+//! | [`rig`] | the timeline: tilter TP1–TP6, check positions CP1–CP6, shake-table plan, flight ramps |
+//! | [`scenario`] | the scenario file (TOML): parsing, checks naming the key, building a [`Simulation`] |
+//!
+//! Row `k` is logged at `t = k/rate`; its signals are the logger's mean over the sample
+//! period: the static parts are evaluated at `t`, the vibration enters through its rectified
+//! mean (and, optionally, its sampling fluctuation). The generator draws every random number
+//! from one ChaCha8 stream in a fixed order, so a seed gives the same file bit for bit on any
+//! machine.
+
+pub mod rectify;
+pub mod rig;
+pub mod scenario;
+pub mod thermal;
+pub mod unit;
+
+use crate::fsio::AtomicFile;
+use crate::recording::{Columns, Row, Writer};
+use bins_comp::vibration::Vibration;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use rig::Segment;
+use std::path::Path;
+use thermal::{Thermal, ThermalParams};
+use unit::{NoiseParams, NoiseState, Quantiser, UnitModel};
+
+/// Everything a run needs.
+#[derive(Clone, Debug)]
+pub struct Simulation {
+    /// The unit.
+    pub unit: UnitModel,
+    /// Thermal model.
+    pub thermal: ThermalParams,
+    /// Noise.
+    pub noise: NoiseParams,
+    /// The rig program.
+    pub segments: Vec<Segment>,
+    /// Logger rate [Hz].
+    pub rate_hz: f64,
+    /// Time since power-on at the first row [s].
+    pub power_on_s: f64,
+    /// Whether `chamber_C` is written.
+    pub log_chamber: bool,
+    /// Comment lines for the file.
+    pub comments: Vec<String>,
+}
+
+impl Simulation {
+    /// Total duration [s].
+    pub fn duration_s(&self) -> f64 {
+        self.segments.iter().map(|s| s.duration_s).sum()
+    }
+
+    /// Rows the run writes: every `t = k/rate` inside the duration.
+    pub fn n_rows(&self) -> u64 {
+        let d = self.duration_s() * self.rate_hz;
+        // A duration that is a whole number of periods ends just before its last instant.
+        let n = d.ceil();
+        if n <= 0.0 { 0 } else { n as u64 }
+    }
+
+    /// The columns a run writes.
+    pub fn columns(&self) -> Columns {
+        Columns { reference: true, chamber: self.log_chamber, pos: true, power: true, extra: Vec::new() }
+    }
+
+    /// A row generator for `seed`.
+    pub fn rows(&self, seed: u64) -> RowGen<'_> {
+        RowGen::new(self, seed)
+    }
+
+    /// Writes the recording of `sim` for `seed` to `output` atomically; returns the row count.
+    pub fn write(&self, scenario_name: &str, seed: u64, output: &Path, progress: bool) -> anyhow::Result<u64> {
+        let mut comments = vec![
+            format!("recording format v1 -- simulated by {}", crate::TOOL_VERSION),
+            format!("scenario: {scenario_name}, seed {seed}"),
+        ];
+        comments.extend(self.comments.iter().cloned());
+        let refs: Vec<&str> = comments.iter().map(String::as_str).collect();
+        let mut file = AtomicFile::create(output)?;
+        let mut w = Writer::new(file.writer(), output, self.columns(), &refs)?;
+        let n = self.n_rows();
+        let bar = if progress { indicatif::ProgressBar::new(n) } else { indicatif::ProgressBar::hidden() };
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} rows, {elapsed} (eta {eta})")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        let mut rows = self.rows(seed);
+        let mut row = Row::default();
+        let mut k = 0u64;
+        while rows.next_row(&mut row) {
+            w.write_row(&row)?;
+            k += 1;
+            if k.is_multiple_of(65536) {
+                bar.set_position(k);
+            }
+        }
+        bar.finish_and_clear();
+        w.finish()?;
+        file.commit()?;
+        Ok(k)
+    }
+}
+
+/// The rectified means for one (force, vibration) pair, cached while both stay the same.
+#[derive(Clone, Debug)]
+struct RectCache {
+    f: [f64; 3],
+    vib: Vibration<f64>,
+    rect_g: [f64; 3],
+    /// Standard deviation of the sample mean of ξ (random vibration, sampling fluctuation).
+    boxcar_sd: f64,
+}
+
+/// Produces the rows of a [`Simulation`] one at a time (constant memory).
+pub struct RowGen<'a> {
+    sim: &'a Simulation,
+    rng: ChaCha8Rng,
+    thermal: Thermal,
+    noise: NoiseState,
+    dt: f64,
+    k: u64,
+    n: u64,
+    seg: usize,
+    seg_start: f64,
+    cache: Option<RectCache>,
+    chamber_q: Quantiser,
+}
+
+impl<'a> RowGen<'a> {
+    fn new(sim: &'a Simulation, seed: u64) -> Self {
+        let dt = 1.0 / sim.rate_hz;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut noise = NoiseState::new(sim.noise, dt);
+        noise.start(&mut rng);
+        RowGen {
+            sim,
+            rng,
+            thermal: Thermal::new(sim.thermal, dt, sim.power_on_s),
+            noise,
+            dt,
+            k: 0,
+            n: sim.n_rows(),
+            seg: 0,
+            seg_start: 0.0,
+            cache: None,
+            chamber_q: Quantiser::new(0.001),
+        }
+    }
+
+    /// Rows left to produce.
+    pub fn remaining(&self) -> u64 {
+        self.n - self.k
+    }
+
+    /// Fills `row` with the next row; false after the last.
+    pub fn next_row(&mut self, row: &mut Row) -> bool {
+        if self.k >= self.n {
+            return false;
+        }
+        let t = self.k as f64 / self.sim.rate_hz;
+        // The segment holding t (segments of zero duration were never pushed).
+        let segs = &self.sim.segments;
+        let mut entered = self.k == 0;
+        while self.seg + 1 < segs.len() && t >= self.seg_start + segs[self.seg].duration_s {
+            self.seg_start += segs[self.seg].duration_s;
+            self.seg += 1;
+            entered = true;
+        }
+        let seg = &segs[self.seg];
+        if entered && let Some(c) = seg.chamber_c {
+            self.thermal.target_c = c;
+        }
+        if self.k > 0 {
+            self.thermal.step();
+        }
+        let s = ((t - self.seg_start) / seg.duration_s).clamp(0.0, 1.0);
+        let f = seg.f_at(s);
+        let vib = if seg.reference_known() { seg.vib } else { Vibration::None };
+        let hit = matches!(&self.cache, Some(c) if c.f == f && c.vib == vib);
+        if !hit {
+            let rect_g = rectify::rectified_g(&self.sim.unit.cf, &f, &vib);
+            let boxcar_sd = match vib {
+                Vibration::Random { band_hz, .. } => rectify::boxcar_variance(band_hz, self.dt).sqrt(),
+                _ => 0.0,
+            };
+            self.cache = Some(RectCache { f, vib, rect_g, boxcar_sd });
+        }
+        let (rect_g, boxcar_sd) = self.cache.as_ref().map_or(([0.0; 3], 0.0), |c| (c.rect_g, c.boxcar_sd));
+        // The sample's mean of the vibration itself (zero over whole periods).
+        let mut vib_mean = [0.0; 3];
+        if self.noise.vibration_sampling() {
+            match vib {
+                Vibration::None => {}
+                Vibration::Harmonic { amp_g, freq_hz } => {
+                    // Mean of sin ωτ over (t − Δt, t].
+                    let w = 2.0 * std::f64::consts::PI * freq_hz;
+                    let m = if w * self.dt > 1e-9 {
+                        ((w * (t - self.dt)).cos() - (w * t).cos()) / (w * self.dt)
+                    } else {
+                        (w * t).sin()
+                    };
+                    vib_mean = amp_g.map(|a| a * m);
+                }
+                Vibration::Random { sigma_g, .. } => {
+                    let z: f64 = self.rng.sample(StandardNormal);
+                    vib_mean = sigma_g.map(|sg| sg * boxcar_sd * z);
+                }
+            }
+        }
+        let power_s = self.sim.power_on_s + t;
+        let mut u = self.sim.unit.signals_v(self.thermal.effective_c, &f, &vib_mean, &rect_g, power_s);
+        self.noise.apply_signals(&mut self.rng, &mut u);
+        let temp_c = self.noise.apply_temp(&mut self.rng, self.thermal.thermistor_c);
+
+        row.line = 0;
+        row.t_s = t;
+        row.u_v = u;
+        row.temp_c = temp_c;
+        row.chamber_c = self.sim.log_chamber.then(|| self.chamber_q.apply(self.thermal.chamber_c));
+        row.power_s = Some(power_s);
+        if seg.reference_known() {
+            row.f_g = f.map(Some);
+            row.set_vibration(&vib);
+            match &seg.label {
+                Some(l) => match &mut row.pos {
+                    Some(p) if p == l => {}
+                    _ => row.pos = Some(l.clone()),
+                },
+                None => row.pos = None,
+            }
+        } else {
+            row.clear_reference();
+            row.pos = None;
+        }
+        self.k += 1;
+        true
+    }
+}

@@ -1,0 +1,190 @@
+//! The truth model of one unit: what its signals are for a given specific force, vibration,
+//! temperature and time since power-on, before and after noise.
+//!
+//! `U_i = Σ_j K_ij(T)·f_j + U0_i(T) + K_ii(T)·⟨N_i(f + ã)⟩ + w_i(t_p) + b_i(t) + n_i`
+//!
+//! - `K(T)`, `U0(T)`: the core's [`CalibrationParams::constants_at`] at the temperature the
+//!   constants follow (die through hysteresis), forward model T(1) by
+//!   [`Constants::signals_v`](bins_comp::Constants::signals_v);
+//! - `⟨N_i⟩`: the rectified mean of V(2)'s nonlinear part ([`super::rectify`]);
+//! - `w_i`: the warm-up transient after power-on, `A_i·e^(−t_p/τ)`;
+//! - `b_i`: bias random walk plus bias instability (first-order Gauss–Markov);
+//! - `n_i`: white noise per sample, then ADC quantisation.
+
+use bins_comp::CalibrationParams;
+use bins_comp::vibration::ConversionFunction;
+use rand::Rng;
+use rand_distr::StandardNormal;
+
+/// Noise and quantisation of the signals and the thermistor. All zero = noise off.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NoiseParams {
+    /// White noise per sample, RMS [V], per axis.
+    pub white_v: [f64; 3],
+    /// Bias random walk [V/√s], per axis.
+    pub random_walk_v_per_sqrt_s: [f64; 3],
+    /// Bias instability: stationary RMS of a first-order Gauss–Markov bias [V], per axis.
+    pub bias_instability_v: [f64; 3],
+    /// Its correlation time [s].
+    pub bias_tau_s: f64,
+    /// ADC step [V]; 0 = no quantisation.
+    pub adc_lsb_v: f64,
+    /// Thermistor white noise per sample, RMS [°C].
+    pub temp_noise_c: f64,
+    /// Thermistor resolution [°C]; 0 = none.
+    pub temp_resolution_c: f64,
+    /// Thermistor offset [°C].
+    pub temp_offset_c: f64,
+    /// Whether the logger's sample mean carries the fluctuation of the vibration over one
+    /// sample period (random: the boxcar-averaged band noise; sine: the part of a period not
+    /// completed in the sample) on top of the rectified mean.
+    pub vibration_sampling: bool,
+}
+
+/// The unit: constants and their temperature model, conversion functions, warm-up.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UnitModel {
+    /// Constants at T0 and their temperature model (method and range unused).
+    pub params: CalibrationParams,
+    /// V(2) of the x, y, z accelerometers, in g units (its linear part is T(1)'s and is not
+    /// added again).
+    pub cf: [ConversionFunction<f64>; 3],
+    /// Warm-up transient amplitude at power-on [V], per axis.
+    pub warmup_v: [f64; 3],
+    /// Warm-up time constant [s].
+    pub warmup_tau_s: f64,
+}
+
+/// A quantiser that prints short: for a step whose inverse is an integer (1e-7 V, 0.01 °C)
+/// it divides by that integer, so the result is the double nearest to a short decimal.
+#[derive(Clone, Copy, Debug)]
+pub struct Quantiser {
+    step: f64,
+    inv: Option<f64>,
+}
+
+impl Quantiser {
+    /// A quantiser with step `step` (0 = identity).
+    pub fn new(step: f64) -> Self {
+        let inv = if step > 0.0 {
+            let i = (1.0 / step).round();
+            (i >= 1.0 && ((1.0 / step) - i).abs() <= 1e-9 * i).then_some(i)
+        } else {
+            None
+        };
+        Quantiser { step, inv }
+    }
+
+    /// `x` rounded to the step.
+    #[inline]
+    pub fn apply(&self, x: f64) -> f64 {
+        match self.inv {
+            Some(inv) => (x * inv).round() / inv,
+            None if self.step > 0.0 => (x / self.step).round() * self.step,
+            None => x,
+        }
+    }
+}
+
+/// The random state of the unit's noise.
+#[derive(Clone, Debug)]
+pub struct NoiseState {
+    p: NoiseParams,
+    rw: [f64; 3],
+    gm: [f64; 3],
+    rw_step: [f64; 3],
+    gm_decay: f64,
+    gm_drive: [f64; 3],
+    adc: Quantiser,
+    temp_q: Quantiser,
+}
+
+impl NoiseState {
+    /// Zero biases; the Gauss–Markov bias starts from its stationary distribution at the
+    /// first draw.
+    pub fn new(p: NoiseParams, dt: f64) -> Self {
+        let gm_decay = if p.bias_tau_s > 0.0 { (-dt / p.bias_tau_s).exp() } else { 0.0 };
+        NoiseState {
+            p,
+            rw: [0.0; 3],
+            gm: [0.0; 3],
+            rw_step: p.random_walk_v_per_sqrt_s.map(|q| q * dt.sqrt()),
+            gm_decay,
+            gm_drive: p.bias_instability_v.map(|s| s * (1.0 - gm_decay * gm_decay).sqrt()),
+            adc: Quantiser::new(p.adc_lsb_v),
+            temp_q: Quantiser::new(p.temp_resolution_c),
+        }
+    }
+
+    /// Initialises the Gauss–Markov bias from its stationary distribution.
+    pub fn start<R: Rng>(&mut self, rng: &mut R) {
+        for i in 0..3 {
+            if self.p.bias_instability_v[i] > 0.0 {
+                let z: f64 = rng.sample(StandardNormal);
+                self.gm[i] = self.p.bias_instability_v[i] * z;
+            }
+        }
+    }
+
+    /// Adds one sample's noise to `u` and quantises it.
+    #[inline]
+    pub fn apply_signals<R: Rng>(&mut self, rng: &mut R, u: &mut [f64; 3]) {
+        for i in 0..3 {
+            if self.rw_step[i] > 0.0 {
+                let z: f64 = rng.sample(StandardNormal);
+                self.rw[i] += self.rw_step[i] * z;
+            }
+            if self.gm_drive[i] > 0.0 {
+                let z: f64 = rng.sample(StandardNormal);
+                self.gm[i] = self.gm_decay * self.gm[i] + self.gm_drive[i] * z;
+            }
+            let mut v = u[i] + self.rw[i] + self.gm[i];
+            if self.p.white_v[i] > 0.0 {
+                let z: f64 = rng.sample(StandardNormal);
+                v += self.p.white_v[i] * z;
+            }
+            u[i] = self.adc.apply(v);
+        }
+    }
+
+    /// The thermistor's reading for its true temperature.
+    #[inline]
+    pub fn apply_temp<R: Rng>(&mut self, rng: &mut R, t: f64) -> f64 {
+        let mut v = t + self.p.temp_offset_c;
+        if self.p.temp_noise_c > 0.0 {
+            let z: f64 = rng.sample(StandardNormal);
+            v += self.p.temp_noise_c * z;
+        }
+        self.temp_q.apply(v)
+    }
+
+    /// Whether vibration sampling fluctuations are on.
+    pub fn vibration_sampling(&self) -> bool {
+        self.p.vibration_sampling
+    }
+}
+
+impl UnitModel {
+    /// The noise-free signals [V] at the constants' temperature `temp_c` for the static
+    /// specific force `f_g` plus the sample's mean vibration `vib_mean_g` (zero unless the
+    /// sampling fluctuation is on), with the rectified means `rect_g` [g] and `power_s` since
+    /// power-on.
+    #[inline]
+    pub fn signals_v(
+        &self,
+        temp_c: f64,
+        f_g: &[f64; 3],
+        vib_mean_g: &[f64; 3],
+        rect_g: &[f64; 3],
+        power_s: f64,
+    ) -> [f64; 3] {
+        let c = self.params.constants_at(temp_c);
+        let f = [f_g[0] + vib_mean_g[0], f_g[1] + vib_mean_g[1], f_g[2] + vib_mean_g[2]];
+        let mut u = c.signals_v(&f);
+        let w = if self.warmup_tau_s > 0.0 { (-power_s / self.warmup_tau_s).exp() } else { 0.0 };
+        for i in 0..3 {
+            u[i] += c.k_v_per_g[i][i] * rect_g[i] + self.warmup_v[i] * w;
+        }
+        u
+    }
+}
