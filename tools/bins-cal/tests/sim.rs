@@ -447,6 +447,9 @@ fn shipped_scenarios_build_and_read_back() {
         let sim = scenario::load(&scenario_path(name)).unwrap_or_else(|e| panic!("{e}"));
         assert!(sim.n_rows() > 10_000, "{name}");
     }
+    // The benchmark day: exactly 24 h at 100 Hz.
+    let day = scenario::load(&scenario_path("day-100hz.toml")).unwrap();
+    assert_eq!(day.n_rows(), 8_640_000);
     // The flight: all Table V2/V3 profiles appear with their levels in the reference columns.
     let sim = scenario::load(&scenario_path("flight.toml")).unwrap();
     let dir = tempfile::tempdir().unwrap();
@@ -535,4 +538,22 @@ fn an_unwritable_output_names_the_file() {
         .unwrap();
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("/nonexistent-dir/out.csv"));
+}
+
+#[test]
+fn an_output_dropped_before_commit_leaves_nothing() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("rec.csv");
+    {
+        let mut f = bins_cal::fsio::AtomicFile::create(&out).unwrap();
+        f.writer().write_all(b"t_s,ux_V\n").unwrap();
+        // An error on the way: dropped without commit.
+    }
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    let mut f = bins_cal::fsio::AtomicFile::create(&out).unwrap();
+    f.writer().write_all(b"done\n").unwrap();
+    f.commit().unwrap();
+    assert_eq!(std::fs::read(&out).unwrap(), b"done\n");
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
