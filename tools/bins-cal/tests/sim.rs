@@ -557,3 +557,79 @@ fn an_output_dropped_before_commit_leaves_nothing() {
     assert_eq!(std::fs::read(&out).unwrap(), b"done\n");
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
+
+#[test]
+fn al15_preset_is_the_data_file() {
+    // data/al15-coefficients.csv (Table V1) against the preset's T(1) constants and V(2).
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/al15-coefficients.csv"))
+        .unwrap();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let vals: Vec<f64> = lines.next().unwrap().split(',').map(|v| v.parse().unwrap()).collect();
+    let get = |name: &str| vals[head.iter().position(|h| *h == name).unwrap()];
+    let (a0, k1) = (get("a0_mg") * 1e-3, get("K1_V_per_g"));
+    let (m1, m2) = (get("m1_mg_per_g") * 1e-3, get("m2_mg_per_g") * 1e-3);
+    let c = scenario::al15_constants();
+    for i in 0..3 {
+        assert!((c.k_v_per_g[i][i] - k1).abs() < 1e-15);
+        assert!((c.u0_v[i] - k1 * a0).abs() < 1e-15);
+        // OA of x is z, of y is x, of z is y; PA is the other one.
+        let (oa, pa) = ((i + 2) % 3, (i + 1) % 3);
+        assert!((c.k_v_per_g[i][oa] - k1 * m1).abs() < 1e-15);
+        assert!((c.k_v_per_g[i][pa] - k1 * m2).abs() < 1e-15);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let sim = load(
+        dir.path(),
+        "al.toml",
+        "[recording]\nrate_Hz = 1.0\n[unit]\npreset = \"al15\"\n[[step]]\nkind = \"hold\"\nposition = \"TP1\"\ndwell_s = 1.0\n",
+    );
+    let cf = sim.unit.cf[1];
+    let want = [
+        get("delta_1A_ppm") * 1e-6,
+        get("k2_ug_per_g2") * 1e-6,
+        get("k3_ug_per_g3") * 1e-6,
+        get("k4_ug_per_g4") * 1e-6,
+        get("k5_ug_per_g5") * 1e-6,
+        get("m31_ug_per_g2") * 1e-6,
+        get("m32_ug_per_g2") * 1e-6,
+    ];
+    let got =
+        [cf.delta_1a, cf.k2_g_per_g2, cf.k3_g_per_g3, cf.k4_g_per_g4, cf.k5_g_per_g5, cf.m31_g_per_g2, cf.m32_g_per_g2];
+    for (g, w) in got.iter().zip(want) {
+        assert!((g - w).abs() <= 1e-12 * w.abs(), "{g} vs {w}");
+    }
+}
+
+#[test]
+fn a_set_point_inside_one_sample_period_is_not_lost() {
+    let text = r#"
+[recording]
+rate_Hz = 10.0
+[unit]
+preset = "paper"
+[thermal]
+rate_C_per_min = inf
+[[step]]
+kind = "hold"
+position = "TP1"
+dwell_s = 1.0
+[[step]]
+kind = "soak"
+chamber_C = -40.0
+dwell_s = 0.05
+[[step]]
+kind = "hold"
+position = "TP2"
+dwell_s = 1.0
+"#;
+    let dir = tempfile::tempdir().unwrap();
+    let sim = load(dir.path(), "short.toml", text);
+    let mut rows = sim.rows(1);
+    let mut row = Row::default();
+    let mut last = Row::default();
+    while rows.next_row(&mut row) {
+        last = row.clone();
+    }
+    assert_eq!((last.chamber_c, last.temp_c, last.pos.as_deref()), (Some(-40.0), -40.0, Some("TP2")));
+}

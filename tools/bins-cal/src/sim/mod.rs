@@ -168,16 +168,20 @@ impl<'a> RowGen<'a> {
         let t = self.k as f64 / self.sim.rate_hz;
         // The segment holding t (segments of zero duration were never pushed).
         let segs = &self.sim.segments;
-        let mut entered = self.k == 0;
+        // Every set point on the way counts, also that of a segment shorter than a period.
+        if self.k == 0
+            && let Some(c) = segs[0].chamber_c
+        {
+            self.thermal.target_c = c;
+        }
         while self.seg + 1 < segs.len() && t >= self.seg_start + segs[self.seg].duration_s {
             self.seg_start += segs[self.seg].duration_s;
             self.seg += 1;
-            entered = true;
+            if let Some(c) = segs[self.seg].chamber_c {
+                self.thermal.target_c = c;
+            }
         }
         let seg = &segs[self.seg];
-        if entered && let Some(c) = seg.chamber_c {
-            self.thermal.target_c = c;
-        }
         if self.k > 0 {
             self.thermal.step();
         }
