@@ -613,11 +613,11 @@ rate_C_per_min = inf
 [[step]]
 kind = "hold"
 position = "TP1"
-dwell_s = 1.0
+dwell_s = 1.01
 [[step]]
 kind = "soak"
 chamber_C = -40.0
-dwell_s = 0.05
+dwell_s = 0.05     # 1.01 … 1.06 s: between the rows at 1.0 and 1.1 s
 [[step]]
 kind = "hold"
 position = "TP2"
