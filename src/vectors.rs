@@ -30,7 +30,13 @@ pub const RECORD_BYTES: usize = 36;
 /// Size of one result record.
 pub const RESULT_BYTES: usize = 16;
 /// Number of calibration variants.
-pub const VARIANTS: usize = 10;
+pub const VARIANTS: usize = 11;
+/// The variant that is always [`Calibration::uncalibrated`].
+pub const UNCALIBRATED_VARIANT: usize = 9;
+/// The variant whose calibration comes from the blob in the CALIB flash region
+/// ([`crate::blob`]): the firmware parses the region at boot, the host the same blob file.
+/// [`calibrations`] leaves it uncalibrated; the caller sets it.
+pub const FLASHED_VARIANT: usize = 10;
 
 /// Temperature model of a variant.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -42,7 +48,8 @@ pub enum VariantModel {
 }
 
 /// Model and method of each variant: 0 uncorrected; 1–4 two-range with method 1, method 2
-/// simplified, full, linearized; 5–8 the same with the quadratic; 9 uncalibrated.
+/// simplified, full, linearized; 5–8 the same with the quadratic; 9 uncalibrated; 10 the
+/// flashed calibration (no fixed model or method: `None`).
 pub fn variant_method(index: usize) -> Option<(VariantModel, Method)> {
     const M: [Method; 4] = [
         Method::CoefficientCorrection,
@@ -59,11 +66,12 @@ pub fn variant_method(index: usize) -> Option<(VariantModel, Method)> {
 }
 
 /// Builds every variant's `f32` calibration: identified in `f64`, rounded, re-validated.
-/// Variant 7 is [`Calibration::uncalibrated`]. A variant that fails to build is also the
-/// uncalibrated stand-in (so its samples are flagged), which the tests would notice.
+/// Variants [`UNCALIBRATED_VARIANT`] and [`FLASHED_VARIANT`] are
+/// [`Calibration::uncalibrated`]. A variant that fails to build is also the uncalibrated
+/// stand-in (so its samples are flagged), which the tests would notice.
 pub fn calibrations() -> [Calibration<f32>; VARIANTS] {
     let mut out = [Calibration::<f32>::uncalibrated(); VARIANTS];
-    for (i, slot) in out.iter_mut().enumerate().take(VARIANTS - 1) {
+    for (i, slot) in out.iter_mut().enumerate().take(UNCALIBRATED_VARIANT) {
         let Some((model, method)) = variant_method(i) else { continue };
         let model = match model {
             VariantModel::TwoRange => paper::two_range_model(),

@@ -1,7 +1,9 @@
 //! The Cortex-M4F firmware, run in QEMU (ARM MPS2 AN386) with semihosting.
 //!
 //! It owns the replay of the host's test vectors on the target: it builds the calibration
-//! variants once at boot ([`bins_comp::vectors::calibrations`]), reads
+//! variants once at boot ([`bins_comp::vectors::calibrations`]) — the flashed variant from the
+//! blob in the CALIB region ([`calib`]; uncalibrated, every sample flagged
+//! `INVALID_CALIBRATION`, if the blob is missing or invalid) — reads
 //! `target/fw-vectors/in.bin` (relative to QEMU's working directory) in chunks of whole
 //! [`RECORD_BYTES`] records, runs every record through its variant, writes the results to
 //! `target/fw-vectors/out.bin` ([`RESULT_BYTES`] each) and compares them bit for bit with the
@@ -12,6 +14,10 @@
 
 use core::sync::atomic::{AtomicBool, Ordering};
 
+mod calib;
+
+use bins_comp::Calibration;
+use bins_comp::blob::BlobError;
 use bins_comp::vectors::{self, RECORD_BYTES, RESULT_BYTES, Record};
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use semihosting::fs::File;
@@ -75,7 +81,8 @@ enum RunError {
 }
 
 fn run() -> Result<Totals, RunError> {
-    let cals = vectors::calibrations();
+    let mut cals = vectors::calibrations();
+    cals[vectors::FLASHED_VARIANT] = flashed_calibration();
     for (i, cal) in cals.iter().enumerate() {
         if !cal.is_valid() {
             defmt::info!("variant {} is the uncalibrated stand-in", i);
@@ -123,6 +130,32 @@ fn run() -> Result<Totals, RunError> {
         if filled < inbuf.len() {
             // End of file.
             return if filled == whole { Ok(totals) } else { Err(RunError::TrailingBytes(filled - whole)) };
+        }
+    }
+}
+
+/// The calibration in the CALIB region, read and checked once, at boot. On any error it is
+/// logged and the uncalibrated stand-in is used: its output is flagged `INVALID_CALIBRATION`
+/// on every sample.
+fn flashed_calibration() -> Calibration<f32> {
+    let region = calib::read_region();
+    match calib::calibration(&region) {
+        Ok((cal, parsed)) => {
+            defmt::info!(
+                "CALIB: valid calibration blob, {} bytes, unit {=str}, by {=str}",
+                parsed.blob.bytes().len(),
+                parsed.meta.serial,
+                parsed.meta.tool_version
+            );
+            cal
+        }
+        Err(BlobError::BadMagic) => {
+            defmt::warn!("CALIB: no calibration blob (bad magic): running uncalibrated");
+            Calibration::uncalibrated()
+        }
+        Err(e) => {
+            defmt::error!("CALIB: invalid calibration blob: {}: running uncalibrated", defmt::Display2Format(&e));
+            Calibration::uncalibrated()
         }
     }
 }

@@ -4,8 +4,10 @@
 //! symbol defined nowhere, so the release link fails with
 //! `undefined symbol: a_panic_is_reachable` as soon as the optimiser cannot remove every path
 //! to a panic in the code below. It builds the calibration variants
-//! ([`bins_comp::vectors::calibrations`]) and compensates inputs read with `read_volatile`
-//! (so nothing is constant-folded), writing each result with `write_volatile`. It links no
+//! ([`bins_comp::vectors::calibrations`]), parses the blob in the CALIB region into the
+//! flashed variant ([`calib`], the same code as the firmware's, so the blob parser is in the
+//! proof) and compensates inputs read with `read_volatile` (so nothing is constant-folded),
+//! writing each result with `write_volatile`. It links no
 //! defmt logger (the logger itself can panic) and does no text formatting. Only the release
 //! build is meaningful: a debug build keeps panics the optimiser would remove.
 //!
@@ -16,6 +18,8 @@
 //! Run in QEMU, it compensates [`ITERATIONS`] samples and exits with success.
 #![no_std]
 #![no_main]
+
+mod calib;
 
 use bins_comp::vectors::{self, VARIANTS};
 use cortex_m_rt::entry;
@@ -45,7 +49,10 @@ static mut OUTPUT: Output = Output { accel_g: [0.0; 3], status: 0 };
 
 #[entry]
 fn main() -> ! {
-    let cals = vectors::calibrations();
+    let mut cals = vectors::calibrations();
+    if let Ok((cal, _)) = calib::calibration(&calib::read_region()) {
+        cals[vectors::FLASHED_VARIANT] = cal;
+    }
     let vib_pipeline = bins_comp::Pipeline::new(
         cals.get(1).copied().unwrap_or(bins_comp::Calibration::uncalibrated()),
         vectors::vibration_config(bins_comp::Variant::Exact),

@@ -17,6 +17,18 @@ const THUMB: &str = "thumbv7em-none-eabihf";
 const THUMB_TARGET_DIR: &str = "target/thumb";
 /// Test vectors the firmware replays (its path is fixed in the firmware).
 const VECTORS_IN: &str = "target/fw-vectors/in.bin";
+/// The calibration file whose blob the firmware finds in its CALIB region during the test.
+const CALIBRATION: &str = "calibrations/paper-two-range.toml";
+/// That blob, and the same as Intel HEX at the CALIB origin (the address the loader uses).
+const BLOB: &str = "target/fw-vectors/cal.bin";
+const BLOB_HEX: &str = "target/fw-vectors/cal.hex";
+/// Working directory of the second QEMU run, with a corrupted blob (its firmware paths
+/// `target/fw-vectors/…` are relative to it).
+const CORRUPT_DIR: &str = "target/fw-corrupt";
+/// The corrupted blob: [`BLOB`] with one payload bit flipped.
+const CORRUPT_BLOB: &str = "target/fw-corrupt/cal.bin";
+/// The byte flipped in the corrupted blob (inside the constants section).
+const CORRUPT_BYTE: usize = 0x90;
 /// QEMU runner (also cargo's `runner` for the thumb target).
 const RUNNER: &str = "tools/qemu-run.sh";
 /// Debian packages of the fallback toolchain and of the QEMU run.
@@ -77,7 +89,7 @@ impl Xtask {
 
     fn test(&mut self) -> bool {
         let started = Instant::now();
-        let steps: [(&str, StepFn); 8] = [
+        let steps: [(&str, StepFn); 9] = [
             ("fmt", |x| x.run(x.host_cargo(["fmt", "--all", "--check"]))),
             ("clippy (host)", |x| {
                 x.run(x.host_cargo(["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"]))
@@ -94,7 +106,10 @@ impl Xtask {
                 x.build_firmware()?;
                 x.build_linkcheck()
             }),
-            ("qemu", |x| x.run_qemu(&x.elf("firmware"))),
+            ("qemu", |x| x.run_qemu_with_blob(&x.elf("firmware"), &x.root, &x.root.join(BLOB))),
+            ("qemu (corrupted calibration blob)", |x| {
+                x.run_qemu_with_blob(&x.elf("firmware"), &x.root.join(CORRUPT_DIR), &x.root.join(CORRUPT_BLOB))
+            }),
         ];
         let mut failed = None;
         for (i, (name, f)) in steps.iter().enumerate() {
@@ -197,8 +212,36 @@ impl Xtask {
         Ok(())
     }
 
+    /// The calibration blobs and the vectors of both QEMU runs. The valid blob is the paper's
+    /// calibration; the corrupted one differs in one bit, and `bins-cal` must reject it.
+    /// gen-vectors parses each blob as the firmware does, so the flashed variant expects the
+    /// calibrated output with the valid blob and the flagged uncalibrated output with the
+    /// corrupted one.
     fn gen_vectors(&mut self) -> Result {
-        self.run(self.host_cargo(["run", "--release", "-p", "host-tests", "--bin", "gen-vectors", "--", VECTORS_IN]))
+        let bins_cal = ["run", "--release", "-q", "-p", "bins-cal", "--", "blob"];
+        let mut c = self.host_cargo(bins_cal);
+        c.args(["encode", CALIBRATION, "-o", BLOB, "--ihex", BLOB_HEX]);
+        self.run(c)?;
+        let mut bad = std::fs::read(self.root.join(BLOB)).map_err(|e| format!("{BLOB}: {e}"))?;
+        *bad.get_mut(CORRUPT_BYTE).ok_or(format!("{BLOB}: shorter than {CORRUPT_BYTE} bytes"))? ^= 0x10;
+        let corrupt_vectors = self.root.join(CORRUPT_DIR).join(VECTORS_IN);
+        if let Some(dir) = corrupt_vectors.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        }
+        std::fs::write(self.root.join(CORRUPT_BLOB), &bad).map_err(|e| format!("{CORRUPT_BLOB}: {e}"))?;
+        let mut c = self.host_cargo(bins_cal);
+        c.args(["check", CORRUPT_BLOB]);
+        if self.run(c).is_ok() {
+            return Err(format!("bins-cal accepted the corrupted blob {CORRUPT_BLOB}"));
+        }
+        println!("(the error above is expected: the corrupted blob must be rejected)");
+        let gen_vectors = ["run", "--release", "-p", "host-tests", "--bin", "gen-vectors", "--", "--blob"];
+        let mut c = self.host_cargo(gen_vectors);
+        c.args([BLOB, VECTORS_IN]);
+        self.run(c)?;
+        let mut c = self.host_cargo(gen_vectors);
+        c.arg(CORRUPT_BLOB).arg(&corrupt_vectors);
+        self.run(c)
     }
 
     fn build_firmware(&mut self) -> Result {
@@ -215,9 +258,17 @@ impl Xtask {
         })
     }
 
-    /// Runs an ELF in QEMU from the repository root through the runner script.
-    fn run_qemu(&self, elf: &Path) -> Result {
-        self.run_qemu_in(elf, &self.root)
+    /// Runs an ELF in QEMU with `cwd` as its working directory and `blob` in the CALIB
+    /// region, placed by QEMU's generic loader at the address of the CALIB origin (taken from
+    /// [`BLOB_HEX`], which `bins-cal` writes at the ORIGIN of CALIB in `memory.x`).
+    fn run_qemu_with_blob(&self, elf: &Path, cwd: &Path, blob: &Path) -> Result {
+        let hex = std::fs::read_to_string(self.root.join(BLOB_HEX)).map_err(|e| format!("{BLOB_HEX}: {e}"))?;
+        let addr = ihex_start(&hex).ok_or(format!("{BLOB_HEX}: no extended-address and data record"))?;
+        let limit = env::var("XTASK_QEMU_TIMEOUT").ok().and_then(|s| s.parse().ok()).unwrap_or(QEMU_TIMEOUT_S);
+        let mut c = self.command(self.root.join(RUNNER));
+        c.env("QEMU_EXTRA", format!("-device loader,file={},addr=0x{addr:08x}", blob.display()));
+        c.arg(elf).current_dir(cwd).stdin(Stdio::null());
+        run_with_timeout(c, Duration::from_secs(limit))
     }
 
     /// Runs an ELF in QEMU with `cwd` as its working directory: the firmware's semihosting
@@ -314,6 +365,21 @@ fn demo_body(x: &mut Xtask) -> Result {
 }
 
 // ---- helpers ----------------------------------------------------------------------------
+
+/// The address of the first data byte of an Intel HEX file: the first extended-linear-address
+/// record (type 04) plus the first data record's offset.
+fn ihex_start(hex: &str) -> Option<u32> {
+    let field = |line: &str, at: usize, len: usize| u32::from_str_radix(line.get(at..at + len)?, 16).ok();
+    let mut upper = 0;
+    for line in hex.lines().filter(|l| l.starts_with(':')) {
+        match field(line, 7, 2)? {
+            0x04 => upper = field(line, 9, 4)?,
+            0x00 => return Some((upper << 16) | field(line, 3, 4)?),
+            _ => {}
+        }
+    }
+    None
+}
 
 fn cmd<I: IntoIterator<Item = S>, S: AsRef<OsStr>>(program: &str, args: I) -> Command {
     let mut c = Command::new(program);

@@ -6,6 +6,11 @@
 //!   the special inputs of the status policies (NaN, ±∞, overflow, unknown variant).
 //! - `gen-vectors --demo OUT.bin`: the demo set — the paper's unit in the six check positions
 //!   at −10, +20 and +45 °C, its true constants the quadratic through Tables T1/T2.
+//! - `--blob CAL.bin` (either set): the calibration blob the firmware finds in its CALIB
+//!   region. The flashed variant ([`vectors::FLASHED_VARIANT`]) is that blob parsed exactly as
+//!   the firmware parses it — or, if the blob is invalid, the uncalibrated stand-in, so every
+//!   one of its records then expects `INVALID_CALIBRATION`. Without `--blob` the region is
+//!   taken to be empty.
 
 use bins_comp::vectors::{self, Record, VARIANTS};
 use bins_comp::{Calibration, Sample, Status, ident, paper};
@@ -103,17 +108,46 @@ fn demo_set(cals: &[Calibration<f32>; VARIANTS]) -> Vec<Record> {
     out
 }
 
+/// The flashed variant's calibration: the blob at `path` parsed as the firmware parses the
+/// CALIB region, or the uncalibrated stand-in.
+fn flashed(path: Option<&str>) -> Calibration<f32> {
+    let Some(path) = path else {
+        println!("gen-vectors: no blob: the flashed variant is uncalibrated");
+        return Calibration::uncalibrated();
+    };
+    let bytes = std::fs::read(path).unwrap_or_else(|e| fail(std::path::Path::new(path), e));
+    match bins_comp::blob::parse_region(&bytes).and_then(|p| p.calibration::<f32>()) {
+        Ok(cal) => {
+            println!("gen-vectors: {path}: valid: the flashed variant uses it");
+            cal
+        }
+        Err(e) => {
+            println!("gen-vectors: {path}: invalid ({e}): the flashed variant is uncalibrated");
+            Calibration::uncalibrated()
+        }
+    }
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let blob = match args.iter().position(|a| a == "--blob") {
+        Some(i) if i + 1 < args.len() => Some(args.drain(i..i + 2).nth(1).unwrap_or_default()),
+        Some(_) => {
+            eprintln!("usage: gen-vectors [--demo] [--blob CAL.bin] OUT.bin");
+            std::process::exit(2);
+        }
+        None => None,
+    };
     let (demo, path) = match args.as_slice() {
         [p] => (false, p.clone()),
         [flag, p] if flag == "--demo" => (true, p.clone()),
         _ => {
-            eprintln!("usage: gen-vectors [--demo] OUT.bin");
+            eprintln!("usage: gen-vectors [--demo] [--blob CAL.bin] OUT.bin");
             std::process::exit(2);
         }
     };
-    let cals = vectors::calibrations();
+    let mut cals = vectors::calibrations();
+    cals[vectors::FLASHED_VARIANT] = flashed(blob.as_deref());
     let records = if demo { demo_set(&cals) } else { test_set(&cals) };
     let path = std::path::PathBuf::from(path);
     if let Some(dir) = path.parent() {
