@@ -89,7 +89,7 @@ impl Xtask {
 
     fn test(&mut self) -> bool {
         let started = Instant::now();
-        let steps: [(&str, StepFn); 9] = [
+        let steps: &[(&str, StepFn)] = &[
             ("fmt", |x| x.run(x.host_cargo(["fmt", "--all", "--check"]))),
             ("clippy (host)", |x| {
                 x.run(x.host_cargo(["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"]))
@@ -110,6 +110,7 @@ impl Xtask {
             ("qemu (corrupted calibration blob)", |x| {
                 x.run_qemu_with_blob(&x.elf("firmware"), &x.root.join(CORRUPT_DIR), &x.root.join(CORRUPT_BLOB))
             }),
+            ("fuzz (blob parser, short pass)", Xtask::fuzz_short),
         ];
         let mut failed = None;
         for (i, (name, f)) in steps.iter().enumerate() {
@@ -129,6 +130,31 @@ impl Xtask {
                 false
             }
         }
+    }
+
+    /// A short libFuzzer pass over the blob parser (`fuzz/`), where a nightly toolchain is
+    /// installed (cargo-fuzz needs it); otherwise the step says why it was skipped. The
+    /// exhaustive bit-flip and truncation tests run in every case (host tests).
+    fn fuzz_short(&mut self) -> Result {
+        if !probe(&mut cmd("rustup", ["run", "nightly", "rustc", "--version"])) {
+            println!("skipped: no nightly toolchain (rustup toolchain install nightly enables it)");
+            return Ok(());
+        }
+        if !probe(&mut cmd("cargo", ["+nightly", "fuzz", "--version"])) {
+            self.run(self.host_cargo(["install", "cargo-fuzz", "--locked"]))?;
+        }
+        let secs = env::var("XTASK_FUZZ_SECONDS").unwrap_or_else(|_| FUZZ_SECONDS.to_string());
+        let mut c = self.host_cargo([
+            "+nightly",
+            "fuzz",
+            "run",
+            "blob_parse",
+            "fuzz/corpus/blob_parse",
+            "fuzz/seeds/blob_parse",
+        ]);
+        c.args(["--", &format!("-max_total_time={secs}")]);
+        c.env_remove("RUSTUP_TOOLCHAIN");
+        self.run(c)
     }
 
     fn demo(&mut self) -> bool {
@@ -343,6 +369,9 @@ impl Xtask {
         if status.success() { Ok(()) } else { Err(format!("`{}` exited with {status}", show(&c))) }
     }
 }
+
+/// Seconds of the fuzz pass in `cargo xtask test` (`XTASK_FUZZ_SECONDS` overrides).
+const FUZZ_SECONDS: u32 = 30;
 
 // ---- the demo ---------------------------------------------------------------------------
 
