@@ -7,6 +7,7 @@
 //! |---|---|
 //! | [`calfile`] | the calibration file (TOML): types, checks naming the key, conversion to and from the core's parameters and the blob |
 //! | [`constants_table`] | tables of the constants at several temperatures (CSV) |
+//! | [`diagnose`] | sim-vs-real mismatch: residual, strata, mechanism library, selection, report |
 //! | [`ihex`] | Intel HEX output |
 //! | [`memmap`] | the CALIB region's address, read from `memory.x` |
 //! | [`fsio`] | writing outputs atomically (temporary file + rename) |
@@ -16,6 +17,7 @@
 
 pub mod calfile;
 pub mod constants_table;
+pub mod diagnose;
 pub mod fsio;
 pub mod ihex;
 pub mod memmap;

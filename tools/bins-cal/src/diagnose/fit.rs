@@ -1,0 +1,728 @@
+//! Selection and fit of the mechanisms on one accelerometer's residual.
+//!
+//! Every model contains the nuisance null: the local-level noise model of [`super::noise`]
+//! (white + random walk, so a constant offset and slow stochastic drift are noise, never a
+//! mechanism). Mechanisms are added by forward search. A candidate is accepted only if all of
+//! - the likelihood-ratio test against the current model, with the statistic divided by the
+//!   variance inflation of the remaining autocorrelation (Bartlett-weighted sum of the
+//!   whitened residual's autocorrelations), has p below α / (mechanisms × axes);
+//! - BIC improves (θ counted as a parameter);
+//! - the held-out score improves by more than its number of parameters: the summed squared
+//!   standardized one-step-ahead innovations on time blocks left out of the fit (40 blocks,
+//!   5 folds, block b in fold b mod 5, so every fold spans the whole record).
+//!
+//! After each addition the time constants of the model's members are re-optimised and members
+//! that no longer pass are dropped (backward step). The random-walk intensity is re-estimated
+//! with the selected model and the search repeated until the model is stable.
+//!
+//! Two mechanisms are ambiguous when replacing one by the other (θ re-searched) changes the
+//! deviance by less than [`AMBIGUOUS_LR`]: the data cannot tell them apart.
+
+use super::mech::{Context, Mech};
+use super::noise::{Filter, Step, estimate_q, smooth_level};
+use super::stats::{chi2_sf, chol_solve, dot};
+
+/// Family-wise false-discovery level of the whole diagnosis.
+pub const ALPHA: f64 = 1e-3;
+/// Deviance difference below which two explanations are taken as equally good.
+pub const AMBIGUOUS_LR: f64 = 10.0;
+/// Time blocks and folds of the held-out score.
+pub const BLOCKS: usize = 40;
+/// Folds (block `b` is in fold `b % FOLDS`).
+pub const FOLDS: usize = 5;
+
+/// A candidate: one mechanism at one grid θ, and its columns in the bank.
+#[derive(Clone, Debug)]
+struct Cand {
+    mech: Mech,
+    theta: Option<f64>,
+    cols: Vec<usize>,
+}
+
+/// The candidate columns of one accelerometer, each scaled to unit RMS.
+struct Bank {
+    cols: Vec<Vec<f64>>,
+    cands: Vec<Cand>,
+}
+
+impl Bank {
+    fn new(ctx: &Context) -> Self {
+        let mut cols = Vec::new();
+        let mut cands = Vec::new();
+        for m in Mech::ALL {
+            if !ctx.available(m) {
+                continue;
+            }
+            let thetas: Vec<Option<f64>> =
+                if m.theta().is_some() { ctx.grid(m).into_iter().map(Some).collect() } else { vec![None] };
+            for th in thetas {
+                let cs = ctx.columns(m, th.unwrap_or(0.0));
+                let mut idx = Vec::new();
+                for c in cs {
+                    let rms = (dot(&c, &c) / c.len().max(1) as f64).sqrt();
+                    if !(rms > 1e-300) || !rms.is_finite() {
+                        continue;
+                    }
+                    cols.push(c.iter().map(|v| v / rms).collect());
+                    idx.push(cols.len() - 1);
+                }
+                if !idx.is_empty() {
+                    cands.push(Cand { mech: m, theta: th, cols: idx });
+                }
+            }
+        }
+        Bank { cols, cands }
+    }
+}
+
+/// The fold of each row (`None`: in no fold).
+fn folds_of(n: usize) -> Vec<usize> {
+    (0..n).map(|i| (i * BLOCKS / n.max(1)) % FOLDS).collect()
+}
+
+/// Gram matrices of the whitened bank columns and `y` (last index).
+struct Grams {
+    p: usize,
+    all: Vec<f64>,
+    test: Vec<Vec<f64>>,
+    train: Vec<Vec<f64>>,
+    n_all: usize,
+}
+
+fn gram_of(w: &[Vec<f64>], rows: Option<&[(usize, usize)]>) -> Vec<f64> {
+    let p = w.len();
+    let mut g = vec![0.0; p * p];
+    for a in 0..p {
+        for b in a..p {
+            let v = match rows {
+                None => dot(&w[a], &w[b]),
+                Some(rs) => rs.iter().map(|&(s, e)| dot(&w[a][s..e], &w[b][s..e])).sum(),
+            };
+            g[a * p + b] = v;
+            g[b * p + a] = v;
+        }
+    }
+    g
+}
+
+fn ranges_of(fold: &[usize], k: usize) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < fold.len() {
+        if fold[i] == k {
+            let s = i;
+            while i < fold.len() && fold[i] == k {
+                i += 1;
+            }
+            out.push((s, i));
+        } else {
+            i += 1;
+        }
+    }
+    out
+}
+
+impl Grams {
+    fn new(t: &[f64], r: &[f64], q: f64, y: &[f64], bank: &Bank, fold: &[usize]) -> Self {
+        let p = bank.cols.len() + 1;
+        let n = y.len();
+        let mut w: Vec<Vec<f64>> = vec![vec![0.0; n]; p];
+        let f0 = Filter::new(t, r, q, |_| true);
+        for (c, out) in bank.cols.iter().zip(w.iter_mut()) {
+            f0.whiten(c, out);
+        }
+        f0.whiten(y, &mut w[p - 1]);
+        let test: Vec<Vec<f64>> = (0..FOLDS).map(|k| gram_of(&w, Some(&ranges_of(fold, k)))).collect();
+        let mut all = vec![0.0; p * p];
+        for g in &test {
+            for (a, b) in all.iter_mut().zip(g) {
+                *a += b;
+            }
+        }
+        let mut train = Vec::new();
+        for k in 0..FOLDS {
+            let fk = Filter::new(t, r, q, |i| fold[i] != k);
+            for (c, out) in bank.cols.iter().zip(w.iter_mut()) {
+                fk.whiten(c, out);
+            }
+            fk.whiten(y, &mut w[p - 1]);
+            train.push(gram_of(&w, None));
+        }
+        Grams { p, all, test, train, n_all: f0.n_used }
+    }
+
+    /// GLS on the columns `idx`: coefficients (of the scaled columns) and SSE.
+    fn fit(g: &[f64], p: usize, idx: &[usize]) -> Option<(Vec<f64>, f64)> {
+        let y = p - 1;
+        let m = idx.len();
+        if m == 0 {
+            return Some((Vec::new(), g[y * p + y]));
+        }
+        let mut a = vec![0.0; m * m];
+        let mut b = vec![0.0; m];
+        for (u, &cu) in idx.iter().enumerate() {
+            b[u] = g[cu * p + y];
+            for (v, &cv) in idx.iter().enumerate() {
+                a[u * m + v] = g[cu * p + cv];
+            }
+        }
+        let (x, _) = chol_solve(&a, &b, m, 1e-9)?;
+        let fit: f64 = x.iter().zip(&b).map(|(x, b)| x * b).sum();
+        Some((x, (g[y * p + y] - fit).max(0.0)))
+    }
+
+    fn sse(&self, idx: &[usize]) -> Option<f64> {
+        Self::fit(&self.all, self.p, idx).map(|f| f.1)
+    }
+
+    /// Held-out score: Σ over folds of the test rows' whitened SSE with β from the others.
+    fn cv(&self, idx: &[usize]) -> Option<f64> {
+        let p = self.p;
+        let y = p - 1;
+        let mut total = 0.0;
+        for k in 0..FOLDS {
+            let (beta, _) = Self::fit(&self.train[k], p, idx)?;
+            let g = &self.test[k];
+            let mut s = g[y * p + y];
+            for (u, &cu) in idx.iter().enumerate() {
+                s -= 2.0 * beta[u] * g[cu * p + y];
+                for (v, &cv) in idx.iter().enumerate() {
+                    s += beta[u] * beta[v] * g[cu * p + cv];
+                }
+            }
+            total += s;
+        }
+        Some(total)
+    }
+}
+
+/// One step of the forward search, for the report.
+#[derive(Clone, Debug)]
+pub struct StepInfo {
+    /// The mechanism tried.
+    pub mech: Mech,
+    /// Its best grid θ.
+    pub theta: Option<f64>,
+    /// Likelihood-ratio statistic (after the autocorrelation inflation).
+    pub lr: f64,
+    /// Degrees of freedom.
+    pub df: usize,
+    /// p-value.
+    pub p: f64,
+    /// BIC improvement.
+    pub dbic: f64,
+    /// Held-out improvement in units of the residual variance.
+    pub dcv: f64,
+    /// Accepted into the model.
+    pub accepted: bool,
+}
+
+/// A fitted term.
+#[derive(Clone, Debug)]
+pub struct Term {
+    /// The mechanism.
+    pub mech: Mech,
+    /// Its θ (time constant [s] or width [°C]).
+    pub theta: Option<f64>,
+    /// 95 % profile-likelihood interval of θ.
+    pub theta_ci: Option<(f64, f64)>,
+    /// Coefficients of the raw (unscaled) columns.
+    pub coef: Vec<f64>,
+    /// Their standard errors (inflated for autocorrelation).
+    pub se: Vec<f64>,
+    /// LR statistic for dropping the term from the final model.
+    pub lr_drop: f64,
+    /// Its p-value.
+    pub p_drop: f64,
+    /// The term's contribution at every row [g].
+    pub contribution: Vec<f64>,
+    /// Its columns at every row (raw, per unit coefficient).
+    pub columns: Vec<Vec<f64>>,
+}
+
+/// The diagnosis of one accelerometer.
+#[derive(Clone, Debug)]
+pub struct AxisFit {
+    /// Accelerometer index.
+    pub axis: usize,
+    /// Random-walk intensity of the noise model [g²/s].
+    pub q: f64,
+    /// Variance inflation for the remaining autocorrelation.
+    pub inflation: f64,
+    /// The selected terms.
+    pub terms: Vec<Term>,
+    /// For each selected mechanism, the mechanisms that explain the data equally well, with
+    /// the deviance difference.
+    pub ambiguous: Vec<(Mech, Vec<(Mech, f64)>)>,
+    /// The forward search.
+    pub trace: Vec<StepInfo>,
+    /// The drift nuisance of the final model at every row [g].
+    pub drift: Vec<f64>,
+    /// Model prediction at every row [g].
+    pub prediction: Vec<f64>,
+    /// RMS [g] of residual − drift, before and after the model, all rows.
+    pub rms: (f64, f64),
+    /// The same on held-out blocks (β fitted without them).
+    pub heldout_rms: (f64, f64),
+}
+
+fn inflation(w: &[f64], used: &[bool]) -> f64 {
+    let v: Vec<f64> = w.iter().zip(used).filter(|(_, u)| **u).map(|(x, _)| *x).collect();
+    let n = v.len();
+    if n < 50 {
+        return 1.0;
+    }
+    let mean = v.iter().sum::<f64>() / n as f64;
+    let c: Vec<f64> = v.iter().map(|x| x - mean).collect();
+    let c0 = dot(&c, &c);
+    if !(c0 > 0.0) {
+        return 1.0;
+    }
+    let l = 20usize.min(n / 10);
+    let mut s = 1.0;
+    for k in 1..=l {
+        let rho = dot(&c[k..], &c[..n - k]) / c0;
+        s += 2.0 * (1.0 - k as f64 / (l as f64 + 1.0)) * rho;
+    }
+    s.max(1.0)
+}
+
+/// Direct GLS with the whitening filter `f`: coefficients, standard errors per unit variance,
+/// SSE and the whitened residual.
+/// GLS result: coefficients, standard errors per unit variance, SSE, whitened residual.
+type Gls = (Vec<f64>, Vec<f64>, f64, Vec<f64>);
+
+fn gls(f: &Filter, y: &[f64], cols: &[&[f64]]) -> Option<Gls> {
+    let wy = f.whitened(y);
+    let wx: Vec<Vec<f64>> = cols.iter().map(|c| f.whitened(c)).collect();
+    let m = wx.len();
+    let norms: Vec<f64> = wx.iter().map(|c| dot(c, c).sqrt()).collect();
+    if norms.iter().any(|v| !(*v > 0.0)) {
+        return None;
+    }
+    let mut a = vec![0.0; m * m];
+    let mut b = vec![0.0; m];
+    for u in 0..m {
+        b[u] = dot(&wx[u], &wy) / norms[u];
+        for v in 0..m {
+            a[u * m + v] = dot(&wx[u], &wx[v]) / (norms[u] * norms[v]);
+        }
+    }
+    let (x, d) = if m > 0 { chol_solve(&a, &b, m, 1e-10)? } else { (Vec::new(), Vec::new()) };
+    let beta: Vec<f64> = x.iter().zip(&norms).map(|(x, n)| x / n).collect();
+    let se: Vec<f64> = d.iter().zip(&norms).map(|(d, n)| d.sqrt() / n).collect();
+    let mut res = wy;
+    for (c, bt) in wx.iter().zip(&beta) {
+        for (r, v) in res.iter_mut().zip(c) {
+            *r -= bt * v;
+        }
+    }
+    let sse = dot(&res, &res);
+    Some((beta, se, sse, res))
+}
+
+/// Variance inflation of a model (by its candidates).
+type InflOf<'a> = Box<dyn Fn(&[usize]) -> f64 + 'a>;
+
+struct Selector<'a> {
+    bank: &'a Bank,
+    grams: Grams,
+    infl_of: InflOf<'a>,
+    alpha: f64,
+}
+
+impl Selector<'_> {
+    fn cols(&self, model: &[usize]) -> Vec<usize> {
+        model.iter().flat_map(|&c| self.bank.cands[c].cols.iter().copied()).collect()
+    }
+
+    fn df(&self, c: usize) -> usize {
+        self.bank.cands[c].cols.len() + usize::from(self.bank.cands[c].theta.is_some())
+    }
+
+    /// Best grid candidate of mechanism `m` added to `model`: (cand, sse).
+    fn best_of(&self, model: &[usize], m: Mech) -> Option<(usize, f64)> {
+        let mut best: Option<(usize, f64)> = None;
+        for (ci, c) in self.bank.cands.iter().enumerate() {
+            if c.mech != m {
+                continue;
+            }
+            let mut idx = self.cols(model);
+            idx.extend(c.cols.iter().copied());
+            if let Some(sse) = self.grams.sse(&idx)
+                && best.is_none_or(|b| sse < b.1)
+            {
+                best = Some((ci, sse));
+            }
+        }
+        best
+    }
+
+    fn evaluate(&self, model: &[usize], cand: usize, sse0: f64, sse1: f64, cv0: f64) -> StepInfo {
+        let n = self.grams.n_all as f64;
+        let mut with = model.to_vec();
+        with.push(cand);
+        let infl = (self.infl_of)(&with);
+        let df = self.df(cand);
+        let lr = n * (sse0 / sse1.max(1e-300)).ln() / infl;
+        let p = chi2_sf(lr, df as f64);
+        let dbic = lr - df as f64 * n.ln();
+        let cv1 = self.grams.cv(&self.cols(&with)).unwrap_or(f64::INFINITY);
+        let dcv = (cv0 - cv1) / (sse1 / n) / infl;
+        let c = &self.bank.cands[cand];
+        StepInfo { mech: c.mech, theta: c.theta, lr, df, p, dbic, dcv, accepted: false }
+    }
+
+    fn passes(&self, s: &StepInfo) -> bool {
+        s.p < self.alpha && s.dbic > 0.0 && s.dcv > s.df as f64
+    }
+
+    fn reoptimise(&self, model: &mut [usize]) {
+        for k in 0..model.len() {
+            let m = self.bank.cands[model[k]].mech;
+            if m.theta().is_none() {
+                continue;
+            }
+            let rest: Vec<usize> = model.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, c)| *c).collect();
+            if let Some((c, _)) = self.best_of(&rest, m) {
+                model[k] = c;
+            }
+        }
+    }
+
+    fn run(&self, start: Vec<usize>, trace: &mut Vec<StepInfo>) -> Vec<usize> {
+        let mut model = start;
+        for _ in 0..12 {
+            let idx = self.cols(&model);
+            let Some(sse0) = self.grams.sse(&idx) else { break };
+            let cv0 = self.grams.cv(&idx).unwrap_or(f64::INFINITY);
+            let mut best: Option<(usize, StepInfo)> = None;
+            for m in Mech::ALL {
+                if model.iter().any(|&c| self.bank.cands[c].mech == m) {
+                    continue;
+                }
+                let Some((c, sse1)) = self.best_of(&model, m) else { continue };
+                let s = self.evaluate(&model, c, sse0, sse1, cv0);
+                let ok = self.passes(&s);
+                if ok && best.as_ref().is_none_or(|b| s.dbic > b.1.dbic) {
+                    best = Some((c, s.clone()));
+                }
+                if !ok {
+                    trace.push(s);
+                }
+            }
+            let Some((c, mut s)) = best else { break };
+            s.accepted = true;
+            trace.push(s);
+            model.push(c);
+            self.reoptimise(&mut model);
+            // Backward: drop members that no longer pass.
+            loop {
+                let mut worst: Option<(usize, f64)> = None;
+                for k in 0..model.len() {
+                    let rest: Vec<usize> = model.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, c)| *c).collect();
+                    let (Some(s_rest), Some(s_all)) =
+                        (self.grams.sse(&self.cols(&rest)), self.grams.sse(&self.cols(&model)))
+                    else {
+                        continue;
+                    };
+                    let cv_rest = self.grams.cv(&self.cols(&rest)).unwrap_or(f64::INFINITY);
+                    let st = self.evaluate(&rest, model[k], s_rest, s_all, cv_rest);
+                    if !self.passes(&st) && worst.is_none_or(|w| st.p > w.1) {
+                        worst = Some((k, st.p));
+                    }
+                }
+                match worst {
+                    Some((k, _)) => {
+                        model.remove(k);
+                    }
+                    None => break,
+                }
+            }
+        }
+        model
+    }
+}
+
+/// Diagnoses one accelerometer.
+pub fn fit_axis(ctx: &Context, n_axes_tested: usize) -> AxisFit {
+    let p = ctx.p;
+    let axis = ctx.axis;
+    let (t, r, y) = (&p.t, &p.r_white[axis], &p.r[axis]);
+    let n = y.len();
+    let bank = Bank::new(ctx);
+    let fold = folds_of(n);
+    let alpha = ALPHA / (Mech::ALL.len() * n_axes_tested.max(1)) as f64;
+    let mut model: Vec<usize> = Vec::new();
+    let mut trace = Vec::new();
+    let mut q = estimate_q(t, r, y, &[]);
+    for round in 0..4 {
+        let grams = Grams::new(t, r, q, y, &bank, &fold);
+        let filt = Filter::new(t, r, q, |_| true);
+        let used: Vec<bool> = filt.step.iter().map(|s| *s == Step::Update).collect();
+        let bank_ref = &bank;
+        let infl_of = move |m: &[usize]| {
+            let cols: Vec<&[f64]> =
+                m.iter().flat_map(|&c| bank_ref.cands[c].cols.iter().map(|&i| bank_ref.cols[i].as_slice())).collect();
+            match gls(&filt, y, &cols) {
+                Some((_, _, _, res)) => inflation(&res, &used),
+                None => f64::INFINITY,
+            }
+        };
+        let sel = Selector { bank: &bank, grams, infl_of: Box::new(infl_of), alpha };
+        trace.clear();
+        let new_model = sel.run(model.clone(), &mut trace);
+        let cols: Vec<&[f64]> =
+            new_model.iter().flat_map(|&c| bank.cands[c].cols.iter().map(|&i| bank.cols[i].as_slice())).collect();
+        let q_new = estimate_q(t, r, y, &cols);
+        let stable = new_model == model && (q_new / q.max(1e-300)).ln().abs() < 0.4;
+        let q_stable = (q_new / q.max(1e-300)).ln().abs() < 0.4 || (q == 0.0 && q_new == 0.0);
+        model = new_model;
+        q = q_new;
+        if stable || (q_stable && round > 0) {
+            break;
+        }
+    }
+    // Backward pruning on the refined model (θ off the grid): a term that no longer passes
+    // was only compensating a grid θ of another.
+    let n_used = n.saturating_sub(1).max(2) as f64;
+    loop {
+        let mut fit = finish(ctx, &bank, &model, q, &fold);
+        let weakest = fit
+            .terms
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| {
+                let df = t.coef.len() + usize::from(t.theta.is_some());
+                t.p_drop >= alpha || t.lr_drop - df as f64 * n_used.ln() < 0.0
+            })
+            .max_by(|a, b| a.1.p_drop.total_cmp(&b.1.p_drop))
+            .map(|(k, _)| k);
+        match weakest {
+            Some(k) => {
+                model.remove(k);
+            }
+            None => {
+                fit.trace = trace;
+                fit.ambiguous = ambiguity(&bank, &model, t, r, q, y, &fold, fit.inflation);
+                return fit;
+            }
+        }
+    }
+}
+
+/// For each member of `model`, the mechanisms that replace it (θ re-searched on the grid)
+/// with a deviance change below [`AMBIGUOUS_LR`].
+#[allow(clippy::too_many_arguments)]
+fn ambiguity(
+    bank: &Bank,
+    model: &[usize],
+    t: &[f64],
+    r: &[f64],
+    q: f64,
+    y: &[f64],
+    fold: &[usize],
+    infl: f64,
+) -> Vec<(Mech, Vec<(Mech, f64)>)> {
+    if model.is_empty() {
+        return Vec::new();
+    }
+    let grams = Grams::new(t, r, q, y, bank, fold);
+    let colsidx = |m: &[usize]| -> Vec<usize> { m.iter().flat_map(|&c| bank.cands[c].cols.iter().copied()).collect() };
+    let mut ambiguous = Vec::new();
+    let sse_full = grams.sse(&colsidx(model));
+    for (k, &c) in model.iter().enumerate() {
+        let mut alts = Vec::new();
+        let rest: Vec<usize> = model.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, c)| *c).collect();
+        for m in Mech::ALL {
+            if model.iter().any(|&mc| bank.cands[mc].mech == m) {
+                continue;
+            }
+            let mut best: Option<f64> = None;
+            for (ci, cand) in bank.cands.iter().enumerate() {
+                if cand.mech != m {
+                    continue;
+                }
+                let mut with = rest.clone();
+                with.push(ci);
+                if let Some(s) = grams.sse(&colsidx(&with))
+                    && best.is_none_or(|b| s < b)
+                {
+                    best = Some(s);
+                }
+            }
+            if let (Some(s_alt), Some(s_full)) = (best, sse_full) {
+                let d = grams.n_all as f64 * (s_alt / s_full.max(1e-300)).ln() / infl;
+                if d < AMBIGUOUS_LR {
+                    alts.push((m, d));
+                }
+            }
+        }
+        if !alts.is_empty() {
+            ambiguous.push((bank.cands[c].mech, alts));
+        }
+    }
+    ambiguous
+}
+
+fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -> AxisFit {
+    let p = ctx.p;
+    let axis = ctx.axis;
+    let (t, r, y) = (&p.t, &p.r_white[axis], &p.r[axis]);
+    let n = y.len();
+    let filt = Filter::new(t, r, q, |_| true);
+    let used: Vec<bool> = filt.step.iter().map(|s| *s == Step::Update).collect();
+    let nu = filt.n_used as f64;
+    // Members with their θ; refine θ by golden section in log θ, coordinate-wise, twice.
+    let mut members: Vec<(Mech, Option<f64>)> =
+        model.iter().map(|&c| (bank.cands[c].mech, bank.cands[c].theta)).collect();
+    let cols_of = |ms: &[(Mech, Option<f64>)]| -> Vec<Vec<f64>> {
+        ms.iter().flat_map(|(m, th)| ctx.columns(*m, th.unwrap_or(0.0))).collect()
+    };
+    let sse_of = |ms: &[(Mech, Option<f64>)]| -> f64 {
+        let cols = cols_of(ms);
+        let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+        gls(&filt, y, &refs).map_or(f64::INFINITY, |g| g.2)
+    };
+    for _ in 0..2 {
+        for k in 0..members.len() {
+            let (m, Some(th0)) = members[k] else { continue };
+            let grid = ctx.grid(m);
+            let step = if grid.len() > 1 { (grid[1] / grid[0]).ln() } else { 0.3 };
+            let (mut a, mut b) = (th0.ln() - step, th0.ln() + step);
+            let phi = 0.618_033_988_749_894_9;
+            let eval = |lt: f64| {
+                let mut ms = members.clone();
+                ms[k].1 = Some(lt.exp());
+                sse_of(&ms)
+            };
+            let (mut c, mut d) = (b - phi * (b - a), a + phi * (b - a));
+            let (mut fc, mut fd) = (eval(c), eval(d));
+            for _ in 0..24 {
+                if fc < fd {
+                    b = d;
+                    d = c;
+                    fd = fc;
+                    c = b - phi * (b - a);
+                    fc = eval(c);
+                } else {
+                    a = c;
+                    c = d;
+                    fc = fd;
+                    d = a + phi * (b - a);
+                    fd = eval(d);
+                }
+            }
+            let best = if fc < fd { c } else { d };
+            if eval(best) <= eval(th0.ln()) {
+                members[k].1 = Some(best.exp());
+            }
+        }
+    }
+    let cols = cols_of(&members);
+    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+    let (beta, se_unit, sse, res) = gls(&filt, y, &refs).unwrap_or_else(|| {
+        let wy = filt.whitened(y);
+        (vec![0.0; refs.len()], vec![0.0; refs.len()], dot(&wy, &wy), wy)
+    });
+    let infl = inflation(&res, &used);
+    let sigma2 = sse / (nu - beta.len() as f64).max(1.0);
+    let mut terms = Vec::new();
+    let mut off = 0;
+    let mut prediction = vec![0.0; n];
+    for (k, (m, th)) in members.iter().enumerate() {
+        let nc = ctx.columns(*m, th.unwrap_or(0.0)).len();
+        let coef = beta[off..off + nc].to_vec();
+        let se: Vec<f64> = se_unit[off..off + nc].iter().map(|s| s * (sigma2 * infl).sqrt()).collect();
+        let tcols: Vec<Vec<f64>> = cols[off..off + nc].to_vec();
+        let mut contribution = vec![0.0; n];
+        for (c, b) in tcols.iter().zip(&coef) {
+            for (o, v) in contribution.iter_mut().zip(c) {
+                *o += b * v;
+            }
+        }
+        for (o, v) in prediction.iter_mut().zip(&contribution) {
+            *o += v;
+        }
+        let mut rest = members.clone();
+        rest.remove(k);
+        let sse_rest = sse_of(&rest);
+        let lr_drop = nu * (sse_rest / sse.max(1e-300)).ln() / infl;
+        let df = nc + usize::from(th.is_some());
+        let p_drop = chi2_sf(lr_drop, df as f64);
+        // Profile interval of θ: where the deviance rises by 3.84·inflation.
+        let theta_ci = th.map(|th| {
+            let grid = ctx.grid(*m);
+            let (gmin, gmax) = (grid.first().copied().unwrap_or(th) / 10.0, grid.last().copied().unwrap_or(th) * 10.0);
+            let dev = |x: f64| {
+                let mut ms = members.clone();
+                ms[k].1 = Some(x);
+                nu * (sse_of(&ms) / sse.max(1e-300)).ln() / infl
+            };
+            let bound = |dir: f64| {
+                let mut inside = th;
+                let mut x = th;
+                loop {
+                    let nx = if dir > 0.0 { x * 1.1 } else { x / 1.1 };
+                    if nx < gmin || nx > gmax {
+                        return nx.clamp(gmin, gmax);
+                    }
+                    if dev(nx) > 3.84 {
+                        let (mut lo, mut hi) = (inside.ln(), nx.ln());
+                        for _ in 0..12 {
+                            let mid = 0.5 * (lo + hi);
+                            if dev(mid.exp()) > 3.84 {
+                                hi = mid;
+                            } else {
+                                lo = mid;
+                            }
+                        }
+                        return (0.5 * (lo + hi)).exp();
+                    }
+                    inside = nx;
+                    x = nx;
+                }
+            };
+            (bound(-1.0), bound(1.0))
+        });
+        terms.push(Term { mech: *m, theta: *th, theta_ci, coef, se, lr_drop, p_drop, contribution, columns: tcols });
+        off += nc;
+    }
+    // RMS of residual − drift, before and after; held-out with β from the other folds.
+    let e: Vec<f64> = y.iter().zip(&prediction).map(|(a, b)| a - b).collect();
+    let drift = smooth_level(t, r, q, &e);
+    let rms = |v: &mut dyn Iterator<Item = f64>| {
+        let (s, c) = v.fold((0.0, 0usize), |(s, c), x| (s + x * x, c + 1));
+        (s / c.max(1) as f64).sqrt()
+    };
+    let before = rms(&mut y.iter().zip(&drift).map(|(a, d)| a - d));
+    let after = rms(&mut e.iter().zip(&drift).map(|(a, d)| a - d));
+    let (mut sb, mut sa, mut cnt) = (0.0, 0.0, 0usize);
+    for k in 0..FOLDS {
+        let fk = Filter::new(t, r, q, |i| fold[i] != k);
+        let bk = if refs.is_empty() { Some(Vec::new()) } else { gls(&fk, y, &refs).map(|g| g.0) };
+        let bk = bk.unwrap_or_else(|| beta.clone());
+        let ek: Vec<f64> = (0..n).map(|i| y[i] - refs.iter().zip(&bk).map(|(c, b)| c[i] * b).sum::<f64>()).collect();
+        let dk = smooth_level(t, r, q, &ek);
+        for i in 0..n {
+            if fold[i] == k {
+                sb += (y[i] - dk[i]).powi(2);
+                sa += (ek[i] - dk[i]).powi(2);
+                cnt += 1;
+            }
+        }
+    }
+    let c = cnt.max(1) as f64;
+    AxisFit {
+        axis,
+        q,
+        inflation: infl,
+        terms,
+        ambiguous: Vec::new(),
+        trace: Vec::new(),
+        drift,
+        prediction,
+        rms: (before, after),
+        heldout_rms: ((sb / c).sqrt(), (sa / c).sqrt()),
+    }
+}

@@ -1,0 +1,405 @@
+//! The library of named physical mechanisms. Each is a parametric term built from the
+//! reference columns, the temperature and time, linear in its coefficients and, for the
+//! thermal and turn-on terms, nonlinear in one time constant or width `θ` (searched on a grid,
+//! then refined).
+//!
+//! Nonlinearity and vibration terms are the conversion function V(2) with one coefficient set
+//! to 1, evaluated statically and rectified under the row's vibration through the core's exact
+//! VE ([`bins_comp::vibration::ve_terms`]), so the same coefficient explains the static and the
+//! vibration part (one implementation of each formula).
+//!
+//! The thermal terms use the simulation's own temperature sensitivity `S_i(T, f)` (fitted to
+//! SIM's departure from its linear model): a sensor whose constants follow an effective
+//! temperature `T_e` instead of the thermistor's `T` differs from SIM by `S_i(T_e) − S_i(T)`.
+//! When SIM has no temperature dependence the term falls back to `T_e − T` with a free
+//! coefficient [g/°C].
+
+use super::noise::ls_sse;
+use super::prep::Prepared;
+use bins_comp::vibration::{Axis, ConversionFunction, Variant, Vibration, ve_terms};
+
+/// Reference temperature of the polynomial terms [°C] (the paper's normal conditions).
+pub const T0_C: f64 = 20.0;
+
+/// A mechanism.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Mech {
+    /// The sensor's effective temperature lags the thermistor (first-order lag, τ).
+    ThermalLag,
+    /// Rate-independent heating/cooling difference (play of width h).
+    ThermalHysteresis,
+    /// The die heats after power-on, unseen by the thermistor: `S'(T)·ΔT_sh·(1 − e^(−P/τ))`.
+    SelfHeating,
+    /// Turn-on transient of the bias: `A·e^(−P/τ)`.
+    Warmup,
+    /// Bias vs temperature beyond the simulated model: `b1 ΔT + b2 ΔT² + b3 ΔT³`.
+    BiasTempOrder,
+    /// Scale-factor temperature dependence missing: `f_i (s1 ΔT + s2 ΔT²)`.
+    ScaleTemp,
+    /// Temperature dependence of the cross-sensitivities missing: `f_j ΔT`, j ≠ i.
+    CrossCouplingTemp,
+    /// Static cross-axis sensitivity / misalignment: `f_j`, j ≠ i.
+    CrossAxis,
+    /// Scale-factor error: `f_i`.
+    ScaleFactor,
+    /// Scale-factor asymmetry δ_1A of V(2): `0.5·δ·|a3|`, rectified under vibration.
+    SfAsymmetry,
+    /// Quadratic nonlinearity k2: `a3²`, rectified `k2·⟨ã3²⟩` under vibration.
+    NonlinearityK2,
+    /// Cubic nonlinearity k3: `a3³`, `3·⟨ã3²⟩·a_p3` under vibration.
+    NonlinearityK3,
+    /// Multiplicative cross-coupling m31, m32: `a3 a1`, `a3 a2`, `⟨ã3 ã1⟩`, `⟨ã3 ã2⟩`.
+    VibrationCross,
+}
+
+impl Mech {
+    /// Every mechanism, in report order.
+    pub const ALL: [Mech; 13] = [
+        Mech::ThermalLag,
+        Mech::ThermalHysteresis,
+        Mech::SelfHeating,
+        Mech::Warmup,
+        Mech::BiasTempOrder,
+        Mech::ScaleTemp,
+        Mech::CrossCouplingTemp,
+        Mech::CrossAxis,
+        Mech::ScaleFactor,
+        Mech::SfAsymmetry,
+        Mech::NonlinearityK2,
+        Mech::NonlinearityK3,
+        Mech::VibrationCross,
+    ];
+
+    /// The report id.
+    pub fn id(self) -> &'static str {
+        match self {
+            Mech::ThermalLag => "thermal_lag",
+            Mech::ThermalHysteresis => "thermal_hysteresis",
+            Mech::SelfHeating => "self_heating",
+            Mech::Warmup => "warmup",
+            Mech::BiasTempOrder => "bias_temp_order",
+            Mech::ScaleTemp => "scale_temp",
+            Mech::CrossCouplingTemp => "cross_coupling_temp",
+            Mech::CrossAxis => "cross_axis",
+            Mech::ScaleFactor => "scale_factor",
+            Mech::SfAsymmetry => "sf_asymmetry",
+            Mech::NonlinearityK2 => "nonlinearity_k2",
+            Mech::NonlinearityK3 => "nonlinearity_k3",
+            Mech::VibrationCross => "vibration_cross",
+        }
+    }
+
+    /// The mechanism with report id `id`.
+    pub fn from_id(id: &str) -> Option<Mech> {
+        Mech::ALL.into_iter().find(|m| m.id() == id)
+    }
+
+    /// Name and unit of the nonlinear parameter θ, if any.
+    pub fn theta(self) -> Option<&'static str> {
+        match self {
+            Mech::ThermalLag | Mech::SelfHeating | Mech::Warmup => Some("tau_s"),
+            Mech::ThermalHysteresis => Some("width_C"),
+            _ => None,
+        }
+    }
+
+    /// One line on what the term is.
+    pub fn explanation(self) -> &'static str {
+        match self {
+            Mech::ThermalLag => {
+                "the sensor's effective temperature lags the thermistor (first-order lag τ): the error follows the ramp rate and decays during holds"
+            }
+            Mech::ThermalHysteresis => {
+                "rate-independent heating/cooling difference (play of width h): the constants follow the temperature through a backlash"
+            }
+            Mech::SelfHeating => {
+                "the die warms after power-on by ΔT_sh with time constant τ, unseen by the thermistor: error = dS/dT·ΔT_sh·(1 − e^(−P/τ))"
+            }
+            Mech::Warmup => "turn-on transient of the bias A·e^(−P/τ), independent of the temperature sensitivity",
+            Mech::BiasTempOrder => {
+                "bias vs temperature of higher order than simulated: b1 ΔT + b2 ΔT² + b3 ΔT³ (ΔT = T − 20 °C)"
+            }
+            Mech::ScaleTemp => "scale-factor temperature dependence missing: f_i·(s1 ΔT + s2 ΔT²)",
+            Mech::CrossCouplingTemp => "temperature dependence of the cross-sensitivities missing: f_j·ΔT, j ≠ i",
+            Mech::CrossAxis => "static cross-axis sensitivity / misalignment: f_j, j ≠ i",
+            Mech::ScaleFactor => "scale factor differs from the simulated one: f_i",
+            Mech::SfAsymmetry => {
+                "scale-factor asymmetry δ_1A of V(2): 0.5·δ·|a3| statically, 0.5·δ·⟨|a_p3 + ã3|⟩ under vibration"
+            }
+            Mech::NonlinearityK2 => {
+                "quadratic nonlinearity k2 of V(2): k2·a3² statically and k2·⟨ã3²⟩ rectified under vibration"
+            }
+            Mech::NonlinearityK3 => {
+                "cubic nonlinearity k3 of V(2): k3·a3³ statically and 3·k3·⟨ã3²⟩·a_p3 under vibration"
+            }
+            Mech::VibrationCross => {
+                "multiplicative cross-coupling m31, m32 of V(2): a3·a1, a3·a2 statically and ⟨ã3 ã1⟩, ⟨ã3 ã2⟩ under vibration"
+            }
+        }
+    }
+}
+
+/// The test that separates two mechanisms the data could not.
+pub fn separating_test(a: Mech, b: Mech) -> String {
+    use Mech::*;
+    let (a, b) = if a <= b { (a, b) } else { (b, a) };
+    match (a, b) {
+        (ThermalLag, ThermalHysteresis) => "two ramp rates with holds at the ends of the ramps: a lag's error scales with the rate and decays during a hold, hysteresis does neither".into(),
+        (SfAsymmetry, NonlinearityK2) => "tilted positions (e.g. ±0.5 g, ±0.7 g along the axis): asymmetry grows as |f|, k2 as f²; or vibration at two amplitudes".into(),
+        (SelfHeating, Warmup) => "power the unit on twice, in opposite positions (±1 g) or at two chamber temperatures: self-heating follows the local temperature sensitivity dS/dT, a warm-up transient does not".into(),
+        (ThermalLag, BiasTempOrder) | (ThermalHysteresis, BiasTempOrder) => "holds at several temperatures, reached by heating and by cooling: the bias curve is the same both ways, lag and hysteresis are not".into(),
+        (NonlinearityK2, NonlinearityK3) | (SfAsymmetry, NonlinearityK3) => "positions with the axis at +1 g and at −1 g (static and under vibration): odd terms change sign, even ones do not".into(),
+        (ScaleTemp, BiasTempOrder) => "both orientations (+1 g and −1 g) at each temperature: the scale-factor term changes sign with f, the bias term does not".into(),
+        (CrossAxis, CrossCouplingTemp) | (ScaleFactor, ScaleTemp) => "the same positions at several temperatures: the temperature term changes with T, the static one does not".into(),
+        (Warmup, _) | (_, Warmup) | (SelfHeating, _) | (_, SelfHeating) => "a second power-on (power cycle) under different conditions: the turn-on term restarts with power_s".into(),
+        _ => format!("a test in which the regressors differ: {} ({}) and {} ({})", a.id(), a.explanation(), b.id(), b.explanation()),
+    }
+}
+
+/// SIM's temperature sensitivity of one accelerometer:
+/// `S(T, f) = Σ_{p=1..3} ΔTᵖ·(c_p0 + Σ_j c_pj f_j)` [g], or `ΔT` itself (free form).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sensitivity {
+    /// True when fitted to SIM; false: the free form `S = ΔT` [°C].
+    pub from_sim: bool,
+    /// `c[p−1][0]` constant, `c[p−1][1 + j]` times `f_j`.
+    pub c: [[f64; 4]; 3],
+}
+
+impl Sensitivity {
+    fn free() -> Self {
+        let mut c = [[0.0; 4]; 3];
+        c[0][0] = 1.0;
+        Sensitivity { from_sim: false, c }
+    }
+
+    /// `S(T, f)`.
+    pub fn eval(&self, temp_c: f64, f: &[f64; 3]) -> f64 {
+        let dt = temp_c - T0_C;
+        let mut acc = 0.0;
+        for p in (0..3).rev() {
+            let k = self.c[p][0] + self.c[p][1] * f[0] + self.c[p][2] * f[1] + self.c[p][3] * f[2];
+            acc = (acc + k) * dt;
+        }
+        acc
+    }
+
+    /// `∂S/∂T`.
+    pub fn deriv(&self, temp_c: f64, f: &[f64; 3]) -> f64 {
+        let dt = temp_c - T0_C;
+        let k = |p: usize| self.c[p][0] + self.c[p][1] * f[0] + self.c[p][2] * f[1] + self.c[p][3] * f[2];
+        k(0) + 2.0 * k(1) * dt + 3.0 * k(2) * dt * dt
+    }
+}
+
+/// One accelerometer's V(2) term with a single unit coefficient: static value plus the exact
+/// VE under the row's vibration [g per unit coefficient].
+fn v2_column(p: &Prepared, axis: usize, cf: &ConversionFunction<f64>) -> Vec<f64> {
+    let ax = Axis::ALL[axis];
+    (0..p.t.len())
+        .map(|k| {
+            let a = bins_comp::vibration::AccelAxes::from_unit(&p.f[k], ax);
+            let stat = cf.eval_g(a) - a.ia;
+            let ve = match p.vib[k] {
+                Vibration::None => 0.0,
+                ref v => ve_terms(cf, Variant::Exact, &v.on_accel(ax), a.ia).total_g(a.ia),
+            };
+            stat + ve
+        })
+        .collect()
+}
+
+fn unit_cf(set: impl FnOnce(&mut ConversionFunction<f64>)) -> ConversionFunction<f64> {
+    let mut cf = ConversionFunction::default();
+    set(&mut cf);
+    cf
+}
+
+/// The V(2) unit columns of accelerometer `axis`: asymmetry, k2, k3, m31, m32.
+pub fn v2_columns(p: &Prepared, axis: usize) -> [Vec<f64>; 5] {
+    [
+        v2_column(p, axis, &unit_cf(|c| c.delta_1a = 1.0)),
+        v2_column(p, axis, &unit_cf(|c| c.k2_g_per_g2 = 1.0)),
+        v2_column(p, axis, &unit_cf(|c| c.k3_g_per_g3 = 1.0)),
+        v2_column(p, axis, &unit_cf(|c| c.m31_g_per_g2 = 1.0)),
+        v2_column(p, axis, &unit_cf(|c| c.m32_g_per_g2 = 1.0)),
+    ]
+}
+
+/// Fits SIM's temperature sensitivity of accelerometer `axis` (ordinary least squares of
+/// `sim_g` on `[1, f] ⊗ [1, ΔT, ΔT², ΔT³]` plus the V(2) columns). Falls back to the free form
+/// when SIM's temperature terms are not significant (F-test, p < 1e-6) or the temperature
+/// does not vary.
+pub fn fit_sensitivity(p: &Prepared, axis: usize) -> Sensitivity {
+    let n = p.t.len();
+    let (tmin, tmax) = p.temp_s.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    if !(tmax - tmin > 0.5) || n < 50 {
+        return Sensitivity::free();
+    }
+    let scale = 0.5 * (tmax - tmin).max(1.0);
+    let dtn: Vec<f64> = p.temp_s.iter().map(|t| (t - T0_C) / scale).collect();
+    let base = |j: usize, k: usize| if j == 0 { 1.0 } else { p.f[k][j - 1] };
+    let mut cols: Vec<Vec<f64>> = Vec::new();
+    let mut tags: Vec<Option<(usize, usize)>> = Vec::new();
+    for j in 0..4 {
+        cols.push((0..n).map(|k| base(j, k)).collect());
+        tags.push(None);
+    }
+    for c in v2_columns(p, axis) {
+        cols.push(c);
+        tags.push(None);
+    }
+    let n_nuis = cols.len();
+    for pw in 1..=3 {
+        for j in 0..4 {
+            cols.push((0..n).map(|k| base(j, k) * dtn[k].powi(pw as i32)).collect());
+            tags.push(Some((pw, j)));
+        }
+    }
+    let y = &p.sim_g[axis];
+    let (sse1, beta) = ls_sse(y, &cols);
+    let (sse0, _) = ls_sse(y, &cols[..n_nuis]);
+    let df = 12.0;
+    let fstat = ((sse0 - sse1) / df) / (sse1 / (n as f64 - cols.len() as f64)).max(1e-300);
+    let significant =
+        sse0 > 0.0 && (sse1 <= 1e-20 * sse0 || fstat > 40.0 || super::stats::chi2_sf(fstat * df, df) < 1e-6);
+    if !significant {
+        return Sensitivity::free();
+    }
+    let mut c = [[0.0; 4]; 3];
+    for (b, tag) in beta.iter().zip(&tags) {
+        if let Some((pw, j)) = tag {
+            c[pw - 1][*j] = b / scale.powi(*pw as i32);
+        }
+    }
+    let s = Sensitivity { from_sim: true, c };
+    // Negligible sensitivity (below 1 µg over the range): free form.
+    let range = (0..n).map(|k| s.eval(p.temp_s[k], &p.f[k]).abs()).fold(0.0, f64::max);
+    if range < 1e-6 { Sensitivity::free() } else { s }
+}
+
+/// First-order lag of the temperature with time constant `tau`, exact for an input that is
+/// linear between samples (first-order hold); starts in equilibrium.
+pub fn lagged(t: &[f64], temp: &[f64], tau: f64) -> Vec<f64> {
+    let mut out = Vec::with_capacity(temp.len());
+    let mut x = temp.first().copied().unwrap_or(0.0);
+    for k in 0..temp.len() {
+        if k > 0 {
+            let h = (t[k] - t[k - 1]).max(0.0);
+            if h > 0.0 {
+                // u(s) = u0 + g·s: x(h) = u1 − gτ + (x − u0 + gτ)·e^(−h/τ).
+                let g = (temp[k] - temp[k - 1]) / h;
+                let e = (-h / tau).exp();
+                x = temp[k] - g * tau + (x - temp[k - 1] + g * tau) * e;
+            }
+        }
+        out.push(x);
+    }
+    out
+}
+
+/// Play (backlash) operator of width `h`, starting at the first temperature.
+pub fn play(temp: &[f64], h: f64) -> Vec<f64> {
+    let mut e = temp.first().copied().unwrap_or(0.0);
+    temp.iter()
+        .map(|&x| {
+            e = e.clamp(x - 0.5 * h, x + 0.5 * h);
+            e
+        })
+        .collect()
+}
+
+/// What the columns of a mechanism are built from, per accelerometer.
+pub struct Context<'a> {
+    /// The data.
+    pub p: &'a Prepared,
+    /// Accelerometer index.
+    pub axis: usize,
+    /// SIM's temperature sensitivity.
+    pub s: Sensitivity,
+    /// V(2) unit columns: asymmetry, k2, k3, m31, m32.
+    pub v2: [Vec<f64>; 5],
+    /// Temperature range [°C].
+    pub temp_range: f64,
+    /// `S(T, f)` at every row.
+    pub s_now: Vec<f64>,
+}
+
+impl<'a> Context<'a> {
+    /// Builds the context of accelerometer `axis`.
+    pub fn new(p: &'a Prepared, axis: usize) -> Self {
+        let s = fit_sensitivity(p, axis);
+        let (tmin, tmax) = p.temp_s.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let s_now = (0..p.t.len()).map(|k| s.eval(p.temp_s[k], &p.f[k])).collect();
+        Context { p, axis, v2: v2_columns(p, axis), s, temp_range: tmax - tmin, s_now }
+    }
+
+    /// Whether the mechanism can be tried on this data at all.
+    pub fn available(&self, m: Mech) -> bool {
+        let thermal = self.temp_range > 0.5;
+        match m {
+            Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasTempOrder => thermal,
+            Mech::ScaleTemp | Mech::CrossCouplingTemp => thermal,
+            Mech::SelfHeating => self.p.power.is_some(),
+            Mech::Warmup => self.p.power.is_some(),
+            _ => true,
+        }
+    }
+
+    /// The grid of θ for a nonlinear mechanism (empty for linear ones), log-spaced, eight points
+    /// a decade.
+    pub fn grid(&self, m: Mech) -> Vec<f64> {
+        let p = self.p;
+        let dur = p.t.last().copied().unwrap_or(0.0) - p.t.first().copied().unwrap_or(0.0);
+        let (lo, hi) = match m {
+            Mech::ThermalLag => ((3.0 * p.dt).max(1.0), 0.25 * dur),
+            Mech::ThermalHysteresis => (0.02, 0.5 * self.temp_range),
+            Mech::SelfHeating | Mech::Warmup => {
+                let pmax = p.power.as_ref().map_or(0.0, |v| v.iter().fold(0.0, |a: f64, &b| a.max(b)));
+                ((3.0 * p.dt).max(1.0), 0.5 * pmax)
+            }
+            _ => return Vec::new(),
+        };
+        if !(hi > lo) {
+            return Vec::new();
+        }
+        let n = ((hi / lo).log10() * 8.0).ceil().max(1.0) as usize;
+        (0..=n).map(|k| lo * (hi / lo).powf(k as f64 / n as f64)).collect()
+    }
+
+    /// The columns of mechanism `m` at `theta` (ignored for linear mechanisms).
+    pub fn columns(&self, m: Mech, theta: f64) -> Vec<Vec<f64>> {
+        let p = self.p;
+        let n = p.t.len();
+        let i = self.axis;
+        let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+        let dtc = |r: usize| p.temp_s[r] - T0_C;
+        match m {
+            Mech::ThermalLag => {
+                let te = lagged(&p.t, &p.temp_s, theta);
+                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - self.s_now[r]).collect()]
+            }
+            Mech::ThermalHysteresis => {
+                let te = play(&p.temp_s, theta);
+                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - self.s_now[r]).collect()]
+            }
+            Mech::SelfHeating => {
+                let pw = p.power.as_deref().unwrap_or(&[]);
+                vec![(0..n).map(|r| self.s.deriv(p.temp_s[r], &p.f[r]) * -(-pw[r] / theta).exp_m1()).collect()]
+            }
+            Mech::Warmup => {
+                let pw = p.power.as_deref().unwrap_or(&[]);
+                vec![(0..n).map(|r| (-pw[r] / theta).exp()).collect()]
+            }
+            Mech::BiasTempOrder => (1..=3).map(|e| (0..n).map(|r| dtc(r).powi(e)).collect()).collect(),
+            Mech::ScaleTemp => (1..=2).map(|e| (0..n).map(|r| p.f[r][i] * dtc(r).powi(e)).collect()).collect(),
+            Mech::CrossCouplingTemp => [j, k].iter().map(|&c| (0..n).map(|r| p.f[r][c] * dtc(r)).collect()).collect(),
+            Mech::CrossAxis => [j, k].iter().map(|&c| (0..n).map(|r| p.f[r][c]).collect()).collect(),
+            Mech::ScaleFactor => vec![(0..n).map(|r| p.f[r][i]).collect()],
+            Mech::SfAsymmetry => vec![self.v2[0].clone()],
+            Mech::NonlinearityK2 => vec![self.v2[1].clone()],
+            Mech::NonlinearityK3 => vec![self.v2[2].clone()],
+            Mech::VibrationCross => vec![self.v2[3].clone(), self.v2[4].clone()],
+        }
+    }
+}

@@ -1,0 +1,75 @@
+//! `bins-cal diagnose`: locate a mismatch between a simulated and a real recording of the same
+//! test, name the physics the simulation misses, model it and show that the fit improves.
+//!
+//! 1. [`prep`]: residual REAL − SIM per accelerometer in g (SIM's own scale factors).
+//! 2. [`noise`]: white + random-walk noise model; noise floor from the Allan deviation of the
+//!    static segments.
+//! 3. [`locate`]: strata of the test that carry the mismatch.
+//! 4. [`mech`] + [`fit`]: the mechanism library, forward selection scored on held-out blocks
+//!    with a significance test against the autocorrelated noise, ambiguity between
+//!    mechanisms the data cannot separate.
+//! 5. [`report`]: the JSON report and the augmented model; [`plot`]: PNGs.
+//!
+//! [`cases`] generates the concealed-effect cases of the proof suite. The method is described
+//! in `docs/diagnosis.md`.
+
+pub mod cases;
+pub mod fit;
+pub mod locate;
+pub mod mech;
+pub mod noise;
+pub mod prep;
+pub mod report;
+pub mod stats;
+
+use crate::recording::{Row, read_all};
+use std::fmt;
+use std::path::Path;
+
+/// An input the diagnosis cannot use: one line naming the file (and line, column).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DiagnoseError(pub String);
+
+impl fmt::Display for DiagnoseError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for DiagnoseError {}
+
+/// Everything the diagnosis found.
+pub struct Diagnosis {
+    /// The aligned data.
+    pub prepared: prep::Prepared,
+    /// Per accelerometer: SIM's temperature sensitivity used by the thermal terms.
+    pub sensitivity: Vec<mech::Sensitivity>,
+    /// Per accelerometer: the selection and fit.
+    pub axes: Vec<fit::AxisFit>,
+    /// The report.
+    pub report: report::Report,
+}
+
+/// Diagnoses a pair of recordings held in memory (`sim_name`, `real_name` name them in
+/// errors and in the report).
+pub fn diagnose(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> Result<Diagnosis, DiagnoseError> {
+    let p = prep::prepare(sim, real, sim_name, real_name)?;
+    let floor = report::noise_floor(&p);
+    let located = locate::locate(&p, &floor.0);
+    let mut axes = Vec::new();
+    let mut sensitivity = Vec::new();
+    for axis in 0..3 {
+        let ctx = mech::Context::new(&p, axis);
+        axes.push(fit::fit_axis(&ctx, 3));
+        sensitivity.push(ctx.s.clone());
+    }
+    let report = report::build(&p, &axes, &sensitivity, floor, located, sim_name, real_name);
+    Ok(Diagnosis { prepared: p, sensitivity, axes, report })
+}
+
+/// Reads both recordings (errors name file, line and column) and diagnoses them.
+pub fn diagnose_files(sim: &Path, real: &Path) -> Result<Diagnosis, DiagnoseError> {
+    let (_, s) = read_all(sim).map_err(|e| DiagnoseError(e.to_string()))?;
+    let (_, r) = read_all(real).map_err(|e| DiagnoseError(e.to_string()))?;
+    diagnose(&s, &r, sim, real)
+}

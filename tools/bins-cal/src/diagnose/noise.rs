@@ -1,0 +1,257 @@
+//! The noise model of the residual: white measurement noise (variance `r_t` per row, from the
+//! differences of consecutive samples within constant-reference segments) plus a random walk
+//! of intensity `q` [g²/s] (random walk and bias instability: the slow drift that must be
+//! recognised as noise). This is the local-level model; its Kalman filter turns any column
+//! into its standardized one-step-ahead innovations, so generalized least squares is ordinary
+//! least squares on filtered columns and the likelihood is exact. The level's start is diffuse
+//! (the first observed row sets it), so a constant offset between SIM and REAL is always part
+//! of the null.
+
+/// What the filter does at a row.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Step {
+    /// Row not observed (masked out or before the first observed row).
+    Skip,
+    /// First observed row: sets the level, gives no innovation.
+    Init,
+    /// A normal update.
+    Update,
+}
+
+/// Gains of the local-level filter for one noise setting and one mask; the same for every
+/// column, so computed once.
+#[derive(Clone, Debug)]
+pub struct Filter {
+    /// What happens at each row.
+    pub step: Vec<Step>,
+    /// Kalman gain at each row.
+    pub gain: Vec<f64>,
+    /// `1/√F` (innovation variance `F`) at each row.
+    pub inv_sqrt_f: Vec<f64>,
+    /// `Σ ln F` over updated rows.
+    pub log_det: f64,
+    /// Number of updated rows.
+    pub n_used: usize,
+}
+
+impl Filter {
+    /// Builds the filter for times `t` [s], white variances `r` and random-walk intensity `q`;
+    /// rows with `observed(i) == false` are skipped (the level only diffuses over them).
+    pub fn new(t: &[f64], r: &[f64], q: f64, observed: impl Fn(usize) -> bool) -> Self {
+        let n = t.len();
+        let mut step = vec![Step::Skip; n];
+        let mut gain = vec![0.0; n];
+        let mut inv_sqrt_f = vec![0.0; n];
+        let (mut p, mut last_t, mut init, mut log_det, mut n_used) = (0.0, 0.0, false, 0.0, 0usize);
+        for i in 0..n {
+            if !observed(i) {
+                continue;
+            }
+            if !init {
+                init = true;
+                p = r[i];
+                last_t = t[i];
+                step[i] = Step::Init;
+                continue;
+            }
+            let pp = p + q * (t[i] - last_t).max(0.0);
+            let f = pp + r[i];
+            let k = pp / f;
+            p = (1.0 - k) * pp;
+            last_t = t[i];
+            step[i] = Step::Update;
+            gain[i] = k;
+            inv_sqrt_f[i] = 1.0 / f.sqrt();
+            log_det += f.ln();
+            n_used += 1;
+        }
+        Filter { step, gain, inv_sqrt_f, log_det, n_used }
+    }
+
+    /// The standardized innovations of column `x` into `out` (0 where not updated).
+    pub fn whiten(&self, x: &[f64], out: &mut [f64]) {
+        let mut mu = 0.0;
+        for i in 0..x.len().min(out.len()) {
+            match self.step[i] {
+                Step::Skip => out[i] = 0.0,
+                Step::Init => {
+                    mu = x[i];
+                    out[i] = 0.0;
+                }
+                Step::Update => {
+                    let v = x[i] - mu;
+                    out[i] = v * self.inv_sqrt_f[i];
+                    mu += self.gain[i] * v;
+                }
+            }
+        }
+    }
+
+    /// Whitened copy of `x`.
+    pub fn whitened(&self, x: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; x.len()];
+        self.whiten(x, &mut out);
+        out
+    }
+}
+
+/// The smoothed level (fixed-interval RTS smoother) of `x` under the local-level model: the
+/// drift estimate. Rows that are not observed take the level of the nearest observed row
+/// before them.
+pub fn smooth_level(t: &[f64], r: &[f64], q: f64, x: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    let mut mf = vec![0.0; n];
+    let mut pf = vec![0.0; n];
+    let mut pp = vec![0.0; n];
+    mf[0] = x[0];
+    pf[0] = r[0];
+    pp[0] = r[0];
+    for i in 1..n {
+        let pred = pf[i - 1] + q * (t[i] - t[i - 1]).max(0.0);
+        let f = pred + r[i];
+        let k = pred / f;
+        mf[i] = mf[i - 1] + k * (x[i] - mf[i - 1]);
+        pf[i] = (1.0 - k) * pred;
+        pp[i] = pred;
+    }
+    let mut ms = mf.clone();
+    for i in (0..n - 1).rev() {
+        let c = if pp[i + 1] > 0.0 { pf[i] / pp[i + 1] } else { 0.0 };
+        ms[i] = mf[i] + c * (ms[i + 1] - mf[i]);
+    }
+    ms
+}
+
+/// Profile log-likelihood of `y = X·β + level + white` for random-walk intensity `q`, the
+/// white variances known up to a common scale (profiled): `−½(n ln(SSE/n) + Σ ln F + n)`.
+/// Returns `(ll, sse, n_used, β)`.
+pub fn profile_ll(t: &[f64], r: &[f64], q: f64, y: &[f64], xs: &[&[f64]]) -> (f64, f64, usize, Vec<f64>) {
+    let filt = Filter::new(t, r, q, |_| true);
+    let wy = filt.whitened(y);
+    let wx: Vec<Vec<f64>> = xs.iter().map(|x| filt.whitened(x)).collect();
+    let (sse, beta) = ls_sse(&wy, &wx);
+    let n = filt.n_used.max(1) as f64;
+    let ll = -0.5 * (n * (sse.max(1e-300) / n).ln() + filt.log_det + n);
+    (ll, sse, filt.n_used, beta)
+}
+
+/// Least squares of `y` on the columns `xs` (already whitened): residual sum of squares and
+/// coefficients. Columns that are collinear with earlier ones get a zero coefficient.
+pub fn ls_sse(y: &[f64], xs: &[Vec<f64>]) -> (f64, Vec<f64>) {
+    use super::stats::{chol_solve, dot};
+    let p = xs.len();
+    let yy = dot(y, y);
+    if p == 0 {
+        return (yy, Vec::new());
+    }
+    // Greedy: keep the columns that are not collinear with those kept.
+    let norms: Vec<f64> = xs.iter().map(|x| dot(x, x).sqrt()).collect();
+    let mut keep: Vec<usize> = Vec::new();
+    let mut sol = (Vec::new(), Vec::new());
+    for j in 0..p {
+        if !(norms[j] > 0.0) {
+            continue;
+        }
+        let mut trial = keep.clone();
+        trial.push(j);
+        let m = trial.len();
+        let mut a = vec![0.0; m * m];
+        let mut b = vec![0.0; m];
+        for (u, &cu) in trial.iter().enumerate() {
+            b[u] = dot(&xs[cu], y) / norms[cu];
+            for (v, &cv) in trial.iter().enumerate() {
+                a[u * m + v] = dot(&xs[cu], &xs[cv]) / (norms[cu] * norms[cv]);
+            }
+        }
+        if let Some(s) = chol_solve(&a, &b, m, 1e-10) {
+            keep = trial;
+            sol = s;
+        }
+    }
+    let mut beta = vec![0.0; p];
+    let mut fit = 0.0;
+    for (u, &c) in keep.iter().enumerate() {
+        beta[c] = sol.0[u] / norms[c];
+        fit += sol.0[u] * dot(&xs[c], y) / norms[c];
+    }
+    ((yy - fit).max(0.0), beta)
+}
+
+/// Maximum-likelihood random-walk intensity `q` [g²/s] on a log grid relative to the median
+/// white variance per second (1e-9 … 10, four points a decade, and 0), refined by a parabola
+/// through the best three.
+pub fn estimate_q(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> f64 {
+    let rmed = super::stats::median(r).max(1e-300);
+    let mut best = (f64::NEG_INFINITY, 0.0, 0usize);
+    let grid: Vec<f64> = (-36..=4).map(|k| rmed * 10f64.powf(k as f64 / 4.0)).collect();
+    let lls: Vec<f64> = grid.iter().map(|&q| profile_ll(t, r, q, y, xs).0).collect();
+    for (i, &ll) in lls.iter().enumerate() {
+        if ll > best.0 {
+            best = (ll, grid[i], i);
+        }
+    }
+    let ll0 = profile_ll(t, r, 0.0, y, xs).0;
+    if ll0 >= best.0 {
+        return 0.0;
+    }
+    let i = best.2;
+    if i == 0 || i + 1 >= grid.len() {
+        return best.1;
+    }
+    // Parabola in log q.
+    let (a, b, c) = (lls[i - 1], lls[i], lls[i + 1]);
+    let den = a - 2.0 * b + c;
+    if !(den < 0.0) {
+        return best.1;
+    }
+    let off = 0.5 * (a - c) / den; // in grid steps
+    grid[i] * 10f64.powf(off.clamp(-1.0, 1.0) / 4.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    #[test]
+    fn whitened_random_walk_plus_white_is_white_and_q_is_recovered() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let nrm = Normal::new(0.0, 1.0).unwrap();
+        let n = 20_000;
+        let (sw, q): (f64, f64) = (1e-4, 1e-10);
+        let t: Vec<f64> = (0..n).map(|i| i as f64).collect();
+        let mut lvl = 0.0;
+        let y: Vec<f64> = (0..n)
+            .map(|_| {
+                lvl += q.sqrt() * nrm.sample(&mut rng);
+                lvl + sw * nrm.sample(&mut rng)
+            })
+            .collect();
+        let r = vec![sw * sw; n];
+        let qh = estimate_q(&t, &r, &y, &[]);
+        assert!(qh > q / 2.0 && qh < q * 2.0, "{qh}");
+        let f = Filter::new(&t, &r, qh, |_| true);
+        let w = f.whitened(&y);
+        let m = w.len() as f64;
+        let var = super::super::stats::dot(&w, &w) / m;
+        let lag1 = super::super::stats::dot(&w[1..], &w[..n - 1]) / m / var;
+        assert!((var - 1.0).abs() < 0.05, "{var}");
+        assert!(lag1.abs() < 0.03, "{lag1}");
+    }
+
+    #[test]
+    fn ls_recovers_coefficients_and_skips_collinear_columns() {
+        let x1: Vec<f64> = (0..100).map(|i| (i as f64 * 0.1).sin()).collect();
+        let x2: Vec<f64> = (0..100).map(|i| (i as f64 * 0.37).cos()).collect();
+        let x3: Vec<f64> = x1.iter().map(|v| 2.0 * v).collect();
+        let y: Vec<f64> = x1.iter().zip(&x2).map(|(a, b)| 3.0 * a - 0.5 * b).collect();
+        let (sse, b) = ls_sse(&y, &[x1, x2, x3]);
+        let yy: f64 = y.iter().map(|v| v * v).sum();
+        assert!(sse < 1e-12 * yy, "{sse}");
+        assert!((b[0] - 3.0).abs() < 1e-10 && (b[1] + 0.5).abs() < 1e-10 && b[2] == 0.0);
+    }
+}

@@ -1,0 +1,358 @@
+//! From a SIM/REAL pair of recordings to the per-accelerometer residual in g: row matching,
+//! the reference, the scale factors from SIM's own signals, the constant-reference segments,
+//! the temperature rate and the white-noise level of each vibration condition.
+
+use super::DiagnoseError;
+use super::stats::{chol_solve, dot, median};
+use crate::recording::{Row, VibKind};
+use bins_comp::vibration::Vibration;
+use std::path::Path;
+
+/// The pair, aligned and reduced to the rows with a known reference.
+#[derive(Clone, Debug)]
+pub struct Prepared {
+    /// Data rows in each file.
+    pub n_total: usize,
+    /// Rows left out because their reference is not known.
+    pub skipped: usize,
+    /// REAL's line number of each used row.
+    pub line: Vec<u64>,
+    /// `t_s` [s].
+    pub t: Vec<f64>,
+    /// REAL's `temp_C` [°C].
+    pub temp: Vec<f64>,
+    /// Reference static specific force [g].
+    pub f: Vec<[f64; 3]>,
+    /// Reference vibration.
+    pub vib: Vec<Vibration<f64>>,
+    /// Vibration condition (kind and level) of each row: index into `vib_names`.
+    pub vib_class: Vec<usize>,
+    /// Names of the vibration conditions (`none`, `sine 0.8 g`, `random 1.5 g`).
+    pub vib_names: Vec<String>,
+    /// Position label index (into `pos_names`), when the file has `pos`.
+    pub pos: Vec<Option<usize>>,
+    /// Position labels.
+    pub pos_names: Vec<String>,
+    /// `power_s` [s] when every used row has it.
+    pub power: Option<Vec<f64>>,
+    /// Constant-reference segment of each row.
+    pub seg: Vec<usize>,
+    /// Residual REAL − SIM per accelerometer [g].
+    pub r: [Vec<f64>; 3],
+    /// SIM's departure from its own linear fit `K·f + U0` per accelerometer [g]: what the
+    /// simulation makes of temperature and nonlinearity.
+    pub sim_g: [Vec<f64>; 3],
+    /// Scale factors `K_ii` used [V/g].
+    pub k_diag: [f64; 3],
+    /// Whether each scale factor came from SIM (false: nominal 1 V/g).
+    pub k_determined: [bool; 3],
+    /// Median sample period [s].
+    pub dt: f64,
+    /// `temp_C` smoothed by a centred moving average over ±10 s (at least ±1 row): the
+    /// thermal terms are built from it, so the thermistor's own noise does not enter the
+    /// regressors (errors in variables).
+    pub temp_s: Vec<f64>,
+    /// Temperature rate (centred difference over about a minute) [°C/s].
+    pub dtemp: Vec<f64>,
+    /// White-noise variance of the residual at each row [g²], per accelerometer.
+    pub r_white: [Vec<f64>; 3],
+    /// Notes for the report.
+    pub notes: Vec<String>,
+}
+
+/// Axis names.
+pub const AXES: [&str; 3] = ["x", "y", "z"];
+
+fn same(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * (1.0 + a.abs().max(b.abs()))
+}
+
+fn opt_same(a: Option<f64>, b: Option<f64>) -> bool {
+    match (a, b) {
+        (Some(a), Some(b)) => same(a, b),
+        (None, None) => true,
+        _ => false,
+    }
+}
+
+/// Aligns the pair and computes the residual. Errors name REAL's file and line.
+pub fn prepare(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> Result<Prepared, DiagnoseError> {
+    let (sn, rn) = (sim_name.display(), real_name.display());
+    if real.is_empty() || sim.is_empty() {
+        let which = if real.is_empty() { &rn } else { &sn };
+        return Err(DiagnoseError(format!("{which}: no data rows")));
+    }
+    if sim.len() != real.len() {
+        return Err(DiagnoseError(format!(
+            "{rn}: {} data rows but {sn} has {}: SIM and REAL must be the same test, row for row",
+            real.len(),
+            sim.len()
+        )));
+    }
+    let any_vib = real.iter().any(|r| r.vib_kind.is_some());
+    let mut notes = Vec::new();
+    if !any_vib {
+        notes.push("no vib_kind in the recordings: every row taken as without vibration".to_string());
+    }
+    let cols = ["fx_g", "fy_g", "fz_g"];
+    let vcols = ["vib_x_g", "vib_y_g", "vib_z_g"];
+    let mut used = Vec::new();
+    for (s, r) in sim.iter().zip(real) {
+        let bad = |col: &str, what: String| {
+            DiagnoseError(format!(
+                "{rn}:{}: column `{col}`: {what} (line {} of {sn}): rows do not match",
+                r.line, s.line
+            ))
+        };
+        if !same(s.t_s, r.t_s) {
+            return Err(bad("t_s", format!("{} s here, {} s in SIM", r.t_s, s.t_s)));
+        }
+        for i in 0..3 {
+            if !opt_same(s.f_g[i], r.f_g[i]) {
+                return Err(bad(cols[i], format!("{:?} here, {:?} in SIM", r.f_g[i], s.f_g[i])));
+            }
+            if !opt_same(s.vib_g[i], r.vib_g[i]) {
+                return Err(bad(vcols[i], format!("{:?} here, {:?} in SIM", r.vib_g[i], s.vib_g[i])));
+            }
+        }
+        if s.vib_kind != r.vib_kind {
+            return Err(bad("vib_kind", "vibration kind differs".into()));
+        }
+        if !opt_same(s.vib_hz, r.vib_hz) || !opt_same(s.vib_bw_hz, r.vib_bw_hz) {
+            return Err(bad("vib_hz", "vibration frequency or band differs".into()));
+        }
+        if s.pos != r.pos {
+            return Err(bad("pos", format!("{:?} here, {:?} in SIM", r.pos, s.pos)));
+        }
+        let Some(f) = r.reference_f_g() else { continue };
+        let vib = if any_vib {
+            match r.vibration() {
+                Some(v) if v.is_valid() => v,
+                _ => continue,
+            }
+        } else {
+            Vibration::None
+        };
+        used.push((s, r, f, vib));
+    }
+    if used.is_empty() {
+        return Err(DiagnoseError(format!(
+            "{rn}: no row has a known reference (fx_g, fy_g, fz_g{}): diagnosis needs what the rig applied",
+            if any_vib { " and the vibration cells" } else { "" }
+        )));
+    }
+    let n = used.len();
+    let skipped = real.len() - n;
+    if skipped > 0 {
+        notes.push(format!("{skipped} of {} rows skipped: reference not known", real.len()));
+    }
+    // Constant signals: a REAL channel that never changes is dead; a constant SIM channel is
+    // legitimate (one orientation, one temperature, no noise) and only costs the scale factor.
+    for (i, c) in ["ux_V", "uy_V", "uz_V"].iter().enumerate() {
+        let first = used[0].1.u_v[i];
+        if used.iter().all(|u| u.1.u_v[i] == first) {
+            return Err(DiagnoseError(format!(
+                "{rn}: column `{c}` is constant ({first} V) over the {n} rows with a known reference: no signal"
+            )));
+        }
+    }
+    if used.iter().all(|u| u.1.temp_c.is_finite()) && used.iter().all(|u| u.1.temp_c == used[0].1.temp_c) {
+        notes.push("temp_C is constant: no thermal mechanism can be tried".into());
+    }
+    let t: Vec<f64> = used.iter().map(|u| u.1.t_s).collect();
+    let temp: Vec<f64> = used.iter().map(|u| u.1.temp_c).collect();
+    let f: Vec<[f64; 3]> = used.iter().map(|u| u.2).collect();
+    let vib: Vec<Vibration<f64>> = used.iter().map(|u| u.3).collect();
+    let line: Vec<u64> = used.iter().map(|u| u.1.line).collect();
+    let diffs: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    let dt = if diffs.is_empty() { 1.0 } else { median(&diffs) };
+
+    // Vibration classes.
+    let mut vib_names: Vec<String> = Vec::new();
+    let vib_class: Vec<usize> = used
+        .iter()
+        .map(|u| {
+            let name = match (u.1.vib_kind, &u.3) {
+                (_, Vibration::None) | (None, _) | (Some(VibKind::None), _) => "none".to_string(),
+                (Some(k), v) => format!("{} {:.3} g", k.as_str(), v.level_g()),
+            };
+            match vib_names.iter().position(|x| *x == name) {
+                Some(p) => p,
+                None => {
+                    vib_names.push(name);
+                    vib_names.len() - 1
+                }
+            }
+        })
+        .collect();
+    let mut pos_names: Vec<String> = Vec::new();
+    let pos: Vec<Option<usize>> = used
+        .iter()
+        .map(|u| {
+            u.1.pos.as_ref().map(|p| match pos_names.iter().position(|x| x == p) {
+                Some(i) => i,
+                None => {
+                    pos_names.push(p.clone());
+                    pos_names.len() - 1
+                }
+            })
+        })
+        .collect();
+    let power = if used.iter().all(|u| u.1.power_s.is_some()) {
+        Some(used.iter().map(|u| u.1.power_s.unwrap_or(0.0)).collect::<Vec<_>>())
+    } else {
+        if used.iter().any(|u| u.1.power_s.is_some()) {
+            notes.push("power_s not known on every row: turn-on mechanisms not tried".into());
+        }
+        None
+    };
+    // Segments: a new one where the reference changes or time jumps.
+    let mut seg = vec![0usize; n];
+    for i in 1..n {
+        let change = f[i] != f[i - 1]
+            || vib[i] != vib[i - 1]
+            || pos[i] != pos[i - 1]
+            || t[i] - t[i - 1] > 3.0 * dt
+            || line[i] != line[i - 1] + 1;
+        seg[i] = seg[i - 1] + usize::from(change);
+    }
+
+    // Scale factors from SIM: u_i = Σ K_ij f_j + U0_i on rows without vibration (all rows if
+    // none), columns scaled to unit norm.
+    let quiet: Vec<usize> = (0..n).filter(|&i| matches!(vib[i], Vibration::None)).collect();
+    let rows_k: Vec<usize> = if quiet.len() >= 4 { quiet } else { (0..n).collect() };
+    let design: Vec<Vec<f64>> =
+        (0..4).map(|j| rows_k.iter().map(|&i| if j < 3 { f[i][j] } else { 1.0 }).collect()).collect();
+    let norms: Vec<f64> = design.iter().map(|c| dot(c, c).sqrt()).collect();
+    let mut gram = vec![0.0; 16];
+    for a in 0..4 {
+        for b in 0..4 {
+            gram[a * 4 + b] = if norms[a] > 0.0 && norms[b] > 0.0 {
+                dot(&design[a], &design[b]) / (norms[a] * norms[b])
+            } else if a == b {
+                1.0
+            } else {
+                0.0
+            };
+        }
+    }
+    let mut k_full = [[0.0; 3]; 3];
+    let mut u0 = [0.0; 3];
+    let mut k_diag = [1.0; 3];
+    let mut k_determined = [false; 3];
+    for i in 0..3 {
+        let u: Vec<f64> = rows_k.iter().map(|&r| used[r].0.u_v[i]).collect();
+        let b: Vec<f64> = (0..4).map(|j| if norms[j] > 0.0 { dot(&design[j], &u) / norms[j] } else { 0.0 }).collect();
+        let ok = norms[i] > 0.0 && norms[3] > 0.0;
+        let sol = if ok { chol_solve(&gram, &b, 4, 1e-9) } else { None };
+        match sol {
+            Some((x, _)) if (x[i] / norms[i]).abs() > 1e-9 => {
+                for j in 0..4 {
+                    let v = if norms[j] > 0.0 { x[j] / norms[j] } else { 0.0 };
+                    if j < 3 {
+                        k_full[i][j] = v;
+                    } else {
+                        u0[i] = v;
+                    }
+                }
+                k_diag[i] = k_full[i][i];
+                k_determined[i] = true;
+            }
+            _ => {
+                let mut uu: Vec<f64> = (0..n).map(|r| used[r].0.u_v[i]).collect();
+                u0[i] = median(&uu);
+                uu.clear();
+                notes.push(format!(
+                    "scale factor of accelerometer {} not determinable from SIM (too few orientations): residual in V at a nominal 1 V/g",
+                    AXES[i]
+                ));
+            }
+        }
+    }
+    let mut r: [Vec<f64>; 3] = Default::default();
+    let mut sim_g: [Vec<f64>; 3] = Default::default();
+    for i in 0..3 {
+        r[i] = used.iter().map(|u| (u.1.u_v[i] - u.0.u_v[i]) / k_diag[i]).collect();
+        sim_g[i] = used
+            .iter()
+            .map(|u| {
+                let lin: f64 = (0..3).map(|j| k_full[i][j] * u.2[j]).sum::<f64>() + u0[i];
+                (u.0.u_v[i] - lin) / k_diag[i]
+            })
+            .collect();
+    }
+    // Temperature rate: centred difference over ±max(30 s, 15 dt).
+    let w = (30.0f64).max(15.0 * dt);
+    let mut dtemp = vec![0.0; n];
+    let (mut lo, mut hi) = (0usize, 0usize);
+    for i in 0..n {
+        while t[i] - t[lo] > w {
+            lo += 1;
+        }
+        while hi + 1 < n && t[hi + 1] - t[i] <= w {
+            hi += 1;
+        }
+        if t[hi] > t[lo] {
+            dtemp[i] = (temp[hi] - temp[lo]) / (t[hi] - t[lo]);
+        }
+    }
+    let half = ((10.0 / dt).round() as usize).clamp(1, 50);
+    let mut prefix = vec![0.0; n + 1];
+    for k in 0..n {
+        prefix[k + 1] = prefix[k] + temp[k];
+    }
+    let temp_s: Vec<f64> = (0..n)
+        .map(|k| {
+            let h = half.min(k).min(n - 1 - k);
+            (prefix[k + h + 1] - prefix[k - h]) / (2 * h + 1) as f64
+        })
+        .collect();
+    // White noise per vibration class from within-segment differences (robust: median of
+    // squared differences / (2·0.4549)).
+    let mut r_white: [Vec<f64>; 3] = Default::default();
+    for i in 0..3 {
+        let mut per_class: Vec<Vec<f64>> = vec![Vec::new(); vib_names.len()];
+        for k in 1..n {
+            if seg[k] == seg[k - 1] {
+                let d = r[i][k] - r[i][k - 1];
+                per_class[vib_class[k]].push(d * d);
+            }
+        }
+        let all: Vec<f64> = per_class.iter().flatten().copied().collect();
+        let global = if all.is_empty() { 0.0 } else { median(&all) / (2.0 * 0.454_936_4) };
+        let floor = {
+            let scale = r[i].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            (1e-9 * scale).powi(2).max(1e-30)
+        };
+        let class_var: Vec<f64> = per_class
+            .iter()
+            .map(|d| if d.len() >= 20 { median(d) / (2.0 * 0.454_936_4) } else { global })
+            .map(|v| v.max(floor))
+            .collect();
+        r_white[i] = vib_class.iter().map(|&c| class_var[c]).collect();
+    }
+    Ok(Prepared {
+        n_total: real.len(),
+        skipped,
+        line,
+        t,
+        temp,
+        f,
+        vib,
+        vib_class,
+        vib_names,
+        pos,
+        pos_names,
+        power,
+        seg,
+        r,
+        sim_g,
+        k_diag,
+        k_determined,
+        dt,
+        temp_s,
+        dtemp,
+        r_white,
+        notes,
+    })
+}

@@ -1,0 +1,376 @@
+//! The JSON report and the augmented model (the found terms, calibration-style TOML).
+
+use super::fit::AxisFit;
+use super::locate::Stratum;
+use super::mech::{Mech, Sensitivity, separating_test};
+use super::prep::{AXES, Prepared};
+use super::stats::allan_dev;
+use bins_comp::vibration::Vibration;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Values per accelerometer, keyed `x`, `y`, `z`.
+pub type PerAxis<T> = BTreeMap<String, T>;
+
+/// One found effect.
+#[derive(Clone, Debug, Serialize)]
+pub struct Effect {
+    /// Mechanism id.
+    pub id: String,
+    /// Accelerometers it was found on.
+    pub axes: Vec<String>,
+    /// Fitted parameters per accelerometer (names carry the unit).
+    pub params: PerAxis<BTreeMap<String, f64>>,
+    /// 95 % intervals of the parameters.
+    pub ci: PerAxis<BTreeMap<String, [f64; 2]>>,
+    /// What the mechanism is.
+    pub explanation: String,
+    /// Likelihood-ratio statistic and p-value for dropping it, per accelerometer.
+    pub significance: PerAxis<[f64; 2]>,
+}
+
+/// Mechanisms the data cannot separate.
+#[derive(Clone, Debug, Serialize)]
+pub struct Ambiguous {
+    /// The mechanism ids (sorted).
+    pub ids: Vec<String>,
+    /// Accelerometers.
+    pub axes: Vec<String>,
+    /// The test that would separate them.
+    pub separating_test: String,
+    /// Which one the model carries (for the RMS figures and the augmented model).
+    pub modelled_as: String,
+    /// Deviance difference of the alternatives, per accelerometer.
+    pub deviance_difference: PerAxis<BTreeMap<String, f64>>,
+}
+
+/// One point of the Allan deviation.
+#[derive(Clone, Debug, Serialize)]
+pub struct AllanPoint {
+    /// Averaging time [s].
+    pub tau_s: f64,
+    /// Allan deviation per accelerometer [mg] (absent where no segment is long enough).
+    pub adev_mg: PerAxis<f64>,
+}
+
+/// One step of the forward search.
+#[derive(Clone, Debug, Serialize)]
+pub struct SearchStep {
+    /// Mechanism.
+    pub id: String,
+    /// Its best grid θ.
+    pub theta: Option<f64>,
+    /// LR statistic (autocorrelation-inflated).
+    pub lr: f64,
+    /// Degrees of freedom.
+    pub df: usize,
+    /// p-value.
+    pub p: f64,
+    /// BIC improvement.
+    pub dbic: f64,
+    /// Held-out improvement / residual variance.
+    pub dcv: f64,
+    /// Accepted.
+    pub accepted: bool,
+}
+
+/// A term of the augmented model.
+#[derive(Clone, Debug, Serialize)]
+pub struct ModelTerm {
+    /// Mechanism id.
+    pub id: String,
+    /// Accelerometer.
+    pub axis: String,
+    /// Parameters (as in the effect).
+    pub params: BTreeMap<String, f64>,
+    /// Whether the data could not tell it from another mechanism.
+    pub ambiguous: bool,
+}
+
+/// The augmented model: the found terms, to add to the simulation.
+#[derive(Clone, Debug, Serialize)]
+pub struct AugmentedModel {
+    /// Reference temperature of the polynomial terms [°C].
+    pub t0_c: f64,
+    /// SIM's temperature sensitivity used by the thermal terms, per accelerometer:
+    /// `S = Σ_p ΔTᵖ (c_p0 + c_px f_x + c_py f_y + c_pz f_z)` [g]; absent: free form `S = ΔT`.
+    pub sensitivity: PerAxis<Vec<[f64; 4]>>,
+    /// The terms.
+    pub term: Vec<ModelTerm>,
+}
+
+/// The report.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// SIM file.
+    pub sim: String,
+    /// REAL file.
+    pub real: String,
+    /// Data rows.
+    pub rows: usize,
+    /// Rows with a known reference (used).
+    pub rows_used: usize,
+    /// Scale factors used [V/g].
+    pub scale_v_per_g: PerAxis<f64>,
+    /// Notes (fallbacks, skipped rows).
+    pub notes: Vec<String>,
+    /// Per-sample white noise of the residual in the static segments (Allan deviation at the
+    /// sample period) [mg].
+    pub noise_floor_mg: PerAxis<f64>,
+    /// Allan deviation of the residual in the static segments.
+    pub allan: Vec<AllanPoint>,
+    /// Random-walk intensity of the fitted noise model, as drift per √hour [mg/√h].
+    pub random_walk_mg_per_sqrt_h: PerAxis<f64>,
+    /// Strata that carry the mismatch.
+    pub located: Vec<Stratum>,
+    /// The named mechanisms.
+    pub effects: Vec<Effect>,
+    /// Groups the data cannot separate.
+    pub ambiguous: Vec<Ambiguous>,
+    /// RMS of residual − drift before the model [mg].
+    pub rms_before_mg: PerAxis<f64>,
+    /// After [mg].
+    pub rms_after_mg: PerAxis<f64>,
+    /// Held-out (β fitted without the block) before [mg].
+    pub heldout_rms_before_mg: PerAxis<f64>,
+    /// Held-out after [mg].
+    pub heldout_rms_after_mg: PerAxis<f64>,
+    /// The forward search per accelerometer.
+    pub search: PerAxis<Vec<SearchStep>>,
+    /// The augmented model.
+    pub model: AugmentedModel,
+}
+
+/// Noise floor per accelerometer [g] and the Allan curve, from the static segments without
+/// vibration (all segments when there are none).
+pub fn noise_floor(p: &Prepared) -> ([f64; 3], Vec<AllanPoint>) {
+    let n = p.t.len();
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    let mut s = 0;
+    for i in 1..=n {
+        if i == n || p.seg[i] != p.seg[s] {
+            runs.push((s, i));
+            s = i;
+        }
+    }
+    let quiet: Vec<(usize, usize)> = runs
+        .iter()
+        .copied()
+        .filter(|&(a, _)| matches!(p.vib[a], Vibration::None))
+        .filter(|&(a, b)| b - a >= 3)
+        .collect();
+    let use_runs = if quiet.is_empty() { runs.clone() } else { quiet };
+    let longest = use_runs.iter().map(|(a, b)| b - a).max().unwrap_or(0);
+    let mut ms = Vec::new();
+    let mut m = 1;
+    while 2 * m < longest {
+        ms.push(m);
+        m *= 2;
+    }
+    let mut floor = [0.0; 3];
+    let mut curve: BTreeMap<usize, PerAxis<f64>> = BTreeMap::new();
+    for axis in 0..3 {
+        let segs: Vec<&[f64]> = use_runs.iter().map(|&(a, b)| &p.r[axis][a..b]).collect();
+        let ad = allan_dev(&segs, &ms);
+        for (m, a, _) in &ad {
+            curve.entry(*m).or_default().insert(AXES[axis].into(), a * 1e3);
+        }
+        floor[axis] =
+            ad.first().map_or_else(|| p.r_white[axis].iter().sum::<f64>().sqrt() / (n as f64).sqrt(), |x| x.1);
+    }
+    let allan = curve.into_iter().map(|(m, a)| AllanPoint { tau_s: m as f64 * p.dt, adev_mg: a }).collect();
+    (floor, allan)
+}
+
+fn per_axis<T>(f: impl Fn(usize) -> T) -> PerAxis<T> {
+    (0..3).map(|i| (AXES[i].to_string(), f(i))).collect()
+}
+
+/// Parameters and 95 % intervals of a term, in report units.
+pub fn term_params(
+    term: &super::fit::Term,
+    s: &Sensitivity,
+    axis: usize,
+) -> (BTreeMap<String, f64>, BTreeMap<String, [f64; 2]>) {
+    let names = coef_names(term.mech, s, axis);
+    let mut params = BTreeMap::new();
+    let mut ci = BTreeMap::new();
+    if let (Some(name), Some(th)) = (term.mech.theta(), term.theta) {
+        params.insert(name.to_string(), th);
+        if let Some((lo, hi)) = term.theta_ci {
+            ci.insert(name.to_string(), [lo, hi]);
+        }
+    }
+    for ((name, factor), (c, se)) in names.iter().zip(term.coef.iter().zip(&term.se)) {
+        params.insert(name.clone(), c * factor);
+        ci.insert(name.clone(), [(c - 1.96 * se) * factor, (c + 1.96 * se) * factor]);
+    }
+    (params, ci)
+}
+
+/// Coefficient names of a mechanism (see [`super::mech::Context::coef_names`]).
+pub fn coef_names(m: Mech, s: &Sensitivity, axis: usize) -> Vec<(String, f64)> {
+    // Built without data: the names depend only on the mechanism, the axis and the form of S.
+    let ax = ["x", "y", "z"];
+    let i = axis;
+    let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+    match m {
+        Mech::ThermalLag | Mech::ThermalHysteresis => {
+            if s.from_sim {
+                vec![("gain".into(), 1.0)]
+            } else {
+                vec![("coef_mg_per_C".into(), 1e3)]
+            }
+        }
+        Mech::SelfHeating => {
+            if s.from_sim {
+                vec![("rise_C".into(), 1.0)]
+            } else {
+                vec![("amp_mg".into(), 1e3)]
+            }
+        }
+        Mech::Warmup => vec![("amp_mg".into(), 1e3)],
+        Mech::BiasTempOrder => {
+            vec![("b1_mg_per_C".into(), 1e3), ("b2_mg_per_C2".into(), 1e3), ("b3_mg_per_C3".into(), 1e3)]
+        }
+        Mech::ScaleTemp => vec![("s1_ppm_per_C".into(), 1e6), ("s2_ppm_per_C2".into(), 1e6)],
+        Mech::CrossCouplingTemp => {
+            vec![(format!("c_{}{}_ppm_per_C", ax[i], ax[j]), 1e6), (format!("c_{}{}_ppm_per_C", ax[i], ax[k]), 1e6)]
+        }
+        Mech::CrossAxis => vec![(format!("m_{}{}_ppm", ax[i], ax[j]), 1e6), (format!("m_{}{}_ppm", ax[i], ax[k]), 1e6)],
+        Mech::ScaleFactor => vec![("sf_ppm".into(), 1e6)],
+        Mech::SfAsymmetry => vec![("delta_1a_ppm".into(), 1e6)],
+        Mech::NonlinearityK2 => vec![("k2_ug_per_g2".into(), 1e6)],
+        Mech::NonlinearityK3 => vec![("k3_ug_per_g3".into(), 1e6)],
+        Mech::VibrationCross => vec![("m31_ug_per_g2".into(), 1e6), ("m32_ug_per_g2".into(), 1e6)],
+    }
+}
+
+/// Accelerometers, the mechanism modelled, deviance differences per accelerometer.
+type AmbGroup = (Vec<String>, String, PerAxis<BTreeMap<String, f64>>);
+
+/// Builds the report.
+pub fn build(
+    p: &Prepared,
+    axes: &[AxisFit],
+    sens: &[Sensitivity],
+    floor: ([f64; 3], Vec<AllanPoint>),
+    located: Vec<Stratum>,
+    sim: &Path,
+    real: &Path,
+) -> Report {
+    // Ambiguous groups per axis: the member and its alternatives.
+    let mut amb_groups: BTreeMap<Vec<String>, AmbGroup> = BTreeMap::new();
+    let mut ambiguous_member: Vec<Vec<Mech>> = vec![Vec::new(); 3];
+    for fit in axes {
+        for (m, alts) in &fit.ambiguous {
+            let mut ids: Vec<String> =
+                std::iter::once(m.id().to_string()).chain(alts.iter().map(|a| a.0.id().to_string())).collect();
+            ids.sort();
+            let e = amb_groups.entry(ids).or_insert_with(|| (Vec::new(), m.id().to_string(), BTreeMap::new()));
+            e.0.push(AXES[fit.axis].into());
+            e.2.insert(AXES[fit.axis].into(), alts.iter().map(|a| (a.0.id().to_string(), a.1)).collect());
+            ambiguous_member[fit.axis].push(*m);
+        }
+    }
+    let ambiguous: Vec<Ambiguous> = amb_groups
+        .into_iter()
+        .map(|(ids, (axes, modelled_as, dev))| {
+            let ms: Vec<Mech> = ids.iter().filter_map(|i| Mech::from_id(i)).collect();
+            let separating_test = if ms.len() == 2 {
+                separating_test(ms[0], ms[1])
+            } else {
+                ms.windows(2).map(|w| separating_test(w[0], w[1])).collect::<Vec<_>>().join("; ")
+            };
+            Ambiguous { ids, axes, separating_test, modelled_as, deviance_difference: dev }
+        })
+        .collect();
+    let mut effects: Vec<Effect> = Vec::new();
+    let mut terms = Vec::new();
+    for m in Mech::ALL {
+        let mut e = Effect {
+            id: m.id().into(),
+            axes: Vec::new(),
+            params: BTreeMap::new(),
+            ci: BTreeMap::new(),
+            explanation: m.explanation().into(),
+            significance: BTreeMap::new(),
+        };
+        for fit in axes {
+            for t in fit.terms.iter().filter(|t| t.mech == m) {
+                let (params, ci) = term_params(t, &sens[fit.axis], fit.axis);
+                let amb = ambiguous_member[fit.axis].contains(&m);
+                terms.push(ModelTerm {
+                    id: m.id().into(),
+                    axis: AXES[fit.axis].into(),
+                    params: params.clone(),
+                    ambiguous: amb,
+                });
+                if amb {
+                    continue;
+                }
+                let ax = AXES[fit.axis].to_string();
+                e.axes.push(ax.clone());
+                e.params.insert(ax.clone(), params);
+                e.ci.insert(ax.clone(), ci);
+                e.significance.insert(ax, [t.lr_drop, t.p_drop]);
+            }
+        }
+        if !e.axes.is_empty() {
+            effects.push(e);
+        }
+    }
+    let search = per_axis(|i| {
+        axes[i]
+            .trace
+            .iter()
+            .map(|s| SearchStep {
+                id: s.mech.id().into(),
+                theta: s.theta,
+                lr: s.lr,
+                df: s.df,
+                p: s.p,
+                dbic: s.dbic,
+                dcv: s.dcv,
+                accepted: s.accepted,
+            })
+            .collect()
+    });
+    let mut notes = p.notes.clone();
+    for (i, s) in sens.iter().enumerate() {
+        if !s.from_sim {
+            notes.push(format!(
+                "accelerometer {}: SIM shows no temperature sensitivity; thermal terms in the free form T_e − T [g/°C]",
+                AXES[i]
+            ));
+        }
+    }
+    Report {
+        sim: sim.display().to_string(),
+        real: real.display().to_string(),
+        rows: p.n_total,
+        rows_used: p.t.len(),
+        scale_v_per_g: per_axis(|i| p.k_diag[i]),
+        notes,
+        noise_floor_mg: per_axis(|i| floor.0[i] * 1e3),
+        allan: floor.1,
+        random_walk_mg_per_sqrt_h: per_axis(|i| (axes[i].q * 3600.0).sqrt() * 1e3),
+        located,
+        effects,
+        ambiguous,
+        rms_before_mg: per_axis(|i| axes[i].rms.0 * 1e3),
+        rms_after_mg: per_axis(|i| axes[i].rms.1 * 1e3),
+        heldout_rms_before_mg: per_axis(|i| axes[i].heldout_rms.0 * 1e3),
+        heldout_rms_after_mg: per_axis(|i| axes[i].heldout_rms.1 * 1e3),
+        search,
+        model: AugmentedModel {
+            t0_c: super::mech::T0_C,
+            sensitivity: (0..3)
+                .filter(|&i| sens[i].from_sim)
+                .map(|i| (AXES[i].to_string(), sens[i].c.to_vec()))
+                .collect(),
+            term: terms,
+        },
+    }
+}

@@ -1,0 +1,252 @@
+//! Small numerical helpers of the diagnosis: a Cholesky solver for the few-column least-squares
+//! problems (normal equations of columns scaled to unit norm), the χ² tail probability, the
+//! overlapping Allan deviation.
+
+/// Solves `A·x = b` for a symmetric positive-definite `A` (`p×p`, row-major) by Cholesky.
+/// Returns `None` when a pivot falls below `rel_tol` times its diagonal element (the columns
+/// are collinear on this data). Also returns the diagonal of `A⁻¹` (for standard errors).
+pub fn chol_solve(a: &[f64], b: &[f64], p: usize, rel_tol: f64) -> Option<(Vec<f64>, Vec<f64>)> {
+    let mut l = vec![0.0; p * p];
+    for i in 0..p {
+        for j in 0..=i {
+            let mut s = a[i * p + j];
+            for k in 0..j {
+                s -= l[i * p + k] * l[j * p + k];
+            }
+            if i == j {
+                let d = a[i * p + i];
+                if !(s > rel_tol * d.abs()) || !(d > 0.0) {
+                    return None;
+                }
+                l[i * p + i] = s.sqrt();
+            } else {
+                l[i * p + j] = s / l[j * p + j];
+            }
+        }
+    }
+    let fwd = |rhs: &[f64]| {
+        let mut y = rhs.to_vec();
+        for i in 0..p {
+            let mut s = y[i];
+            for k in 0..i {
+                s -= l[i * p + k] * y[k];
+            }
+            y[i] = s / l[i * p + i];
+        }
+        y
+    };
+    let back = |y: &[f64]| {
+        let mut x = y.to_vec();
+        for i in (0..p).rev() {
+            let mut s = x[i];
+            for k in i + 1..p {
+                s -= l[k * p + i] * x[k];
+            }
+            x[i] = s / l[i * p + i];
+        }
+        x
+    };
+    let x = back(&fwd(b));
+    // diag(A⁻¹) = diag(L⁻ᵀ·L⁻¹): column sums of the squares of L⁻¹.
+    let mut linv = vec![0.0; p * p];
+    for j in 0..p {
+        let mut e = vec![0.0; p];
+        e[j] = 1.0;
+        let y = fwd(&e);
+        for i in 0..p {
+            linv[i * p + j] = y[i];
+        }
+    }
+    let mut diag = vec![0.0; p];
+    for (j, d) in diag.iter_mut().enumerate() {
+        for i in 0..p {
+            *d += linv[i * p + j] * linv[i * p + j];
+        }
+    }
+    Some((x, diag))
+}
+
+/// `ln Γ(x)` for `x > 0` (Lanczos, 15 digits).
+fn ln_gamma(x: f64) -> f64 {
+    const G: [f64; 9] = [
+        0.999_999_999_999_809_9,
+        676.520_368_121_885_1,
+        -1_259.139_216_722_402_8,
+        771.323_428_777_653_1,
+        -176.615_029_162_140_6,
+        12.507_343_278_686_905,
+        -0.138_571_095_265_720_12,
+        9.984_369_578_019_572e-6,
+        1.505_632_735_149_311_6e-7,
+    ];
+    if x < 0.5 {
+        return (std::f64::consts::PI / (std::f64::consts::PI * x).sin()).ln() - ln_gamma(1.0 - x);
+    }
+    let x = x - 1.0;
+    let mut a = G[0];
+    let t = x + 7.5;
+    for (i, g) in G.iter().enumerate().skip(1) {
+        a += g / (x + i as f64);
+    }
+    0.5 * (2.0 * std::f64::consts::PI).ln() + (x + 0.5) * t.ln() - t + a.ln()
+}
+
+/// Regularized upper incomplete gamma `Q(s, x)`.
+fn gamma_q(s: f64, x: f64) -> f64 {
+    if !(x > 0.0) {
+        return 1.0;
+    }
+    let lg = ln_gamma(s);
+    if x < s + 1.0 {
+        // Series for P.
+        let (mut sum, mut term, mut n) = (1.0 / s, 1.0 / s, s);
+        for _ in 0..10_000 {
+            n += 1.0;
+            term *= x / n;
+            sum += term;
+            if term.abs() < sum.abs() * 1e-16 {
+                break;
+            }
+        }
+        (1.0 - sum * (-x + s * x.ln() - lg).exp()).max(0.0)
+    } else {
+        // Continued fraction for Q (Lentz).
+        let tiny = 1e-300;
+        let mut b = x + 1.0 - s;
+        let mut c = 1.0 / tiny;
+        let mut d = 1.0 / b;
+        let mut h = d;
+        for i in 1..10_000 {
+            let an = -(i as f64) * (i as f64 - s);
+            b += 2.0;
+            d = an * d + b;
+            if d.abs() < tiny {
+                d = tiny;
+            }
+            c = b + an / c;
+            if c.abs() < tiny {
+                c = tiny;
+            }
+            d = 1.0 / d;
+            let del = d * c;
+            h *= del;
+            if (del - 1.0).abs() < 1e-16 {
+                break;
+            }
+        }
+        ((-x + s * x.ln() - lg).exp() * h).clamp(0.0, 1.0)
+    }
+}
+
+/// `P(χ²_k > x)`.
+pub fn chi2_sf(x: f64, k: f64) -> f64 {
+    gamma_q(0.5 * k, 0.5 * x)
+}
+
+/// Overlapping Allan deviation at cluster sizes `ms` (samples), pooled over `segments` (each a
+/// run of equally spaced samples). Returns `(m, adev, n_terms)` for every `m` with at least
+/// one term.
+pub fn allan_dev(segments: &[&[f64]], ms: &[usize]) -> Vec<(usize, f64, usize)> {
+    let mut out = Vec::new();
+    for &m in ms {
+        let (mut sum, mut n) = (0.0, 0usize);
+        for seg in segments {
+            if seg.len() < 2 * m + 1 {
+                continue;
+            }
+            // Prefix sums: cluster means ȳ_k = (S[k+m] − S[k])/m.
+            let mut s = Vec::with_capacity(seg.len() + 1);
+            s.push(0.0);
+            for v in seg.iter() {
+                s.push(s.last().copied().unwrap_or(0.0) + v);
+            }
+            let mf = m as f64;
+            for k in 0..=seg.len() - 2 * m {
+                let a = (s[k + m] - s[k]) / mf;
+                let b = (s[k + 2 * m] - s[k + m]) / mf;
+                sum += (b - a) * (b - a);
+                n += 1;
+            }
+        }
+        if n > 0 {
+            out.push((m, (0.5 * sum / n as f64).sqrt(), n));
+        }
+    }
+    out
+}
+
+/// Dot product with four accumulators (vectorises).
+#[inline]
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0.0f64; 4];
+    let chunks = n / 4;
+    for c in 0..chunks {
+        let i = 4 * c;
+        acc[0] += a[i] * b[i];
+        acc[1] += a[i + 1] * b[i + 1];
+        acc[2] += a[i + 2] * b[i + 2];
+        acc[3] += a[i + 3] * b[i + 3];
+    }
+    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for i in 4 * chunks..n {
+        s += a[i] * b[i];
+    }
+    s
+}
+
+/// Median of a slice (copies); NaN for an empty slice.
+pub fn median(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut w = v.to_vec();
+    w.sort_by(f64::total_cmp);
+    let n = w.len();
+    if n % 2 == 1 { w[n / 2] } else { 0.5 * (w[n / 2 - 1] + w[n / 2]) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chi2_tail_matches_known_values() {
+        // χ²₁: P(>3.841459) = 0.05; χ²₂: P(>x) = exp(−x/2); χ²₁₀: P(>23.209251) = 0.01.
+        assert!((chi2_sf(3.841_458_820_694_124, 1.0) - 0.05).abs() < 1e-10);
+        for x in [0.1, 1.0, 7.0, 40.0] {
+            assert!((chi2_sf(x, 2.0) / (-x / 2.0f64).exp() - 1.0).abs() < 1e-10);
+        }
+        assert!((chi2_sf(23.209_251_158_954_356, 10.0) - 0.01).abs() < 1e-10);
+    }
+
+    #[test]
+    fn cholesky_solves_and_inverts() {
+        let a = [4.0, 2.0, 0.6, 2.0, 5.0, 1.0, 0.6, 1.0, 3.0];
+        let x_true = [1.0, -2.0, 0.5];
+        let b: Vec<f64> = (0..3).map(|i| (0..3).map(|j| a[i * 3 + j] * x_true[j]).sum()).collect();
+        let (x, d) = chol_solve(&a, &b, 3, 1e-12).unwrap();
+        for i in 0..3 {
+            assert!((x[i] - x_true[i]).abs() < 1e-12);
+        }
+        // diag(A⁻¹) by cofactors.
+        let det = 4.0 * (15.0 - 1.0) - 2.0 * (6.0 - 0.6) + 0.6 * (2.0 - 3.0);
+        assert!((d[0] - 14.0 / det).abs() < 1e-12);
+        assert!((d[1] - (12.0 - 0.36) / det).abs() < 1e-12);
+        assert!((d[2] - 16.0 / det).abs() < 1e-12);
+        assert!(chol_solve(&[1.0, 1.0, 1.0, 1.0], &[1.0, 1.0], 2, 1e-9).is_none());
+    }
+
+    #[test]
+    fn allan_of_white_noise_is_sigma_over_sqrt_m() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let n = Normal::new(0.0, 2.0).unwrap();
+        let x: Vec<f64> = (0..200_000).map(|_| n.sample(&mut rng)).collect();
+        let a = allan_dev(&[&x], &[1, 16]);
+        assert!((a[0].1 / 2.0 - 1.0).abs() < 0.01, "{:?}", a);
+        assert!((a[1].1 / (2.0 / 4.0) - 1.0).abs() < 0.03, "{:?}", a);
+    }
+}
