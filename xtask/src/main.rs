@@ -245,6 +245,10 @@ impl Xtask {
     /// corrupted one.
     fn gen_vectors(&mut self) -> Result {
         let bins_cal = ["run", "--release", "-q", "-p", "bins-cal", "--", "blob"];
+        // A fresh clone has no target/fw-vectors yet.
+        if let Some(dir) = self.root.join(BLOB).parent() {
+            std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        }
         let mut c = self.host_cargo(bins_cal);
         c.args(["encode", CALIBRATION, "-o", BLOB, "--ihex", BLOB_HEX]);
         self.run(c)?;
