@@ -4,6 +4,8 @@
 //! | subcommand | module | does |
 //! |---|---|---|
 //! | `blob encode\|decode\|check` | [`cmd::blob`] | calibration file (TOML) ⇄ calibration blob, checks |
+//! | `calibrate` | [`cmd::calibrate`] | tilter recordings → calibration file, blob |
+//! | `verify` | [`cmd::verify`] | check recordings + calibration → \|g\| errors, table, plots |
 //! | `simulate` | [`cmd::simulate`] | scenario file (TOML) → simulated recording (format v1) |
 //! | `tempco` | [`cmd::tempco`] | temperature coefficients from constants at several temperatures |
 //! | `vibration` | [`cmd::vibration`] | the VE table of a conversion function in an environment |
@@ -27,6 +29,10 @@ struct Cli {
 enum Command {
     /// The calibration blob flashed into the CALIB region.
     Blob(cmd::blob::Args),
+    /// Calibrate from tilter recordings: constants per temperature, temperature model.
+    Calibrate(cmd::calibrate::Args),
+    /// Check a calibration on check-position recordings: |g| error per method (T(13)).
+    Verify(cmd::verify::Args),
     /// Simulate a unit on its rigs (scenario file → recording).
     Simulate(cmd::simulate::Args),
     /// Temperature coefficients T(11)/T(12) from constants measured at several temperatures.
@@ -39,6 +45,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Blob(args) => cmd::blob::run(args),
+        Command::Calibrate(args) => cmd::calibrate::run(args),
+        Command::Verify(args) => cmd::verify::run(args),
         Command::Simulate(args) => cmd::simulate::run(args),
         Command::Tempco(args) => cmd::tempco::run(args),
         Command::Vibration(args) => cmd::vibration::run(args),

@@ -1,6 +1,9 @@
 //! The subcommands, one module each.
 
 pub mod blob;
+pub mod calibrate;
+pub mod segments;
 pub mod simulate;
 pub mod tempco;
+pub mod verify;
 pub mod vibration;

@@ -1,0 +1,367 @@
+//! `bins-cal calibrate`: a calibration file (and blob, Intel HEX) from tilter recordings.
+//!
+//! 1. The dwells of every position and temperature ([`segments`](super::segments)).
+//! 2. Per temperature, the 12 constants: T(10) when the dwells are exactly TP1…TP6 at the
+//!    ideal positions, otherwise the least squares fit over the dwell means and their
+//!    reference specific forces (`ident::fit_constants`).
+//! 3. The temperature model from the constants: piecewise-linear through the temperatures
+//!    (T(12), `ident::pwl_from_constants`) or a polynomial (T(11)/least squares,
+//!    `ident::poly_from_constants`). With one temperature only the T0 constants can be
+//!    written (`--model none`, or `auto`), and the file says so.
+//!
+//! Every fit's residual and the dwells it used are printed as a table.
+
+use super::segments::{self, Segment};
+use anyhow::{anyhow, bail};
+use bins_cal::calfile::CalibrationFile;
+use bins_cal::{fsio, ihex, memmap};
+use bins_comp::blob::Meta;
+use bins_comp::ident::{self, FitError, TILTER_POSITIONS_G};
+use bins_comp::{CalibrationParams, CoefDelta, Constants, Form, Method, TempModel};
+use std::path::PathBuf;
+
+/// Arguments of `bins-cal calibrate`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Tilter recordings (format v1 with `pos` and fx/fy/fz), one or several.
+    #[arg(long, num_args = 1.., required = true)]
+    tilter: Vec<PathBuf>,
+    /// Reference temperature T0 [°C]: the dwells nearest to it give the T0 constants, and
+    /// their measured mean temperature becomes the calibration's T0.
+    #[arg(long, default_value_t = 20.0)]
+    t0: f64,
+    /// Temperature model: `pwl` (knots at the calibration temperatures), `poly:N` (N = 1..4),
+    /// `none` (T0 constants only) or `auto` (`pwl`, or `none` with one temperature).
+    #[arg(long, default_value = "auto")]
+    model: String,
+    /// For `pwl`: use only the temperatures nearest to these [°C] as knots (T0 is always one).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    knots: Vec<f64>,
+    /// Compensation method: 1 (coefficient correction) or 2 (output correction).
+    #[arg(long, default_value_t = 1)]
+    method: u8,
+    /// Form of method 2: full, simplified or linearized.
+    #[arg(long, default_value = "full")]
+    form: String,
+    /// The unit's serial number.
+    #[arg(long)]
+    serial: Option<String>,
+    /// Output calibration file (TOML).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Also write the calibration blob here.
+    #[arg(long)]
+    blob: Option<PathBuf>,
+    /// Also write the blob as Intel HEX at the CALIB region's address.
+    #[arg(long)]
+    ihex: Option<PathBuf>,
+    /// memory.x giving the CALIB origin (default: found upwards from the working directory).
+    #[arg(long)]
+    memory_x: Option<PathBuf>,
+    /// Only dwells whose label starts with this (`""`: every labelled dwell).
+    #[arg(long, default_value = "TP")]
+    pos_prefix: String,
+    #[command(flatten)]
+    seg: segments::Options,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum ModelArg {
+    Auto,
+    None,
+    Pwl,
+    Poly(usize),
+}
+
+fn parse_model(s: &str) -> anyhow::Result<ModelArg> {
+    Ok(match s {
+        "auto" => ModelArg::Auto,
+        "none" => ModelArg::None,
+        "pwl" => ModelArg::Pwl,
+        _ => ModelArg::Poly(
+            s.strip_prefix("poly:")
+                .and_then(|n| n.parse::<usize>().ok())
+                .filter(|n| (1..=4).contains(n))
+                .ok_or_else(|| anyhow!("--model `{s}`: expected auto, none, pwl or poly:N with N in 1..=4"))?,
+        ),
+    })
+}
+
+/// The method requested on the command line.
+pub fn parse_method(method: u8, form: &str) -> anyhow::Result<Method> {
+    let form = match form {
+        "full" => Form::Full,
+        "simplified" => Form::Simplified,
+        "linearized" => Form::Linearized,
+        _ => bail!("--form `{form}`: expected full, simplified or linearized"),
+    };
+    match method {
+        1 => Ok(Method::CoefficientCorrection),
+        2 => Ok(Method::OutputCorrection(form)),
+        _ => bail!("--method {method}: expected 1 or 2"),
+    }
+}
+
+/// The constants identified at one temperature.
+pub struct TempFit<'a> {
+    /// Mean temperature of its dwells [°C].
+    pub temp_c: f64,
+    /// The dwells used.
+    pub segments: Vec<&'a Segment>,
+    /// The constants.
+    pub constants: Constants<f64>,
+    /// `T(10)` or `LS`.
+    pub how: &'static str,
+    /// Residual of each dwell, `U − (K·f + U0)` in g (divided by K_ii), per axis.
+    pub residual_g: Vec<[f64; 3]>,
+}
+
+/// The constants at one temperature from its dwells.
+pub fn fit_temperature<'a>(temp_c: f64, segs: Vec<&'a Segment>, files: &str) -> anyhow::Result<TempFit<'a>> {
+    let f: Vec<[f64; 3]> = segs.iter().map(|s| s.f_g).collect();
+    let u: Vec<[f64; 3]> = segs.iter().map(|s| s.mean_u_v).collect();
+    let labels: Vec<&str> = segs.iter().map(|s| s.pos.as_str()).collect();
+    let six: Option<[[f64; 3]; 6]> = (segs.len() == 6)
+        .then(|| {
+            let mut out = [[0.0; 3]; 6];
+            for (k, ideal) in TILTER_POSITIONS_G.iter().enumerate() {
+                let s = segs.iter().find(|s| s.pos == format!("TP{}", k + 1) && s.f_g == *ideal)?;
+                out[k] = s.mean_u_v;
+            }
+            Some(out)
+        })
+        .flatten();
+    let (constants, how) = match six {
+        Some(u6) => (ident::six_position(&u6), "T(10)"),
+        None => {
+            let c = ident::fit_constants(&f, &u).map_err(|e| match e {
+                FitError::TooFewPoints { got, .. } => {
+                    let missing: Vec<String> =
+                        (1..=6).map(|k| format!("TP{k}")).filter(|p| !labels.contains(&p.as_str())).collect();
+                    anyhow!(
+                        "{files}: at {temp_c:.2} °C only {got} stationary dwell(s) ({}); the 12 constants need at least 4 positions (missing: {})",
+                        labels.join(", "),
+                        missing.join(", ")
+                    )
+                }
+                FitError::Singular => anyhow!(
+                    "{files}: at {temp_c:.2} °C the dwells ({}) do not determine the constants (singular fit: positions coplanar)",
+                    labels.join(", ")
+                ),
+                e => anyhow!("{files}: at {temp_c:.2} °C: {e}"),
+            })?;
+            (c, "LS")
+        }
+    };
+    let k = &constants.k_v_per_g;
+    let residual_g = segs
+        .iter()
+        .map(|s| {
+            let mut r = [0.0; 3];
+            for i in 0..3 {
+                let model = k[i][0] * s.f_g[0] + k[i][1] * s.f_g[1] + k[i][2] * s.f_g[2] + constants.u0_v[i];
+                r[i] = (s.mean_u_v[i] - model) / k[i][i];
+            }
+            r
+        })
+        .collect();
+    Ok(TempFit { temp_c, segments: segs, constants, how, residual_g })
+}
+
+/// Prints the dwells (used and rejected).
+pub fn print_segments(all: &[Segment]) {
+    println!("dwells:");
+    println!(
+        "  {:<28} {:<5} {:>9} {:>9} {:>5} {:>9} {:>8} {:>10}  status",
+        "file", "pos", "from_s", "to_s", "rows", "temp_C", "C/min", "std_mV"
+    );
+    for s in all {
+        let name = s.file.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+        println!(
+            "  {:<28} {:<5} {:>9.1} {:>9.1} {:>5} {:>9.2} {:>+8.3} {:>10.4}  {}",
+            name,
+            s.pos,
+            s.t_s.0,
+            s.t_s.1,
+            s.rows.len(),
+            s.temp_c,
+            s.rate_c_per_min,
+            s.std_u_v.iter().fold(0.0f64, |a, b| a.max(*b)) * 1e3,
+            s.rejected.as_deref().unwrap_or("used")
+        );
+    }
+}
+
+fn rms(v: &[[f64; 3]]) -> f64 {
+    let n = (v.len() * 3) as f64;
+    (v.iter().flatten().map(|x| x * x).sum::<f64>() / n).sqrt()
+}
+
+/// Runs `bins-cal calibrate`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let model_arg = parse_model(&args.model)?;
+    let method = parse_method(args.method, &args.form)?;
+    let (all, files) = segments::find_all(&args.tilter, &args.seg)?;
+    let all: Vec<Segment> = all.into_iter().filter(|s| s.pos.starts_with(&args.pos_prefix)).collect();
+    print_segments(&all);
+    let groups = segments::by_temperature(&all, args.seg.temp_tol_c);
+    if groups.is_empty() {
+        bail!("{files}: no stationary dwell with a settled temperature (see the table above)");
+    }
+    let mut fits = Vec::new();
+    for (t, segs) in groups {
+        fits.push(fit_temperature(t, segs, &files)?);
+    }
+    println!("\nconstants per temperature (residual = U − (K·f + U0), in mg of the axis):");
+    println!("  {:>9} {:>4} {:<6} {:>10} {:>10}  dwells", "temp_C", "n", "fit", "rms_mg", "max_mg");
+    for f in &fits {
+        let max = f.residual_g.iter().flatten().fold(0.0f64, |a, b| a.max(b.abs()));
+        let names: Vec<&str> = f.segments.iter().map(|s| s.pos.as_str()).collect();
+        println!(
+            "  {:>9.2} {:>4} {:<6} {:>10.4} {:>10.4}  {}",
+            f.temp_c,
+            f.segments.len(),
+            f.how,
+            rms(&f.residual_g) * 1e3,
+            max * 1e3,
+            names.join(" ")
+        );
+    }
+    // T0: the temperature nearest to --t0.
+    let i0 = (0..fits.len())
+        .min_by(|&a, &b| (fits[a].temp_c - args.t0).abs().total_cmp(&(fits[b].temp_c - args.t0).abs()))
+        .unwrap_or(0);
+    if (fits[i0].temp_c - args.t0).abs() > args.seg.temp_tol_c {
+        let temps: Vec<String> = fits.iter().map(|f| format!("{:.2}", f.temp_c)).collect();
+        bail!(
+            "{files}: no dwells at T0 = {} °C (within {} °C); the recordings have {} °C",
+            args.t0,
+            args.seg.temp_tol_c,
+            temps.join(", ")
+        );
+    }
+    let t0 = fits[i0].temp_c;
+    let c0 = fits[i0].constants;
+    let others: Vec<(f64, Constants<f64>)> =
+        fits.iter().enumerate().filter(|(i, _)| *i != i0).map(|(_, f)| (f.temp_c, f.constants)).collect();
+    let model_arg = match model_arg {
+        ModelArg::Auto if others.is_empty() => ModelArg::None,
+        ModelArg::Auto => ModelArg::Pwl,
+        m => m,
+    };
+    let mut notes: Vec<String> =
+        vec![format!("T0 = {t0:.2} °C: the measured mean temperature of the dwells nearest to --t0 {}", args.t0)];
+    let (model, method, range) = match model_arg {
+        ModelArg::None | ModelArg::Auto => {
+            notes.push(format!(
+                "one temperature only ({t0:.2} °C): T0 constants only, no temperature model (method: uncorrected)"
+            ));
+            let lo = all.iter().filter(|s| s.rejected.is_none()).map(|s| s.temp_c).fold(t0, f64::min);
+            let hi = all.iter().filter(|s| s.rejected.is_none()).map(|s| s.temp_c).fold(t0, f64::max);
+            let zero = TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] };
+            (zero, Method::Uncorrected, ((lo - 1.0).floor(), (hi + 1.0).ceil()))
+        }
+        ModelArg::Pwl => {
+            if others.is_empty() {
+                bail!(
+                    "{files}: only one temperature ({t0:.2} °C): the piecewise-linear model needs at least one more (use --model none for T0 constants only)"
+                );
+            }
+            let chosen: Vec<(f64, Constants<f64>)> = if args.knots.is_empty() {
+                others.clone()
+            } else {
+                let mut v: Vec<(f64, Constants<f64>)> = Vec::new();
+                for k in &args.knots {
+                    if (k - args.t0).abs() <= args.seg.temp_tol_c {
+                        continue;
+                    }
+                    let best = others
+                        .iter()
+                        .min_by(|a, b| (a.0 - k).abs().total_cmp(&(b.0 - k).abs()))
+                        .filter(|p| (p.0 - k).abs() <= args.seg.temp_tol_c)
+                        .ok_or_else(|| {
+                            anyhow!(
+                                "{files}: --knots {k}: no calibration temperature within {} °C",
+                                args.seg.temp_tol_c
+                            )
+                        })?;
+                    if !v.iter().any(|p| p.0 == best.0) {
+                        v.push(*best);
+                    }
+                }
+                v
+            };
+            let m = ident::pwl_from_constants(t0, &c0, &chosen)
+                .map_err(|e| anyhow!("{files}: piecewise-linear model: {e}"))?;
+            let lo = chosen.iter().map(|p| p.0).fold(t0, f64::min);
+            let hi = chosen.iter().map(|p| p.0).fold(t0, f64::max);
+            (m, method, (lo, hi))
+        }
+        ModelArg::Poly(order) => {
+            let m = ident::poly_from_constants(t0, &c0, &others, order).map_err(|e| match e {
+                FitError::TooFewPoints { needed, got } => anyhow!(
+                    "{files}: a polynomial of order {order} needs at least {needed} temperature(s) besides T0 = {t0:.2} °C, the recordings have {got}"
+                ),
+                e => anyhow!("{files}: polynomial model: {e}"),
+            })?;
+            let lo = others.iter().map(|p| p.0).fold(t0, f64::min);
+            let hi = others.iter().map(|p| p.0).fold(t0, f64::max);
+            (m, method, (lo, hi))
+        }
+    };
+    let params = CalibrationParams { constants: c0, t0_c: t0, model, method, temp_range_c: range };
+    // Model residual: the constants the model gives at each temperature vs the measured ones.
+    println!("\ntemperature model residual (model − measured at each calibration temperature):");
+    println!("  {:>9} {:>12} {:>14}", "temp_C", "max|dU0| mg", "max|dK/K| ppm");
+    for f in &fits {
+        let m = params.constants_at(f.temp_c);
+        let (mut du, mut dk) = (0.0f64, 0.0f64);
+        for i in 0..3 {
+            du = du.max(((m.u0_v[i] - f.constants.u0_v[i]) / f.constants.k_v_per_g[i][i]).abs());
+            for j in 0..3 {
+                dk = dk.max(((m.k_v_per_g[i][j] - f.constants.k_v_per_g[i][j]) / f.constants.k_v_per_g[i][i]).abs());
+            }
+        }
+        println!("  {:>9.2} {:>12.4} {:>14.2}", f.temp_c, du * 1e3, dk * 1e6);
+    }
+    let meta = Meta { serial: args.serial.as_deref().unwrap_or(""), date: None, tool_version: bins_cal::TOOL_VERSION };
+    let file = CalibrationFile::from_params(&params, &meta);
+    // Everything is computed and checked before anything is written.
+    let blob = file.to_blob().map_err(|e| anyhow!("{files}: the calibration is not valid: {e}"))?;
+    let hex = match &args.ihex {
+        Some(_) => {
+            let (origin, _) = memmap::resolve_calib_origin(args.memory_x.as_deref())?;
+            Some(ihex::encode(origin, &blob).map_err(|e| anyhow!(e))?)
+        }
+        None => None,
+    };
+    let mut header = String::from("# bins-cal calibrate from: ");
+    header.push_str(&files);
+    header.push('\n');
+    for n in &notes {
+        header.push_str("# note: ");
+        header.push_str(n);
+        header.push('\n');
+    }
+    let text = header + &file.to_toml();
+    fsio::write_atomic(&args.output, text.as_bytes())?;
+    println!();
+    for n in &notes {
+        println!("note: {n}");
+    }
+    println!(
+        "wrote {} (model {}, method {})",
+        args.output.display(),
+        args.model,
+        bins_cal::calfile::method_name(method)
+    );
+    if let Some(p) = &args.blob {
+        fsio::write_atomic(p, &blob)?;
+        println!("wrote {} ({} bytes)", p.display(), blob.len());
+    }
+    if let (Some(p), Some(h)) = (&args.ihex, hex) {
+        fsio::write_atomic(p, h.as_bytes())?;
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,184 @@
+//! Dwell segments of rig recordings, shared by `calibrate` and `verify`.
+//!
+//! A segment is a maximal run of consecutive rows with the same `pos` label and the same known
+//! reference (fx/fy/fz). Its first `settle_s` seconds (at most a quarter of the run) are
+//! dropped as settling margin; the rest is kept if the signals are stationary (standard
+//! deviation of every signal at most `max_std_v`) and the temperature settled (its least
+//! squares rate at most `max_rate_c_per_min`). Nothing assumes long dwells: a hold of a few
+//! seconds at the logger's rate is enough. Kept segments are grouped by temperature: sorted
+//! by mean temperature and split where two neighbours differ by more than `temp_tol_c`.
+
+use anyhow::{anyhow, bail};
+use bins_cal::recording::{Reader, Row};
+use std::path::{Path, PathBuf};
+
+/// How segments are found.
+#[derive(Clone, Copy, Debug, clap::Args)]
+pub struct Options {
+    /// Settling margin dropped at the start of each dwell [s] (at most a quarter of the dwell).
+    #[arg(long, default_value_t = 1.0)]
+    pub settle_s: f64,
+    /// Largest standard deviation of a signal in a stationary dwell [V].
+    #[arg(long, default_value_t = 0.01)]
+    pub max_std_v: f64,
+    /// Largest temperature rate in a settled dwell [°C/min].
+    #[arg(long, default_value_t = 0.5)]
+    pub max_rate_c_per_min: f64,
+    /// Dwells whose mean temperatures differ by at most this much form one temperature [°C].
+    #[arg(long, default_value_t = 3.0)]
+    pub temp_tol_c: f64,
+}
+
+/// One dwell.
+#[derive(Clone, Debug)]
+pub struct Segment {
+    /// The recording it comes from.
+    pub file: PathBuf,
+    /// Its `pos` label.
+    pub pos: String,
+    /// Reference specific force [g].
+    pub f_g: [f64; 3],
+    /// Time of the first and last row used [s].
+    pub t_s: (f64, f64),
+    /// Rows used (after the settling margin): signals [V] and temperature [°C].
+    pub rows: Vec<([f64; 3], f64)>,
+    /// Mean signals [V].
+    pub mean_u_v: [f64; 3],
+    /// Standard deviation of the signals [V].
+    pub std_u_v: [f64; 3],
+    /// Mean temperature [°C].
+    pub temp_c: f64,
+    /// Temperature rate [°C/min].
+    pub rate_c_per_min: f64,
+    /// Why it is not used, if it is not.
+    pub rejected: Option<String>,
+}
+
+struct Run {
+    pos: String,
+    f_g: [f64; 3],
+    rows: Vec<(f64, [f64; 3], f64)>,
+}
+
+/// All dwells of a recording (kept and rejected). Errors name the file: unreadable, no `pos`
+/// column, no reference columns, no row with a known reference and a position label.
+pub fn find(path: &Path, opt: &Options) -> anyhow::Result<Vec<Segment>> {
+    let mut reader = Reader::open(path).map_err(|e| anyhow!("{e}"))?;
+    if !reader.has_column("pos") {
+        bail!("{}: missing column `pos` (the rig position label): cannot find the dwells", path.display());
+    }
+    if !reader.has_reference() {
+        bail!("{}: missing reference columns `fx_g`, `fy_g`, `fz_g`: cannot find the dwells", path.display());
+    }
+    let mut runs: Vec<Run> = Vec::new();
+    let mut cur: Option<Run> = None;
+    let mut row = Row::default();
+    while reader.read_row(&mut row).map_err(|e| anyhow!("{e}"))? {
+        let key = match (&row.pos, row.reference_f_g()) {
+            (Some(p), Some(f)) if !p.is_empty() => Some((p.as_str(), f)),
+            _ => None,
+        };
+        match key {
+            Some((p, f)) => {
+                let same = cur.as_ref().is_some_and(|r| r.pos == p && r.f_g == f);
+                if !same {
+                    runs.extend(cur.take());
+                    cur = Some(Run { pos: p.to_string(), f_g: f, rows: Vec::new() });
+                }
+                if let Some(r) = cur.as_mut() {
+                    r.rows.push((row.t_s, row.u_v, row.temp_c));
+                }
+            }
+            None => runs.extend(cur.take()),
+        }
+    }
+    runs.extend(cur.take());
+    if runs.is_empty() {
+        bail!("{}: no row with both a `pos` label and a known reference (fx_g, fy_g, fz_g)", path.display());
+    }
+    Ok(runs.into_iter().map(|r| segment(path, r, opt)).collect())
+}
+
+fn segment(path: &Path, run: Run, opt: &Options) -> Segment {
+    let (t_first, t_last) = (run.rows[0].0, run.rows[run.rows.len() - 1].0);
+    let margin = opt.settle_s.min(0.25 * (t_last - t_first));
+    let rows: Vec<_> = run.rows.iter().filter(|r| r.0 >= t_first + margin).copied().collect();
+    let n = rows.len() as f64;
+    let mut mean = [0.0; 3];
+    let mut temp = 0.0;
+    let mut t_mean = 0.0;
+    for (t, u, tc) in &rows {
+        for i in 0..3 {
+            mean[i] += u[i] / n;
+        }
+        temp += tc / n;
+        t_mean += t / n;
+    }
+    let mut var = [0.0; 3];
+    let (mut stt, mut sty) = (0.0, 0.0);
+    for (t, u, tc) in &rows {
+        for i in 0..3 {
+            var[i] += (u[i] - mean[i]).powi(2) / n;
+        }
+        stt += (t - t_mean).powi(2);
+        sty += (t - t_mean) * (tc - temp);
+    }
+    let std = var.map(f64::sqrt);
+    let rate = if stt > 0.0 { sty / stt * 60.0 } else { 0.0 };
+    let rejected = if rows.len() < 3 {
+        Some(format!("only {} rows after the settling margin", rows.len()))
+    } else if std.iter().any(|s| !(*s <= opt.max_std_v)) {
+        Some(format!(
+            "not stationary (signal std {:.2e} V > {:.1e} V)",
+            std.iter().fold(0.0f64, |a, b| a.max(*b)),
+            opt.max_std_v
+        ))
+    } else if !(rate.abs() <= opt.max_rate_c_per_min) {
+        Some(format!("temperature not settled ({rate:+.2} °C/min)"))
+    } else {
+        None
+    };
+    Segment {
+        file: path.to_path_buf(),
+        pos: run.pos,
+        f_g: run.f_g,
+        t_s: (rows.first().map_or(t_first, |r| r.0), rows.last().map_or(t_last, |r| r.0)),
+        rows: rows.iter().map(|r| (r.1, r.2)).collect(),
+        mean_u_v: mean,
+        std_u_v: std,
+        temp_c: temp,
+        rate_c_per_min: rate,
+        rejected,
+    }
+}
+
+/// The kept segments grouped by temperature, coldest first: (mean temperature, segments).
+pub fn by_temperature(segments: &[Segment], tol_c: f64) -> Vec<(f64, Vec<&Segment>)> {
+    let mut kept: Vec<&Segment> = segments.iter().filter(|s| s.rejected.is_none()).collect();
+    kept.sort_by(|a, b| a.temp_c.total_cmp(&b.temp_c));
+    let mut groups: Vec<Vec<&Segment>> = Vec::new();
+    for s in kept {
+        match groups.last_mut() {
+            Some(g) if s.temp_c - g[g.len() - 1].temp_c <= tol_c => g.push(s),
+            _ => groups.push(vec![s]),
+        }
+    }
+    groups
+        .into_iter()
+        .map(|mut g| {
+            g.sort_by(|a, b| a.pos.cmp(&b.pos).then(a.t_s.0.total_cmp(&b.t_s.0)));
+            let t = g.iter().map(|s| s.temp_c).sum::<f64>() / g.len() as f64;
+            ((t * 100.0).round() / 100.0, g)
+        })
+        .collect()
+}
+
+/// All segments of several recordings; the names of the files for messages.
+pub fn find_all(paths: &[PathBuf], opt: &Options) -> anyhow::Result<(Vec<Segment>, String)> {
+    let mut all = Vec::new();
+    for p in paths {
+        all.extend(find(p, opt)?);
+    }
+    let names = paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ");
+    Ok((all, names))
+}
