@@ -51,6 +51,10 @@ impl Status {
     /// The vibration level (σ or amplitude above 10 g) or the static acceleration along an
     /// input axis (above 10 g, V(17)) was outside the VE model's range: clamped to it.
     pub const VIBRATION_OUT_OF_RANGE: Status = Status(1 << 5);
+    /// The sampling interrupt lost data since the previous result: a sample was not taken in
+    /// its slot (input not ready, or the interrupt ran past its deadline), or a result was
+    /// dropped because the consumer's queue was full (see [`replay`](crate::replay)).
+    pub const OVERRUN: Status = Status(1 << 6);
     /// An input of this sample was not freshly measured: a sensor driver failed, and the
     /// signals were held or NaN, or the temperature poll failed or the temperature is stale
     /// (see [`drivers`](crate::drivers)).

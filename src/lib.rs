@@ -25,6 +25,7 @@
 //! | [`vibration`] | vibration error V(1)–V(23): conversion function, paper and exact VE, online moments, shake-table identification |
 //! | [`pipeline`] | the per-sample step with vibration-error subtraction |
 //! | [`blob`] | the calibration blob: byte format, parser, encoder, CRC-32, physical limits |
+//! | [`replay`] | the sampling interrupt's step and the replay stream formats shared by the firmware and `bins-cal replay` |
 //! | [`drivers`] | sensor drivers (ADS131M04 ADC, TMP117 temperature) over embedded-hal, and the sample source's fault policy |
 #![no_std]
 #![forbid(unsafe_code)]
@@ -39,6 +40,7 @@ pub mod linalg;
 pub mod model;
 pub mod paper;
 pub mod pipeline;
+pub mod replay;
 pub mod temperature;
 pub mod vectors;
 pub mod vibration;

@@ -29,6 +29,11 @@ const CORRUPT_DIR: &str = "target/fw-corrupt";
 const CORRUPT_BLOB: &str = "target/fw-corrupt/cal.bin";
 /// The byte flipped in the corrupted blob (inside the constants section).
 const CORRUPT_BYTE: usize = 0x90;
+/// The replay test's recording: short, 1 kHz, temperature ramps and vibration.
+const REPLAY_SCENARIO: &str = "scenarios/replay-short.toml";
+/// Working directory of the replay test (the replay firmware's paths `target/fw-replay/…` are
+/// relative to QEMU's working directory).
+const REPLAY_DIR: &str = "target/replay-test";
 /// QEMU runner (also cargo's `runner` for the thumb target).
 const RUNNER: &str = "tools/qemu-run.sh";
 /// Debian packages of the fallback toolchain and of the QEMU run.
@@ -50,10 +55,12 @@ fn main() -> ExitCode {
     let ok = match args.first().map(String::as_str) {
         Some("test") => x.test(),
         Some("demo") => x.demo(),
+        Some("replay") => x.replay(args.get(1..).unwrap_or(&[])),
         _ => {
-            eprintln!("usage: cargo xtask <test|demo>");
+            eprintln!("usage: cargo xtask <test|demo|replay>");
             eprintln!("  test   fmt, clippy, host tests, thumb clippy, vectors, firmware build + link check, QEMU run");
             eprintln!("  demo   build and run the demo in QEMU");
+            eprintln!("  replay REC.csv --calib CAL.bin -o OUT.csv   a recording through the replay firmware in QEMU");
             return ExitCode::from(2);
         }
     };
@@ -110,6 +117,7 @@ impl Xtask {
             ("qemu (corrupted calibration blob)", |x| {
                 x.run_qemu_with_blob(&x.elf("firmware"), &x.root.join(CORRUPT_DIR), &x.root.join(CORRUPT_BLOB))
             }),
+            ("replay: QEMU vs host, bit for bit", Xtask::replay_test),
             ("fuzz (blob parser, short pass)", Xtask::fuzz_short),
         ];
         let mut failed = None;
@@ -275,7 +283,114 @@ impl Xtask {
     }
 
     fn build_firmware(&mut self) -> Result {
-        self.run(self.thumb_cargo("build", ["--release", "--features", "firmware-log", "--bin", "firmware"])?)
+        let args = ["--release", "--features", "firmware-log", "--bin", "firmware", "--bin", "replay"];
+        self.run(self.thumb_cargo("build", args)?)
+    }
+
+    /// `cargo xtask replay REC.csv --calib CAL.bin -o OUT.csv`: the recording through the replay
+    /// firmware in QEMU (SysTick at 1 kHz, or `REPLAY_TICK_HZ` at build time), results as CSV.
+    fn replay(&mut self, args: &[String]) -> bool {
+        let (mut rec, mut calib, mut out) = (None, None, None);
+        let mut it = args.iter();
+        while let Some(a) = it.next() {
+            match a.as_str() {
+                "--calib" => calib = it.next().cloned(),
+                "-o" | "--output" => out = it.next().cloned(),
+                _ if rec.is_none() => rec = Some(a.clone()),
+                _ => rec = None,
+            }
+        }
+        let (Some(rec), Some(calib), Some(out)) = (rec, calib, out) else {
+            eprintln!("usage: cargo xtask replay REC.csv --calib CAL.bin -o OUT.csv");
+            return false;
+        };
+        let cwd = env::current_dir().unwrap_or_default();
+        let (rec, calib, out) = (cwd.join(rec), cwd.join(calib), cwd.join(out));
+        let started = Instant::now();
+        let ok = self.step(1, "toolchain", Xtask::setup_toolchain)
+            && self.step(2, "build", |x| {
+                x.run(x.host_cargo(["build", "--release", "-q", "-p", "bins-cal"]))?;
+                x.build_firmware()
+            })
+            && {
+                let t = Instant::now();
+                match self.replay_firmware(&rec, &calib, &out, &self.root.join("target/replay")) {
+                    Ok(()) => {
+                        println!("replay: {} in {:.1} s wall", out.display(), t.elapsed().as_secs_f64());
+                        true
+                    }
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        false
+                    }
+                }
+            };
+        self.summary(started);
+        ok
+    }
+
+    /// The release `bins-cal` binary (built by the step that calls this).
+    fn bins_cal(&self) -> Command {
+        self.command(self.root.join("target/release/bins-cal"))
+    }
+
+    /// A recording through the replay firmware in QEMU, in `work`: the recording as the input
+    /// stream, the blob in CALIB, the output stream back to CSV (`t_s` from the recording).
+    fn replay_firmware(&self, rec: &Path, calib: &Path, out: &Path, work: &Path) -> Result {
+        let stream_dir = work.join("target/fw-replay");
+        std::fs::create_dir_all(&stream_dir).map_err(|e| format!("{}: {e}", stream_dir.display()))?;
+        let mut c = self.bins_cal();
+        c.arg("replay").arg("--rec").arg(rec).arg("--write-stream").arg(stream_dir.join("in.bin"));
+        self.run(c)?;
+        self.run_qemu_with_blob(&self.elf("replay"), work, calib)?;
+        let mut c = self.bins_cal();
+        c.arg("replay").arg("--rec").arg(rec).arg("--read-stream").arg(stream_dir.join("out.bin")).arg("-o").arg(out);
+        self.run(c)
+    }
+
+    /// The short recording ([`REPLAY_SCENARIO`]) through the replay firmware in QEMU and
+    /// through `bins-cal replay` on the host, with the paper's calibration (method 2,
+    /// simplified, piecewise-linear) and the same with method 1: the CSVs must be identical.
+    fn replay_test(&mut self) -> Result {
+        self.run(self.host_cargo(["build", "--release", "-q", "-p", "bins-cal"]))?;
+        let dir = self.root.join(REPLAY_DIR);
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let rec = dir.join("rec.csv");
+        let mut c = self.bins_cal();
+        c.args(["simulate", REPLAY_SCENARIO, "--seed", "1", "-o"]).arg(&rec);
+        self.run(c)?;
+        let toml = std::fs::read_to_string(self.root.join(CALIBRATION)).map_err(|e| format!("{CALIBRATION}: {e}"))?;
+        let m2 = "kind = \"output-correction\"\nform = \"simplified\"";
+        if !toml.contains(m2) {
+            return Err(format!("{CALIBRATION}: no `{m2}` method to swap for method 1"));
+        }
+        let m1_toml = dir.join("method1.toml");
+        std::fs::write(&m1_toml, toml.replace(m2, "kind = \"coefficient-correction\""))
+            .map_err(|e| format!("{}: {e}", m1_toml.display()))?;
+        let m1_blob = dir.join("method1.bin");
+        let mut c = self.bins_cal();
+        c.args(["blob", "encode"]).arg(&m1_toml).arg("-o").arg(&m1_blob);
+        self.run(c)?;
+        for (name, blob) in [("method2", self.root.join(BLOB)), ("method1", m1_blob)] {
+            let (fw, host) = (dir.join(format!("{name}-qemu.csv")), dir.join(format!("{name}-host.csv")));
+            self.replay_firmware(&rec, &blob, &fw, &dir)?;
+            let mut c = self.bins_cal();
+            c.arg("replay").arg("--rec").arg(&rec).arg("--calib").arg(&blob).arg("-o").arg(&host);
+            self.run(c)?;
+            let (a, b) = (read(&fw)?, read(&host)?);
+            let rows = a.iter().filter(|&&c| c == b'\n').count().saturating_sub(1);
+            if a != b {
+                let line = a.split(|&c| c == b'\n').zip(b.split(|&c| c == b'\n')).position(|(x, y)| x != y);
+                return Err(format!(
+                    "{name}: {} and {} differ (first at line {})",
+                    fw.display(),
+                    host.display(),
+                    line.map_or(0, |l| l + 1)
+                ));
+            }
+            println!("replay {name}: QEMU and host bit-identical, {rows} rows");
+        }
+        Ok(())
     }
 
     /// The release link of `linkcheck` fails iff a panic is reachable from its code.
@@ -381,23 +496,107 @@ const FUZZ_SECONDS: u32 = 30;
 
 /// The demo's scenario, run by `cargo xtask demo` after the toolchain step.
 ///
-/// Placeholder until the demo exists: replays the test vectors in the firmware under QEMU.
-///
-/// The paper's unit in the six check positions at −10, +20 and +45 °C (true constants: the
-/// quadratic through Tables T1/T2; calibration: the paper's two-range model), compensated by
-/// the firmware in QEMU; the host then checks the results bit for bit and prints the table.
+/// The whole pipeline on the paper's twin: simulate the temperature paper's tilter campaign
+/// (scenarios/paper-tilter.toml), calibrate with the paper's two-range model and with a
+/// quadratic one, write the blob, run the firmware in QEMU, verify both calibrations in the
+/// check positions (−10, +20, +45 °C) and print the summary; plots in `target/demo/`.
 fn demo_body(x: &mut Xtask) -> Result {
     let dir = x.root.join("target/demo");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let p = |name: &str| dir.join(name).to_string_lossy().into_owned();
+    let scenario = x.root.join("scenarios/paper-tilter.toml").to_string_lossy().into_owned();
+    let bins_cal = |args: &[&str]| {
+        let mut c = x.host_cargo(["run", "--release", "-q", "-p", "bins-cal", "--"]);
+        c.args(args);
+        c
+    };
+    let rec = p("paper-tilter.csv");
+    x.run(bins_cal(&["simulate", &scenario, "-o", &rec, "--seed", "1"]))?;
+    // The paper's model: two ranges through −40/+20/+70 °C; then the quadratic (T(11)).
+    x.run(bins_cal(&["calibrate", "--tilter", &rec, "--model", "pwl", "--method", "2", "-o", &p("cal-pwl.toml")]))?;
+    x.run(bins_cal(&[
+        "calibrate",
+        "--tilter",
+        &rec,
+        "--model",
+        "poly:2",
+        "--method",
+        "1",
+        "-o",
+        &p("cal-poly2.toml"),
+        "--blob",
+        &p("cal-poly2.bin"),
+    ]))?;
+    x.run(bins_cal(&["verify", "--check", &rec, "--calib", &p("cal-pwl.toml"), "-o", &p("verify-pwl")]))?;
+    x.run(bins_cal(&["verify", "--check", &rec, "--calib", &p("cal-poly2.toml"), "-o", &p("verify-poly2")]))?;
+    // The firmware in QEMU on its test vectors.
     let input = dir.join("target/fw-vectors/in.bin");
     let output = dir.join("target/fw-vectors/out.bin");
     let (inp, out) = (input.to_string_lossy().into_owned(), output.to_string_lossy().into_owned());
     x.run(x.host_cargo(["run", "--release", "-q", "-p", "host-tests", "--bin", "gen-vectors", "--", "--demo", &inp]))?;
     x.build_firmware()?;
     x.run_qemu_in(&x.elf("firmware"), &dir)?;
-    x.run(x.host_cargo(["run", "--release", "-q", "-p", "host-tests", "--bin", "demo-report", "--", &inp, &out]))
+    x.run(x.host_cargo(["run", "--release", "-q", "-p", "host-tests", "--bin", "demo-report", "--", &inp, &out]))?;
+    demo_summary(&dir)
+}
+
+/// max |Δg| [mg] per check temperature and method, from the two `verify.csv` files.
+fn demo_summary(dir: &Path) -> Result {
+    let mut rows: Vec<(String, String, f64, f64)> = Vec::new(); // (model, method, temp, max)
+    for (model, sub) in [("two-range (paper)", "verify-pwl"), ("poly:2", "verify-poly2")] {
+        let path = dir.join(sub).join("verify.csv");
+        let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        for line in text.lines().skip(1) {
+            let c: Vec<&str> = line.split(',').collect();
+            let (Some(t), Some(m), Some(v)) = (c.first(), c.get(2), c.get(3)) else { continue };
+            let (Ok(t), Ok(v)) = (t.parse::<f64>(), v.parse::<f64>()) else { continue };
+            if model.starts_with("poly") && *m == "T0 constants" {
+                continue;
+            }
+            let label = if *m == "T0 constants" { "-".to_string() } else { model.to_string() };
+            match rows.iter_mut().find(|r| r.0 == label && r.1 == *m && (r.2 - t).abs() < 0.5) {
+                Some(r) => r.3 = r.3.max(v.abs()),
+                None => rows.push((label, m.to_string(), t, v.abs())),
+            }
+        }
+    }
+    let mut temps: Vec<f64> = rows.iter().map(|r| r.2).collect();
+    temps.sort_by(f64::total_cmp);
+    temps.dedup();
+    println!("\nmax |Δg| [mg] in the check positions CP1..CP6 (tolerance ±0.3 mg at T0, ±1 mg over the range):");
+    print!("| model | method |");
+    for t in &temps {
+        print!(" {t:+.1} °C |");
+    }
+    println!();
+    println!("|---|---|{}", "---:|".repeat(temps.len()));
+    let mut seen: Vec<(String, String)> = Vec::new();
+    for r in &rows {
+        if seen.contains(&(r.0.clone(), r.1.clone())) {
+            continue;
+        }
+        seen.push((r.0.clone(), r.1.clone()));
+        print!("| {} | {} |", r.0, r.1);
+        for t in &temps {
+            let v = rows.iter().find(|q| q.0 == r.0 && q.1 == r.1 && q.2 == *t).map_or(f64::NAN, |q| q.3);
+            print!(" {v:.3} |");
+        }
+        println!();
+    }
+    println!(
+        "plots: {} and {}",
+        dir.join("verify-pwl/verify.png").display(),
+        dir.join("verify-poly2/verify.png").display()
+    );
+    Ok(())
 }
 
 // ---- helpers ----------------------------------------------------------------------------
+
+/// A file's bytes, or an error naming it.
+fn read(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))
+}
 
 /// The address of the first data byte of an Intel HEX file: the first extended-linear-address
 /// record (type 04) plus the first data record's offset.

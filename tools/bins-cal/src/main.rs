@@ -6,6 +6,7 @@
 //! | `blob encode\|decode\|check` | [`cmd::blob`] | calibration file (TOML) ⇄ calibration blob, checks |
 //! | `calibrate` | [`cmd::calibrate`] | tilter recordings → calibration file, blob |
 //! | `verify` | [`cmd::verify`] | check recordings + calibration → \|g\| errors, table, plots |
+//! | `replay` | [`cmd::replay`] | recording + calibration → the firmware's per-sample output on the host; replay streams |
 //! | `simulate` | [`cmd::simulate`] | scenario file (TOML) → simulated recording (format v1) |
 //! | `tempco` | [`cmd::tempco`] | temperature coefficients from constants at several temperatures |
 //! | `vibration` | [`cmd::vibration`] | the VE table of a conversion function in an environment |
@@ -33,6 +34,8 @@ enum Command {
     Calibrate(cmd::calibrate::Args),
     /// Check a calibration on check-position recordings: |g| error per method (T(13)).
     Verify(cmd::verify::Args),
+    /// A recording through the firmware's per-sample step (host), or its replay streams.
+    Replay(cmd::replay::Args),
     /// Simulate a unit on its rigs (scenario file → recording).
     Simulate(cmd::simulate::Args),
     /// Temperature coefficients T(11)/T(12) from constants measured at several temperatures.
@@ -47,6 +50,7 @@ fn main() -> ExitCode {
         Command::Blob(args) => cmd::blob::run(args),
         Command::Calibrate(args) => cmd::calibrate::run(args),
         Command::Verify(args) => cmd::verify::run(args),
+        Command::Replay(args) => cmd::replay::run(args),
         Command::Simulate(args) => cmd::simulate::run(args),
         Command::Tempco(args) => cmd::tempco::run(args),
         Command::Vibration(args) => cmd::vibration::run(args),

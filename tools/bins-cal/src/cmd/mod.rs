@@ -3,6 +3,7 @@
 pub mod blob;
 pub mod calibrate;
 pub mod segments;
+pub mod replay;
 pub mod simulate;
 pub mod tempco;
 pub mod verify;

@@ -1,0 +1,63 @@
+//! The sampling interrupt's body, shared by the replay firmware and the link check (`mod isr;`
+//! in each), so the link check proves exactly this code panic-free.
+//!
+//! Deadline: one tick period (1 ms at the default 1 kHz). The body takes one sample, runs one
+//! [`Tick::step`] (bounded: see `bench` in the README for the instructions it takes) and pushes
+//! the result into the consumer's queue without waiting. Whatever cannot be done in the slot
+//! is counted and flagged ([`Status::OVERRUN`](bins_comp::Status::OVERRUN)), never waited for.
+
+use bins_comp::replay::{Input, Tick, WINDOW};
+use bins_comp::{Pipeline, Sample};
+use heapless::spsc::Producer;
+
+/// What a sample source has for this tick.
+pub enum Take {
+    /// The sample of this slot.
+    Sample(Input<f32>),
+    /// No sample is ready: the slot is missed (an overrun).
+    NotReady,
+    /// The source has ended (a replayed recording is exhausted): nothing to do.
+    End,
+}
+
+/// A source of one sample per tick.
+pub trait SampleIn {
+    /// The sample of the current slot. Must not block.
+    fn take(&mut self) -> Take;
+}
+
+/// Everything the interrupt owns: the per-tick state, the source and the output queue.
+pub struct Isr<S: 'static> {
+    /// Pipeline and its running state.
+    pub tick: Tick<f32, WINDOW>,
+    /// Where the samples come from.
+    pub source: S,
+    /// The consumer's queue (drained by `main`).
+    pub output: Producer<'static, Sample<f32>>,
+}
+
+impl<S: SampleIn> Isr<S> {
+    /// The interrupt's state at boot.
+    pub fn new(pipeline: Pipeline<f32>, source: S, output: Producer<'static, Sample<f32>>) -> Self {
+        Isr { tick: Tick::new(pipeline), source, output }
+    }
+
+    /// One tick: take a sample, step, push. Returns false once the source has ended.
+    #[inline]
+    pub fn on_tick(&mut self) -> bool {
+        match self.source.take() {
+            Take::Sample(input) => {
+                let s = self.tick.step(&input);
+                if self.output.enqueue(s).is_err() {
+                    self.tick.overrun();
+                }
+                true
+            }
+            Take::NotReady => {
+                self.tick.overrun();
+                true
+            }
+            Take::End => false,
+        }
+    }
+}

@@ -1,0 +1,107 @@
+//! `bins-cal replay`: a recording through the firmware's per-sample step on the host, and the
+//! conversions of a recording to and from the firmware's replay streams
+//! ([`bins_comp::replay`]).
+//!
+//! The host path runs [`Tick::step`] in `f32` over the rows in order, exactly as the
+//! firmware's sampling interrupt does, so with no overrun the two outputs are identical byte
+//! for byte. Output CSV: `t_s` (from the recording), `ax_g`, `ay_g`, `az_g` (shortest decimal
+//! that reads back to the same `f32`), `status` (decimal bits of [`bins_comp::Status`]).
+
+use anyhow::{Context, bail};
+use bins_cal::calfile::{CalibrationFile, describe};
+use bins_cal::fsio::AtomicFile;
+use bins_cal::recording::{Reader, Row};
+use bins_comp::replay::{self, Input, OUTPUT_BYTES, Tick, WINDOW};
+use bins_comp::{Calibration, Sample, Status};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `bins-cal replay`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The recording (format v1).
+    #[arg(long)]
+    rec: PathBuf,
+    /// The calibration: a blob (`.bin`) or a calibration file (`.toml`).
+    #[arg(long, required_unless_present_any = ["write_stream", "read_stream"])]
+    calib: Option<PathBuf>,
+    /// The output CSV (`t_s,ax_g,ay_g,az_g,status`).
+    #[arg(short, long, required_unless_present = "write_stream")]
+    output: Option<PathBuf>,
+    /// Instead: write the recording as the firmware's input stream (16 bytes per row).
+    #[arg(long, value_name = "IN.bin", conflicts_with_all = ["read_stream", "output"])]
+    write_stream: Option<PathBuf>,
+    /// Instead of computing: take the results from the firmware's output stream (16 bytes per
+    /// row) and write them as the output CSV.
+    #[arg(long, value_name = "OUT.bin")]
+    read_stream: Option<PathBuf>,
+}
+
+/// Runs `bins-cal replay …`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut reader = Reader::open(&args.rec)?;
+    let mut row = Row::default();
+    if let Some(path) = &args.write_stream {
+        let mut out = AtomicFile::create(path)?;
+        while reader.read_row(&mut row)? {
+            let input = input_of(&row);
+            out.writer().write_all(&input.encode()).with_context(|| path.display().to_string())?;
+        }
+        return out.commit();
+    }
+    let Some(output) = &args.output else { bail!("--output is required") };
+    let mut csv = AtomicFile::create(output)?;
+    writeln!(csv.writer(), "t_s,ax_g,ay_g,az_g,status")?;
+    let mut rows = 0u64;
+    if let Some(stream) = &args.read_stream {
+        let bytes = std::fs::read(stream).with_context(|| stream.display().to_string())?;
+        if bytes.len() % OUTPUT_BYTES != 0 {
+            bail!("{}: {} bytes is not a whole number of {OUTPUT_BYTES}-byte results", stream.display(), bytes.len());
+        }
+        let mut results = bytes.chunks_exact(OUTPUT_BYTES);
+        while reader.read_row(&mut row)? {
+            let Some(r) = results.next() else {
+                bail!("{}: {} results, the recording has more rows", stream.display(), rows)
+            };
+            let r: &[u8; OUTPUT_BYTES] = r.try_into()?;
+            write_row(csv.writer(), row.t_s, &replay::decode_output(r))?;
+            rows += 1;
+        }
+        if results.next().is_some() {
+            bail!("{}: more results than the recording's {rows} rows", stream.display());
+        }
+    } else {
+        let Some(calib) = &args.calib else { bail!("--calib is required") };
+        let mut tick = Tick::<f32, WINDOW>::new(replay::pipeline(load_calibration(calib)?));
+        while reader.read_row(&mut row)? {
+            write_row(csv.writer(), row.t_s, &tick.step(&input_of(&row)))?;
+        }
+    }
+    csv.commit()
+}
+
+/// The `f32` input of one row, as the firmware receives it.
+fn input_of(row: &Row) -> Input<f32> {
+    Input { u_v: row.u_v.map(|u| u as f32), temp_c: row.temp_c as f32, status: Status::OK }
+}
+
+fn write_row(w: &mut impl Write, t_s: f64, s: &Sample<f32>) -> std::io::Result<()> {
+    let mut b = ryu::Buffer::new();
+    write!(w, "{}", b.format(t_s))?;
+    for a in s.accel_g {
+        write!(w, ",{}", b.format(a))?;
+    }
+    writeln!(w, ",{}", s.status.0)
+}
+
+/// The `f32` calibration of a blob or (by its `.toml` extension) a calibration file.
+pub fn load_calibration(path: &Path) -> anyhow::Result<Calibration<f32>> {
+    if path.extension().is_some_and(|e| e == "toml") {
+        let (params, _) =
+            CalibrationFile::read(path)?.to_params().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        return Calibration::new(&params).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()));
+    }
+    let bytes = std::fs::read(path).with_context(|| path.display().to_string())?;
+    let parsed = bins_comp::blob::parse(&bytes).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), describe(&e)))?;
+    parsed.calibration::<f32>().map_err(|e| anyhow::anyhow!("{}: {}", path.display(), describe(&e)))
+}
