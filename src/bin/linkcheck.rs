@@ -15,6 +15,10 @@
 //! ([`bins_comp::Pipeline`]): once as a vibration test-vector variant (a flight profile) and
 //! once with the online moment window, whose state persists across the samples.
 //!
+//! The sampling interrupt's per-sample step ([`bins_comp::replay::Tick::step`], with the replay
+//! firmware's pipeline and window) runs once per sample. Not yet covered: the heapless SPSC
+//! enqueue/dequeue around it in `isr.rs` (with them in, the link reports a reachable panic).
+//!
 //! Run in QEMU, it compensates [`ITERATIONS`] samples and exits with success.
 #![no_std]
 #![no_main]
@@ -58,6 +62,9 @@ fn main() -> ! {
         vectors::vibration_config(bins_comp::Variant::Exact),
     );
     let mut vib_state = bins_comp::PipelineState::<f32, 16>::new();
+    let mut tick = bins_comp::replay::Tick::<f32, { bins_comp::replay::WINDOW }>::new(bins_comp::replay::pipeline(
+        *vib_pipeline.calibration(),
+    ));
     for i in 0..ITERATIONS {
         // SAFETY: `INPUT` is a valid, aligned, initialised static; this single-threaded
         // program has no interrupt handlers, so nothing writes it concurrently. The volatile
@@ -77,6 +84,15 @@ fn main() -> ! {
             temp_c: input.temp_c,
             expected: bins_comp::Sample { accel_g: [0.0; 3], status: bins_comp::Status::OK },
         };
+        // The sampling interrupt's body, as the replay firmware runs it.
+        let s0 = tick.step(&bins_comp::replay::Input {
+            u_v: input.u_v,
+            temp_c: input.temp_c,
+            status: bins_comp::Status::OK,
+        });
+        // SAFETY: `OUTPUT` is a valid, aligned static, written by this code only; nothing
+        // holds a reference to it.
+        unsafe { core::ptr::write_volatile(&raw mut OUTPUT, Output { accel_g: s0.accel_g, status: s0.status.0 }) };
         let online = vib_pipeline.step(&mut vib_state, input.u_v, input.temp_c, bins_comp::VibrationSource::Online);
         for s in [vectors::evaluate(&cals, &rec), online] {
             // SAFETY: `OUTPUT` is a valid, aligned static, written by this code only; nothing

@@ -56,8 +56,10 @@ fn main() -> ExitCode {
         Some("test") => x.test(),
         Some("demo") => x.demo(),
         Some("replay") => x.replay(args.get(1..).unwrap_or(&[])),
+        Some("bench") => x.bench(),
         _ => {
-            eprintln!("usage: cargo xtask <test|demo|replay>");
+            eprintln!("usage: cargo xtask <test|demo|replay|bench>");
+            eprintln!("  bench  instructions per sample in QEMU, stack depth, flash/RAM of the replay firmware");
             eprintln!("  test   fmt, clippy, host tests, thumb clippy, vectors, firmware build + link check, QEMU run");
             eprintln!("  demo   build and run the demo in QEMU");
             eprintln!("  replay REC.csv --calib CAL.bin -o OUT.csv   a recording through the replay firmware in QEMU");
@@ -325,6 +327,27 @@ impl Xtask {
                     }
                 }
             };
+        self.summary(started);
+        ok
+    }
+
+    /// `cargo xtask bench`: instructions per sample of each method/model case and the step's
+    /// stack high-water mark (the `bench` firmware in QEMU, `-icount shift=0`), then flash and
+    /// static RAM of the replay firmware (`llvm-size`).
+    fn bench(&mut self) -> bool {
+        let started = Instant::now();
+        let ok = self.step(1, "toolchain", Xtask::setup_toolchain)
+            && self.step(2, "build", |x| {
+                x.build_firmware()?;
+                let args = ["--release", "--features", "firmware-log", "--bin", "bench"];
+                x.run(x.thumb_cargo("build", args)?)
+            })
+            && self.step(3, "instructions per sample (QEMU)", |x| x.run_qemu_in(&x.elf("bench"), &x.root))
+            && self.step(4, "size of the replay firmware", |x| {
+                let mut c = x.command("llvm-size");
+                c.arg(x.elf("replay"));
+                x.run(c)
+            });
         self.summary(started);
         ok
     }
