@@ -6,6 +6,7 @@
 //! | `blob encode\|decode\|check` | [`cmd::blob`] | calibration file (TOML) ⇄ calibration blob, checks |
 //! | `calibrate` | [`cmd::calibrate`] | tilter recordings → calibration file, blob |
 //! | `verify` | [`cmd::verify`] | check recordings + calibration → \|g\| errors, table, plots |
+//! | `diagnose` | [`cmd::diagnose`] | SIM vs REAL recording → mismatch located, mechanisms named and fitted, report, plots |
 //! | `replay` | [`cmd::replay`] | recording + calibration → the firmware's per-sample output on the host; replay streams |
 //! | `simulate` | [`cmd::simulate`] | scenario file (TOML) → simulated recording (format v1) |
 //! | `tempco` | [`cmd::tempco`] | temperature coefficients from constants at several temperatures |
@@ -34,6 +35,8 @@ enum Command {
     Calibrate(cmd::calibrate::Args),
     /// Check a calibration on check-position recordings: |g| error per method (T(13)).
     Verify(cmd::verify::Args),
+    /// Locate a sim-vs-real mismatch, name the missing physics, model it (report, plots).
+    Diagnose(cmd::diagnose::Args),
     /// A recording through the firmware's per-sample step (host), or its replay streams.
     Replay(cmd::replay::Args),
     /// Simulate a unit on its rigs (scenario file → recording).
@@ -50,6 +53,7 @@ fn main() -> ExitCode {
         Command::Blob(args) => cmd::blob::run(args),
         Command::Calibrate(args) => cmd::calibrate::run(args),
         Command::Verify(args) => cmd::verify::run(args),
+        Command::Diagnose(args) => cmd::diagnose::run(args),
         Command::Replay(args) => cmd::replay::run(args),
         Command::Simulate(args) => cmd::simulate::run(args),
         Command::Tempco(args) => cmd::tempco::run(args),

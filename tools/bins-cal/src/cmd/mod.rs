@@ -2,8 +2,9 @@
 
 pub mod blob;
 pub mod calibrate;
-pub mod segments;
+pub mod diagnose;
 pub mod replay;
+pub mod segments;
 pub mod simulate;
 pub mod tempco;
 pub mod verify;

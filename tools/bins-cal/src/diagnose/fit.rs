@@ -456,6 +456,8 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize) -> AxisFit {
     let mut model: Vec<usize> = Vec::new();
     let mut trace = Vec::new();
     let mut q = estimate_q(t, r, y, &[]);
+    // The Gram matrices of the last search round, reused for the ambiguity check.
+    let mut last_grams: Option<Grams> = None;
     for round in 0..4 {
         let grams = Grams::new(t, r, q, y, &bank, &fold);
         let filt = Filter::new(t, r, q, |_| true);
@@ -472,6 +474,7 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize) -> AxisFit {
         let sel = Selector { bank: &bank, grams, infl_of: Box::new(infl_of), alpha };
         trace.clear();
         let new_model = sel.run(model.clone(), &mut trace);
+        last_grams = Some(sel.grams);
         let cols: Vec<&[f64]> =
             new_model.iter().flat_map(|&c| bank.cands[c].cols.iter().map(|&i| bank.cols[i].as_slice())).collect();
         let q_new = estimate_q(t, r, y, &cols);
@@ -504,7 +507,10 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize) -> AxisFit {
             }
             None => {
                 fit.trace = trace;
-                fit.ambiguous = ambiguity(&bank, &model, t, r, q, y, &fold, fit.inflation);
+                fit.ambiguous = match &last_grams {
+                    Some(g) => ambiguity(&bank, &model, g, fit.inflation),
+                    None => Vec::new(),
+                };
                 return fit;
             }
         }
@@ -513,21 +519,10 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize) -> AxisFit {
 
 /// For each member of `model`, the mechanisms that replace it (θ re-searched on the grid)
 /// with a deviance change below [`AMBIGUOUS_LR`].
-#[allow(clippy::too_many_arguments)]
-fn ambiguity(
-    bank: &Bank,
-    model: &[usize],
-    t: &[f64],
-    r: &[f64],
-    q: f64,
-    y: &[f64],
-    fold: &[usize],
-    infl: f64,
-) -> Vec<(Mech, Vec<(Mech, f64)>)> {
+fn ambiguity(bank: &Bank, model: &[usize], grams: &Grams, infl: f64) -> Vec<(Mech, Vec<(Mech, f64)>)> {
     if model.is_empty() {
         return Vec::new();
     }
-    let grams = Grams::new(t, r, q, y, bank, fold);
     let colsidx = |m: &[usize]| -> Vec<usize> { m.iter().flat_map(|&c| bank.cands[c].cols.iter().copied()).collect() };
     let mut ambiguous = Vec::new();
     let sse_full = grams.sse(&colsidx(model));

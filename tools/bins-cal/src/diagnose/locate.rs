@@ -1,11 +1,12 @@
-//! Where the mismatch is: the residual (minus its median) averaged over strata of the test
-//! (rig position, temperature range, heating/cooling/steady, ramp rate, vibration condition,
-//! time since power-on), with a standard error that accounts for autocorrelation: the stratum
-//! is cut into blocks of consecutive rows, and the spread of the block means is divided by the
-//! effective number of blocks `n·(1 − ρ)/(1 + ρ)` (ρ = lag-1 correlation of the block means).
+//! Where the mismatch is: the residual minus the drift nuisance (the random-walk level of the
+//! noise model, estimated with the found terms removed, so it carries no mechanism) averaged
+//! over strata of the test (rig position, temperature range, heating/cooling/steady, ramp
+//! rate, vibration condition, time since power-on). The standard error is that of the noise
+//! model: the white variances of the stratum's rows, times the variance inflation of the
+//! remaining autocorrelation (effective sample size = rows / inflation).
 
+use super::fit::AxisFit;
 use super::prep::{AXES, Prepared};
-use super::stats::median;
 use serde::Serialize;
 
 /// One stratum that carries mismatch.
@@ -27,7 +28,7 @@ pub struct Stratum {
     pub se_mg: f64,
     /// `mean / se`.
     pub z: f64,
-    /// Effective number of independent blocks.
+    /// Effective number of independent rows (rows / variance inflation).
     pub n_eff: f64,
 }
 
@@ -83,63 +84,43 @@ fn strata(p: &Prepared) -> Vec<(String, String, Vec<bool>)> {
 
 /// The strata of every accelerometer whose mean residual is significant (|z| ≥ [`Z_LOCATED`]),
 /// most significant first.
-pub fn locate(p: &Prepared, noise_floor_g: &[f64; 3]) -> Vec<Stratum> {
+pub fn locate(p: &Prepared, fits: &[AxisFit]) -> Vec<Stratum> {
     let n = p.t.len();
-    let block = (n / 200).max(10);
     let st = strata(p);
     let mut found = Vec::new();
-    for axis in 0..3 {
-        let med = median(&p.r[axis]);
-        let y: Vec<f64> = p.r[axis].iter().map(|v| v - med).collect();
+    for fit in fits {
+        let axis = fit.axis;
+        let y: Vec<f64> = p.r[axis].iter().zip(&fit.drift).map(|(v, d)| v - d).collect();
         for (dim, val, mask) in &st {
-            // Blocks: runs of consecutive rows in the stratum, cut every `block` rows.
-            let mut means = Vec::new();
-            let mut counts = Vec::new();
-            let mut i = 0;
-            let mut dur = 0.0;
-            while i < n {
-                if !mask[i] {
-                    i += 1;
-                    continue;
+            let (mut sum, mut var, mut rows, mut dur) = (0.0, 0.0, 0usize, 0.0);
+            for i in 0..n {
+                if mask[i] {
+                    sum += y[i];
+                    var += p.r_white[axis][i];
+                    rows += 1;
+                    dur += if i + 1 < n { (p.t[i + 1] - p.t[i]).min(3.0 * p.dt) } else { p.dt };
                 }
-                let s = i;
-                while i < n && mask[i] && i - s < block {
-                    i += 1;
-                }
-                means.push(y[s..i].iter().sum::<f64>() / (i - s) as f64);
-                counts.push((i - s) as f64);
-                dur += p.t[i - 1] - p.t[s] + p.dt;
             }
-            let rows: f64 = counts.iter().sum();
-            let mean = means.iter().zip(&counts).map(|(m, c)| m * c).sum::<f64>() / rows;
-            let nb = means.len();
-            let white_se = noise_floor_g[axis] / rows.sqrt();
-            let (se, n_eff) = if nb >= 5 {
-                let var = means.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (nb - 1) as f64;
-                let c0: f64 = means.iter().map(|m| (m - mean).powi(2)).sum();
-                let c1: f64 = means.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum();
-                let rho = if c0 > 0.0 { (c1 / c0).clamp(0.0, 0.95) } else { 0.0 };
-                let ne = nb as f64 * (1.0 - rho) / (1.0 + rho);
-                ((var / ne).sqrt().max(white_se), ne)
-            } else {
-                (white_se * (block as f64).sqrt(), nb as f64)
-            };
+            let rf = rows as f64;
+            let mean = sum / rf;
+            let se = (var * fit.inflation).sqrt() / rf;
             let z = if se > 0.0 { mean / se } else { 0.0 };
             if z.abs() >= Z_LOCATED {
                 found.push(Stratum {
                     axis: AXES[axis].into(),
                     dimension: dim.clone(),
                     value: val.clone(),
-                    rows: rows as usize,
+                    rows,
                     duration_s: dur,
                     mean_mg: mean * 1e3,
                     se_mg: se * 1e3,
                     z,
-                    n_eff,
+                    n_eff: rf / fit.inflation,
                 });
             }
         }
     }
     found.sort_by(|a, b| b.z.abs().total_cmp(&a.z.abs()));
+    found.truncate(60);
     found
 }

@@ -18,6 +18,7 @@ pub mod fit;
 pub mod locate;
 pub mod mech;
 pub mod noise;
+pub mod plot;
 pub mod prep;
 pub mod report;
 pub mod stats;
@@ -55,7 +56,6 @@ pub struct Diagnosis {
 pub fn diagnose(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> Result<Diagnosis, DiagnoseError> {
     let p = prep::prepare(sim, real, sim_name, real_name)?;
     let floor = report::noise_floor(&p);
-    let located = locate::locate(&p, &floor.0);
     let mut axes = Vec::new();
     let mut sensitivity = Vec::new();
     for axis in 0..3 {
@@ -63,6 +63,7 @@ pub fn diagnose(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) ->
         axes.push(fit::fit_axis(&ctx, 3));
         sensitivity.push(ctx.s.clone());
     }
+    let located = locate::locate(&p, &axes);
     let report = report::build(&p, &axes, &sensitivity, floor, located, sim_name, real_name);
     Ok(Diagnosis { prepared: p, sensitivity, axes, report })
 }

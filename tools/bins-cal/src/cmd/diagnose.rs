@@ -1,0 +1,77 @@
+//! `bins-cal diagnose`: where a simulated recording and a real one of the same test disagree,
+//! which physics the simulation misses, the fitted terms, and the fit before and after. The
+//! method is in `docs/diagnosis.md`.
+
+use anyhow::{Context, anyhow};
+use bins_cal::diagnose::{diagnose_files, plot};
+use bins_cal::fsio;
+use std::path::PathBuf;
+
+/// Arguments of `bins-cal diagnose`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The simulated recording (format v1).
+    #[arg(long, value_name = "SIM.csv")]
+    sim: PathBuf,
+    /// The real recording of the same test, row for row.
+    #[arg(long, value_name = "REAL.csv")]
+    real: PathBuf,
+    /// The report to write (JSON).
+    #[arg(long, value_name = "OUT.json")]
+    report: PathBuf,
+    /// Also write PNG plots into this directory.
+    #[arg(long, value_name = "DIR")]
+    plots: Option<PathBuf>,
+    /// Also write the augmented model (the found terms) as TOML.
+    #[arg(long, value_name = "MODEL.toml")]
+    model: Option<PathBuf>,
+}
+
+/// Runs `bins-cal diagnose`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let t0 = std::time::Instant::now();
+    let d = diagnose_files(&args.sim, &args.real).map_err(|e| anyhow!("{e}"))?;
+    let r = &d.report;
+    let json = serde_json::to_string_pretty(r).context("report")?;
+    fsio::write_atomic(&args.report, json.as_bytes())?;
+    if let Some(m) = &args.model {
+        let text = toml::to_string(&r.model).with_context(|| format!("{}", m.display()))?;
+        let head = "# bins-cal diagnose: terms missing from the simulation (add to its model).\n";
+        fsio::write_atomic(m, format!("{head}{text}").as_bytes())?;
+    }
+    let mut plots = Vec::new();
+    if let Some(dir) = &args.plots {
+        plots = plot::write_plots(&d, dir).map_err(|e| anyhow!("{e}"))?;
+    }
+    println!("diagnosed {} rows ({} used) in {:.1} s", r.rows, r.rows_used, t0.elapsed().as_secs_f64());
+    for n in &r.notes {
+        println!("note: {n}");
+    }
+    if r.effects.is_empty() && r.ambiguous.is_empty() {
+        println!("no mechanism found above the noise");
+    }
+    for e in &r.effects {
+        println!("effect {} on {}: {}", e.id, e.axes.join(","), e.explanation);
+        for (ax, ps) in &e.params {
+            let list: Vec<String> = ps.iter().map(|(k, v)| format!("{k} = {v:.6}")).collect();
+            println!("    {ax}: {}", list.join(", "));
+        }
+    }
+    for a in &r.ambiguous {
+        println!("ambiguous on {}: {} — separate by: {}", a.axes.join(","), a.ids.join(" / "), a.separating_test);
+    }
+    for ax in ["x", "y", "z"] {
+        let g = |m: &std::collections::BTreeMap<String, f64>| m.get(ax).copied().unwrap_or(f64::NAN);
+        println!(
+            "{ax}: noise floor {:.4} mg; held-out RMS {:.4} → {:.4} mg",
+            g(&r.noise_floor_mg),
+            g(&r.heldout_rms_before_mg),
+            g(&r.heldout_rms_after_mg)
+        );
+    }
+    println!("report: {}", args.report.display());
+    for p in plots {
+        println!("plot: {}", p.display());
+    }
+    Ok(())
+}

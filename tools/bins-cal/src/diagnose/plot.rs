@@ -1,0 +1,191 @@
+//! PNG plots of a diagnosis (plotters, bitmap backend, the embedded DejaVu Sans through
+//! ab_glyph, so no system font library is needed):
+//!
+//! - `residual_<axis>.png`: the residual minus the drift nuisance over time, before and after
+//!   the model (block means, at most 2000 points);
+//! - `effect_<id>_<axis>.png`: the partial residual (residual − drift − the other terms)
+//!   against the term's fitted contribution, with the line y = x and binned means.
+//!
+//! Each file is drawn into a temporary sibling and renamed, so none is half-written.
+
+use super::{DiagnoseError, Diagnosis};
+use plotters::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// The font (DejaVu Sans; licence in `assets/DejaVuSans.LICENSE`).
+static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+
+fn err(path: &Path, e: impl std::fmt::Display) -> DiagnoseError {
+    DiagnoseError(format!("{}: {e}", path.display()))
+}
+
+/// Block means of `(x, y)` pairs: at most `max` points.
+fn decimate(x: &[f64], y: &[f64], max: usize) -> Vec<(f64, f64)> {
+    let n = x.len().min(y.len());
+    let b = n.div_ceil(max.max(1)).max(1);
+    (0..n)
+        .step_by(b)
+        .map(|s| {
+            let e = (s + b).min(n);
+            let m = (e - s) as f64;
+            (x[s..e].iter().sum::<f64>() / m, y[s..e].iter().sum::<f64>() / m)
+        })
+        .collect()
+}
+
+fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) =
+        v.filter(|x| x.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+    if !(hi > lo) {
+        let c = if lo.is_finite() { lo } else { 0.0 };
+        return (c - 1e-3, c + 1e-3);
+    }
+    let pad = 0.05 * (hi - lo);
+    (lo - pad, hi + pad)
+}
+
+/// Draws into `dir/name` through a temporary sibling.
+fn draw(
+    dir: &Path,
+    name: &str,
+    f: impl FnOnce(&DrawingArea<BitMapBackend, plotters::coord::Shift>) -> Result<(), String>,
+) -> Result<PathBuf, DiagnoseError> {
+    let path = dir.join(name);
+    let tmp = dir.join(format!(".{name}.tmp-{}.png", std::process::id()));
+    let result = {
+        let root = BitMapBackend::new(&tmp, (1000, 520)).into_drawing_area();
+        root.fill(&WHITE)
+            .map_err(|e| e.to_string())
+            .and_then(|_| f(&root))
+            .and_then(|_| root.present().map_err(|e| e.to_string()))
+    };
+    match result.and_then(|_| std::fs::rename(&tmp, &path).map_err(|e| e.to_string())) {
+        Ok(()) => Ok(path),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(err(&path, e))
+        }
+    }
+}
+
+/// Writes the plots of `d` into `dir` (created if missing); returns the files written.
+pub fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, DiagnoseError> {
+    use plotters::style::{FontStyle, register_font};
+    let _ = register_font("sans-serif", FontStyle::Normal, FONT);
+    std::fs::create_dir_all(dir).map_err(|e| err(dir, e))?;
+    let p = &d.prepared;
+    let hours: Vec<f64> = p.t.iter().map(|t| t / 3600.0).collect();
+    let mut out = Vec::new();
+    for fit in &d.axes {
+        let ax = super::prep::AXES[fit.axis];
+        let y = &p.r[fit.axis];
+        let before: Vec<f64> = y.iter().zip(&fit.drift).map(|(a, b)| (a - b) * 1e3).collect();
+        let after: Vec<f64> = before.iter().zip(&fit.prediction).map(|(a, b)| a - b * 1e3).collect();
+        let pb = decimate(&hours, &before, 2000);
+        let pa = decimate(&hours, &after, 2000);
+        let (x0, x1) = range(hours.iter().copied());
+        let (y0, y1) = range(pb.iter().chain(&pa).map(|q| q.1));
+        let title = format!(
+            "accelerometer {ax}: residual − drift, held-out RMS {:.4} → {:.4} mg",
+            fit.heldout_rms.0 * 1e3,
+            fit.heldout_rms.1 * 1e3
+        );
+        out.push(draw(dir, &format!("residual_{ax}.png"), |root| {
+            let mut chart = ChartBuilder::on(root)
+                .caption(title, ("sans-serif", 20))
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(70)
+                .build_cartesian_2d(x0..x1, y0..y1)
+                .map_err(|e| e.to_string())?;
+            chart
+                .configure_mesh()
+                .x_desc("time [h]")
+                .y_desc("residual [mg]")
+                .label_style(("sans-serif", 14))
+                .draw()
+                .map_err(|e| e.to_string())?;
+            let cb = RGBColor(214, 39, 40);
+            let ca = RGBColor(31, 119, 180);
+            chart
+                .draw_series(LineSeries::new(pb.iter().copied(), cb.stroke_width(1)))
+                .map_err(|e| e.to_string())?
+                .label("before (REAL − SIM)")
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], cb.stroke_width(2)));
+            chart
+                .draw_series(LineSeries::new(pa.iter().copied(), ca.stroke_width(1)))
+                .map_err(|e| e.to_string())?
+                .label("after the found terms")
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], ca.stroke_width(2)));
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 14))
+                .draw()
+                .map_err(|e| e.to_string())
+        })?);
+        for (k, term) in fit.terms.iter().enumerate() {
+            let others: Vec<f64> = (0..y.len())
+                .map(|i| fit.terms.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, t)| t.contribution[i]).sum())
+                .collect();
+            let xs: Vec<f64> = term.contribution.iter().map(|v| v * 1e3).collect();
+            let ys: Vec<f64> = (0..y.len()).map(|i| (y[i] - fit.drift[i] - others[i]) * 1e3).collect();
+            // Sort by the regressor for binned means.
+            let mut idx: Vec<usize> = (0..xs.len()).collect();
+            idx.sort_by(|a, b| xs[*a].total_cmp(&xs[*b]));
+            let sx: Vec<f64> = idx.iter().map(|&i| xs[i]).collect();
+            let sy: Vec<f64> = idx.iter().map(|&i| ys[i]).collect();
+            let bins = decimate(&sx, &sy, 60);
+            let pts: Vec<(f64, f64)> =
+                (0..xs.len()).step_by(xs.len().div_ceil(3000).max(1)).map(|i| (xs[i], ys[i])).collect();
+            let (x0, x1) = range(xs.iter().copied());
+            let (y0, y1) = range(pts.iter().map(|q| q.1).chain(bins.iter().map(|q| q.1)));
+            let theta = term.theta.map_or(String::new(), |t| format!(", θ = {t:.4}"));
+            let title = format!("{} on {ax}{theta}: partial residual vs fitted term", term.mech.id());
+            out.push(draw(dir, &format!("effect_{}_{ax}.png", term.mech.id()), |root| {
+                let mut chart = ChartBuilder::on(root)
+                    .caption(title, ("sans-serif", 20))
+                    .margin(12)
+                    .x_label_area_size(40)
+                    .y_label_area_size(70)
+                    .build_cartesian_2d(x0..x1, y0..y1)
+                    .map_err(|e| e.to_string())?;
+                chart
+                    .configure_mesh()
+                    .x_desc("fitted term [mg]")
+                    .y_desc("residual − drift − other terms [mg]")
+                    .label_style(("sans-serif", 14))
+                    .draw()
+                    .map_err(|e| e.to_string())?;
+                let grey = RGBColor(160, 160, 160);
+                chart
+                    .draw_series(pts.iter().map(|&(x, y)| Circle::new((x, y), 1, grey.filled())))
+                    .map_err(|e| e.to_string())?
+                    .label("rows")
+                    .legend(move |(x, y)| Circle::new((x + 7, y), 3, grey.filled()));
+                let c = RGBColor(214, 39, 40);
+                chart
+                    .draw_series(bins.iter().map(|&(x, y)| Circle::new((x, y), 4, c.filled())))
+                    .map_err(|e| e.to_string())?
+                    .label("binned means")
+                    .legend(move |(x, y)| Circle::new((x + 7, y), 4, c.filled()));
+                chart
+                    .draw_series(LineSeries::new([(x0, x0), (x1, x1)], BLACK.stroke_width(2)))
+                    .map_err(|e| e.to_string())?
+                    .label("y = x")
+                    .legend(|(x, y)| PathElement::new([(x, y), (x + 14, y)], BLACK.stroke_width(2)));
+                chart
+                    .configure_series_labels()
+                    .position(SeriesLabelPosition::UpperLeft)
+                    .background_style(WHITE.mix(0.85))
+                    .border_style(BLACK)
+                    .label_font(("sans-serif", 14))
+                    .draw()
+                    .map_err(|e| e.to_string())
+            })?);
+        }
+    }
+    Ok(out)
+}

@@ -1,0 +1,204 @@
+//! `bins-cal diagnose` end to end: a generated pair through the command (report keys, plots,
+//! augmented model), unusable inputs give one-line errors and a non-zero exit, the CSV path
+//! never panics on mutated files (property test), and the time of a 30 000-row pair.
+
+use bins_cal::diagnose::{cases, diagnose, diagnose_files};
+use bins_cal::recording::{Columns, Row, Writer};
+use proptest::prelude::*;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn write(path: &Path, rows: &[Row]) {
+    let f = std::fs::File::create(path).unwrap();
+    let mut w =
+        Writer::new(std::io::BufWriter::new(f), path, Columns::all(), &["recording format v1 -- test"]).unwrap();
+    for r in rows {
+        w.write_row(r).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+fn case(name: &str, rows: usize) -> cases::Case {
+    let mut c = cases::suite().into_iter().find(|c| c.name == name).unwrap();
+    c.plan.rows = rows;
+    c
+}
+
+fn bins_cal() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_bins-cal"))
+}
+
+fn pair(dir: &Path, name: &str, rows: usize) -> (PathBuf, PathBuf) {
+    let (s, r) = cases::generate(&case(name, rows));
+    let (sp, rp) = (dir.join("sim.csv"), dir.join("real.csv"));
+    write(&sp, &s);
+    write(&rp, &r);
+    (sp, rp)
+}
+
+#[test]
+fn command_writes_report_model_and_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sp, rp) = pair(dir.path(), "lag_plus_asymmetry", 12_000);
+    let (rep, plots, model) = (dir.path().join("out.json"), dir.path().join("plots"), dir.path().join("model.toml"));
+    let out = bins_cal()
+        .args(["diagnose", "--sim"])
+        .arg(&sp)
+        .arg("--real")
+        .arg(&rp)
+        .arg("--report")
+        .arg(&rep)
+        .arg("--plots")
+        .arg(&plots)
+        .arg("--model")
+        .arg(&model)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}{}", stdout, String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    for key in [
+        "effects",
+        "ambiguous",
+        "located",
+        "noise_floor_mg",
+        "rms_before_mg",
+        "rms_after_mg",
+        "heldout_rms_before_mg",
+        "heldout_rms_after_mg",
+    ] {
+        assert!(v.get(key).is_some(), "report lacks {key}");
+    }
+    let ids: Vec<&str> = v["effects"].as_array().unwrap().iter().map(|e| e["id"].as_str().unwrap()).collect();
+    assert!(ids.contains(&"thermal_lag") && ids.contains(&"sf_asymmetry"), "{ids:?}");
+    let e = &v["effects"][0];
+    for k in ["id", "axes", "params", "ci", "explanation"] {
+        assert!(e.get(k).is_some(), "effect lacks {k}");
+    }
+    // The mismatch is located: heating/cooling strata on every axis carry it.
+    let located = v["located"].as_array().unwrap();
+    assert!(located.iter().any(|s| s["dimension"] == "thermal_state"), "{located:?}");
+    // Plots: one residual plot per axis and one per effect and axis, real PNGs.
+    let mut n = 0;
+    for f in std::fs::read_dir(&plots).unwrap() {
+        let p = f.unwrap().path();
+        let bytes = std::fs::read(&p).unwrap();
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{}", p.display());
+        n += 1;
+    }
+    assert_eq!(n, 3 + 3 + 1, "residual x/y/z, lag x/y/z, asymmetry y");
+    let m: toml::Value = toml::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    let terms = m["term"].as_array().unwrap();
+    assert!(terms.iter().any(|t| t["id"].as_str() == Some("sf_asymmetry") && t["axis"].as_str() == Some("y")));
+}
+
+fn run_err(sim: &Path, real: &Path, dir: &Path) -> String {
+    let out = bins_cal()
+        .args(["diagnose", "--sim"])
+        .arg(sim)
+        .arg("--real")
+        .arg(real)
+        .arg("--report")
+        .arg(dir.join("r.json"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(!dir.join("r.json").exists(), "no report on failure");
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+    err
+}
+
+#[test]
+fn unusable_inputs_are_one_line_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let (s, r) = cases::generate(&case("cross_axis", 400));
+    let sp = dir.path().join("sim.csv");
+    write(&sp, &s);
+    // Rows that do not match: one row fewer.
+    let short = dir.path().join("short.csv");
+    write(&short, &r[..399]);
+    let e = run_err(&sp, &short, dir.path());
+    assert!(e.contains("399 data rows") && e.contains("row for row"), "{e}");
+    // A reference cell that differs names REAL's line and the column.
+    let mut moved = r.clone();
+    moved[10].f_g[1] = Some(0.5);
+    let mp = dir.path().join("moved.csv");
+    write(&mp, &moved);
+    let e = run_err(&sp, &mp, dir.path());
+    assert!(e.contains("moved.csv:") && e.contains("`fy_g`"), "{e}");
+    // Missing reference columns.
+    let bare = dir.path().join("bare.csv");
+    let text: String = std::fs::read_to_string(&sp)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(',').take(5).collect::<Vec<_>>().join(",") + "\n")
+        .collect();
+    std::fs::write(&bare, &text).unwrap();
+    let e = run_err(&bare, &bare, dir.path());
+    assert!(e.contains("no row has a known reference"), "{e}");
+    // A constant (dead) channel.
+    let mut dead = r.clone();
+    for row in &mut dead {
+        row.u_v[2] = 0.25;
+    }
+    let dp = dir.path().join("dead.csv");
+    write(&dp, &dead);
+    let e = run_err(&sp, &dp, dir.path());
+    assert!(e.contains("`uz_V` is constant"), "{e}");
+    // A malformed cell names file, line and column.
+    let bad = dir.path().join("bad.csv");
+    let t = std::fs::read_to_string(&sp).unwrap().replacen("0.0,0.0,1.0", "0.0,zero,1.0", 1);
+    std::fs::write(&bad, t).unwrap();
+    let e = run_err(&sp, &bad, dir.path());
+    assert!(e.contains("bad.csv:") && e.contains("column"), "{e}");
+}
+
+#[test]
+fn a_30000_row_pair_in_under_10_s() {
+    let (s, r) = cases::generate(&case("warmup", 30_000));
+    let t0 = std::time::Instant::now();
+    let d = diagnose(&s, &r, Path::new("sim"), Path::new("real")).unwrap();
+    let secs = t0.elapsed().as_secs_f64();
+    println!("30 000-row pair (warm-up case, 4 θ-mechanisms on 3 axes) diagnosed in {secs:.2} s");
+    assert_eq!(d.report.effects.len(), 1);
+    if !cfg!(debug_assertions) {
+        assert!(secs < 10.0, "{secs} s");
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, failure_persistence: None, ..ProptestConfig::default() })]
+    /// Mutated files (a cell replaced, a line cut, a line dropped) give Ok or a one-line
+    /// error, never a panic.
+    #[test]
+    fn mutated_csv_never_panics(line in 0usize..80, cell in 0usize..16, what in 0u8..4, text in "[-a-z0-9.e,]{0,8}") {
+        let dir = tempfile::tempdir().unwrap();
+        let (sp, rp) = pair(dir.path(), "asymmetry_vs_k2_level", 60);
+        let src = std::fs::read_to_string(&rp).unwrap();
+        let mut lines: Vec<String> = src.lines().map(String::from).collect();
+        let li = line % lines.len();
+        match what {
+            0 => {
+                let mut cells: Vec<String> = lines[li].split(',').map(String::from).collect();
+                let ci = cell % cells.len();
+                cells[ci] = text.clone();
+                lines[li] = cells.join(",");
+            }
+            1 => {
+                let cut = lines[li].len() / 2;
+                lines[li].truncate(cut);
+            }
+            2 => {
+                lines.remove(li);
+            }
+            _ => lines.insert(li, text.clone()),
+        }
+        std::fs::write(&rp, lines.join("\n") + "\n").unwrap();
+        if let Err(e) = diagnose_files(&sp, &rp) {
+            prop_assert!(!e.0.contains('\n'), "{}", e.0);
+            prop_assert!(!e.0.is_empty());
+        }
+    }
+}
