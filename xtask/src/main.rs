@@ -153,6 +153,10 @@ impl Xtask {
         if !probe(&mut cmd("cargo", ["+nightly", "fuzz", "--version"])) {
             self.run(self.host_cargo(["install", "cargo-fuzz", "--locked"]))?;
         }
+        // libFuzzer writes new inputs into the corpus directory (ignored by git) and refuses to
+        // start without it; a fresh clone has only the checked-in seeds.
+        let corpus = self.root.join("fuzz/corpus/blob_parse");
+        std::fs::create_dir_all(&corpus).map_err(|e| format!("{}: {e}", corpus.display()))?;
         let secs = env::var("XTASK_FUZZ_SECONDS").unwrap_or_else(|_| FUZZ_SECONDS.to_string());
         let mut c = self.host_cargo([
             "+nightly",
