@@ -213,7 +213,7 @@ pub fn prepare(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> 
             || vib[i] != vib[i - 1]
             || pos[i] != pos[i - 1]
             || t[i] - t[i - 1] > 3.0 * dt
-            || line[i] != line[i - 1] + 1;
+            || (line[i] > 0 && line[i] != line[i - 1] + 1);
         seg[i] = seg[i - 1] + usize::from(change);
     }
 
