@@ -228,6 +228,44 @@ pub struct Calibration<F> {
     temp_min_c: F,
     temp_max_c: F,
     valid: bool,
+    /// A hash of `params` (0 for [`uncalibrated`](Self::uncalibrated)): what [`TempCache`]
+    /// keys on, so that terms of one calibration are never applied with another.
+    fingerprint: u64,
+}
+
+/// A 64-bit hash of everything that defines a calibration (FNV-1a-style over the bits of
+/// each number). Equal parameters give equal hashes; two different calibrations collide
+/// with probability about 2⁻⁶⁴.
+fn fingerprint(p: &CalibrationParams) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut mix = |w: u64| h = (h ^ w).wrapping_mul(0x0000_0100_0000_01b3);
+    let c = &p.constants;
+    for i in 0..3 {
+        c.k_v_per_g[i].iter().for_each(|x| mix(x.to_bits()));
+        mix(c.u0_v[i].to_bits());
+    }
+    for x in [p.t0_c, p.temp_range_c.0, p.temp_range_c.1] {
+        mix(x.to_bits());
+    }
+    mix(match p.method {
+        Method::Uncorrected => 1,
+        Method::CoefficientCorrection => 2,
+        Method::OutputCorrection(Form::Full) => 3,
+        Method::OutputCorrection(Form::Simplified) => 4,
+        Method::OutputCorrection(Form::Linearized) => 5,
+    });
+    match &p.model {
+        TempModel::Poly { order, coef } => {
+            mix(0x100 + *order as u64);
+            coef.iter().for_each(|d| d.to_array().iter().for_each(|x| mix(x.to_bits())));
+        }
+        TempModel::Pwl { n_knots, knots_c, at_knot } => {
+            mix(0x200 + *n_knots as u64);
+            knots_c.iter().for_each(|x| mix(x.to_bits()));
+            at_knot.iter().for_each(|d| d.to_array().iter().for_each(|x| mix(x.to_bits())));
+        }
+    }
+    h
 }
 
 impl<F: Float> Calibration<F> {
@@ -285,6 +323,7 @@ impl<F: Float> Calibration<F> {
             temp_min_c: F::of(lo),
             temp_max_c: F::of(hi),
             valid: true,
+            fingerprint: fingerprint(p),
         })
     }
 
@@ -313,6 +352,7 @@ impl<F: Float> Calibration<F> {
             temp_min_c: F::of(-1.0e30),
             temp_max_c: F::of(1.0e30),
             valid: false,
+            fingerprint: 0,
         }
     }
 
@@ -441,19 +481,23 @@ impl<F: Float> Calibration<F> {
 
     /// The per-sample step: signals `u_v` [V] and the unit's temperature `temp_c` [°C] to
     /// specific force [g] and status. Allocation-free, panic-free, bounded time; the output is
-    /// always finite (see the module's policies).
+    /// always finite (see the module's policies). Equal, bit for bit, to
+    /// [`apply`](Self::apply) of [`at_temperature`](Self::at_temperature).
     #[inline]
     pub fn compensate(&self, u_v: Vec3<F>, temp_c: F) -> Sample<F> {
+        self.apply(u_v, &self.at_temperature(temp_c))
+    }
+
+    /// The temperature-dependent half of the step: everything [`apply`](Self::apply) needs
+    /// that depends on `temp_c` alone (the clamped temperature's flags; method 1's
+    /// `U0(T)` and correction matrix M; method 2's coefficient changes). A pure function of
+    /// `temp_c`, so a caller may keep it while the temperature reading does not change
+    /// ([`TempCache`]) without changing any result.
+    #[inline]
+    pub fn at_temperature(&self, temp_c: F) -> AtTemperature<F> {
         let mut status = Status::OK;
         if !self.valid {
             status.insert(Status::INVALID_CALIBRATION);
-        }
-        let mut u = u_v;
-        for i in 0..3 {
-            if !u[i].is_finite() {
-                u[i] = self.constants.u0_v[i];
-                status.insert(Status::NONFINITE_INPUT);
-            }
         }
         let t = if !temp_c.is_finite() {
             status.insert(Status::NONFINITE_INPUT | Status::TEMP_CLAMPED);
@@ -467,30 +511,52 @@ impl<F: Float> Calibration<F> {
         } else {
             temp_c
         };
-
-        let mut a = match self.method {
-            Method::Uncorrected => self.apply_n(&u, &self.constants.u0_v),
+        let terms = match self.method {
+            Method::Uncorrected => TempTerms::None,
             Method::CoefficientCorrection => {
                 let d = self.model.delta(t, self.t0_c);
                 let u0 = &self.constants.u0_v;
                 let u0_t = [u0[0] + d.du0_v[0], u0[1] + d.du0_v[1], u0[2] + d.du0_v[2]];
-                let a0 = self.apply_n(&u, &u0_t);
-                match self.method1_matrix(&d) {
+                let m = self.method1_matrix(&d);
+                if m.is_none() {
+                    status.insert(Status::SINGULAR_AT_TEMP);
+                }
+                TempTerms::Method1 { u0_t, m }
+            }
+            Method::OutputCorrection(form) => TempTerms::Method2 { d: self.model.delta(t, self.t0_c), form },
+        };
+        AtTemperature { status, terms }
+    }
+
+    /// The signal-dependent half of the step: signals `u_v` [V] to specific force [g] with
+    /// the temperature terms `at` of [`at_temperature`](Self::at_temperature) (T(1) with
+    /// method 1 or 2 of §5).
+    #[inline]
+    pub fn apply(&self, u_v: Vec3<F>, at: &AtTemperature<F>) -> Sample<F> {
+        let mut status = at.status;
+        let mut u = u_v;
+        for i in 0..3 {
+            if !u[i].is_finite() {
+                u[i] = self.constants.u0_v[i];
+                status.insert(Status::NONFINITE_INPUT);
+            }
+        }
+        let mut a = match &at.terms {
+            TempTerms::None => self.apply_n(&u, &self.constants.u0_v),
+            TempTerms::Method1 { u0_t, m } => {
+                let a0 = self.apply_n(&u, u0_t);
+                match m {
                     Some(m) => {
-                        let c = linalg::mat_vec(&m, &a0);
+                        let c = linalg::mat_vec(m, &a0);
                         [a0[0] + c[0], a0[1] + c[1], a0[2] + c[2]]
                     }
-                    None => {
-                        status.insert(Status::SINGULAR_AT_TEMP);
-                        a0
-                    }
+                    None => a0,
                 }
             }
-            Method::OutputCorrection(form) => {
+            TempTerms::Method2 { d, form } => {
                 let a0 = self.apply_n(&u, &self.constants.u0_v);
                 let v = linalg::vec_sub(&u, &self.constants.u0_v);
-                let d = self.model.delta(t, self.t0_c);
-                let c = self.output_correction(&v, &d, form);
+                let c = self.output_correction(&v, d, *form);
                 [a0[0] + c[0], a0[1] + c[1], a0[2] + c[2]]
             }
         };
@@ -499,5 +565,76 @@ impl<F: Float> Calibration<F> {
             status.insert(Status::NONFINITE_INPUT);
         }
         Sample { accel_g: a, status }
+    }
+}
+
+/// What the step needs at one temperature, by method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum TempTerms<F> {
+    /// No temperature correction.
+    None,
+    /// Method 1: `U0(T)` [V] and M (`None` when K(T) is singular: the T0 inverse is used).
+    Method1 { u0_t: Vec3<F>, m: Option<Mat3<F>> },
+    /// Method 2: the coefficient changes of T(3)/T(4) and the form of the correction.
+    Method2 { d: CoefDelta<F>, form: Form },
+}
+
+/// The temperature-dependent half of the per-sample step
+/// ([`Calibration::at_temperature`]): the temperature's status flags and the method's terms.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AtTemperature<F> {
+    status: Status,
+    terms: TempTerms<F>,
+}
+
+impl<F: Float> AtTemperature<F> {
+    /// The flags the temperature contributes (clamped, non-finite, singular K(T), invalid
+    /// calibration).
+    pub fn status(&self) -> Status {
+        self.status
+    }
+}
+
+/// The temperature terms of the last temperature reading, kept while the reading does not
+/// change. A temperature sensor converts far more slowly than the accelerometers are sampled
+/// (the TMP117's shortest cycle is 15.5 ms, 16 samples at 1 kHz), so most samples reuse the
+/// terms and skip the temperature model and method 1's 3×3 inverse. Results are the same,
+/// bit for bit, as without the cache.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TempCache<F> {
+    /// The calibration's fingerprint and the reading the terms were computed for (`None`:
+    /// nothing cached yet).
+    key: Option<(u64, F)>,
+    at: AtTemperature<F>,
+}
+
+impl<F: Float> Default for TempCache<F> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<F: Float> TempCache<F> {
+    /// Empty: the first lookup computes.
+    pub const fn new() -> Self {
+        TempCache { key: None, at: AtTemperature { status: Status::OK, terms: TempTerms::None } }
+    }
+
+    /// The terms of `cal` at `temp_c`, recomputed only when `temp_c` differs from the last
+    /// reading or `cal` from the last calibration (by fingerprint); a non-finite reading is
+    /// never reused.
+    #[inline]
+    pub fn get(&mut self, cal: &Calibration<F>, temp_c: F) -> &AtTemperature<F> {
+        let key = Some((cal.fingerprint, temp_c));
+        if self.key != key {
+            self.at = cal.at_temperature(temp_c);
+            self.key = key;
+        }
+        &self.at
+    }
+
+    /// Forgets the cached terms.
+    pub fn invalidate(&mut self) {
+        self.key = None;
     }
 }

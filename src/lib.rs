@@ -45,7 +45,9 @@ pub mod temperature;
 pub mod vectors;
 pub mod vibration;
 
-pub use compensate::{Calibration, CalibrationError, CalibrationParams, Form, Method, Sample, Status};
+pub use compensate::{
+    AtTemperature, Calibration, CalibrationError, CalibrationParams, Form, Method, Sample, Status, TempCache,
+};
 pub use float::Float;
 pub use linalg::{Mat3, Vec3};
 pub use model::Constants;

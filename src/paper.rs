@@ -7,7 +7,7 @@ use crate::compensate::{Calibration, CalibrationError, CalibrationParams, Method
 use crate::float::Float;
 use crate::ident;
 use crate::model::Constants;
-use crate::temperature::TempModel;
+use crate::temperature::{CoefDelta, TempModel};
 
 /// T0, the "normal conditions" calibration temperature [°C].
 pub const T0_C: f64 = 20.0;
@@ -89,4 +89,18 @@ pub fn params(model: TempModel<f64>, method: Method) -> CalibrationParams {
 /// A validated calibration of the paper's unit with the given model and method.
 pub fn calibration<F: Float>(model: TempModel<f64>, method: Method) -> Result<Calibration<F>, CalibrationError> {
     Calibration::new(&params(model, method))
+}
+
+/// [`quadratic_truth`] made order 3 by a small cubic term (each cubic coefficient 10⁻³ of
+/// the quadratic one, per °C), so the Horner evaluation of an order-3 model has its full
+/// length: the benchmarks' "order-3 polynomial" case.
+pub fn order3_model() -> Result<TempModel<f64>, ident::FitError> {
+    match quadratic_truth()? {
+        TempModel::Poly { mut coef, .. } => {
+            let c3 = coef[1].to_array().map(|c| c * 1e-3);
+            coef[2] = CoefDelta::from_array(&c3);
+            Ok(TempModel::Poly { order: 3, coef })
+        }
+        other => Ok(other),
+    }
 }

@@ -13,13 +13,16 @@
 //!   over the vibration, `y = a_p + VE(a_p)` per axis; `a_p` is solved for
 //!   ([`solve_static_g`](crate::vibration::solve_static_g), a fixed number of Newton steps)
 //!   and `VE(a_p)` subtracted, so `y − VE = a_p`.
-//! - `Online`: the moments of the last `W` compensated samples ([`MomentWindow`]), for a
-//!   system that samples fast enough to see the vibration, referred back to the acceleration
-//!   by the gain of each conversion function at the window mean
+//! - `Online`: the moments of the last complete block of `W` compensated samples
+//!   ([`MomentWindow`]), for a system that samples fast enough to see the vibration, referred
+//!   back to the acceleration by the gain of each conversion function at the block mean
 //!   ([`output_gains`](VibrationConfig::output_gains); the AL-15 at 6 g magnifies the
 //!   vibration by 2.5 %, which would overstate the VE by 5 %); the exact moment form is used
-//!   and `a_p` is solved from the window mean the same way. The window is fed on every step,
-//!   whatever the source, so it is ready when selected.
+//!   and `a_p` is solved from the block mean the same way. The VE depends on the block alone,
+//!   so it is computed once, on the sample that completes the block, and subtracted from
+//!   every sample until the next block completes. The window is fed only while `Online` is
+//!   selected and emptied by any other source, so after switching to `Online` the first
+//!   estimate comes with the first complete block (flagged not ready until then).
 //!
 //! # Policies
 //!
@@ -31,14 +34,15 @@
 //! - Invalid calibration (output in volts) or a non-finite input: nothing subtracted and the
 //!   sample is kept out of the window.
 //!
-//! Allocation-free, panic-free and bounded time: one compensation, one window update (O(1)),
-//! three VE solutions of five evaluations each (a few dozen operations and, in the exact
-//! variant, one `acos` or `exp`/`erfc` each).
+//! Allocation-free, panic-free and bounded time: one compensation (its temperature terms
+//! reused while the temperature reading does not change, [`TempCache`]), one window update
+//! (O(1)), and per step at most three VE solutions of five evaluations each (a profile; or an
+//! online block that just completed).
 
-use crate::compensate::{Calibration, Sample, Status};
+use crate::compensate::{Calibration, Sample, Status, TempCache};
 use crate::float::Float;
 use crate::linalg::Vec3;
-use crate::vibration::window::MomentWindow;
+use crate::vibration::window::{MomentWindow, Pushed};
 use crate::vibration::{MAX_LEVEL_G, VibrationConfig};
 
 /// What the VE of a sample is computed for.
@@ -59,11 +63,17 @@ pub struct Pipeline<F> {
     vib: VibrationConfig<F>,
 }
 
-/// The running state of the per-sample step: the online moment window over `W` samples.
+/// The running state of the per-sample step: the online moment window over blocks of `W`
+/// samples, the VE of the last block, and the temperature terms of the last reading.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PipelineState<F, const W: usize> {
-    /// Moments of the last `W` compensated samples.
+    /// Moments of the compensated samples, by blocks of `W`.
     pub window: MomentWindow<F, W>,
+    /// The online VE [g] of the last complete block and whether it was clamped (`None`
+    /// before the first block).
+    online_ve: Option<(Vec3<F>, bool)>,
+    /// Temperature terms of the last reading.
+    temps: TempCache<F>,
 }
 
 impl<F: Float, const W: usize> Default for PipelineState<F, W> {
@@ -73,9 +83,9 @@ impl<F: Float, const W: usize> Default for PipelineState<F, W> {
 }
 
 impl<F: Float, const W: usize> PipelineState<F, W> {
-    /// The state at power-on: empty window.
-    pub fn new() -> Self {
-        PipelineState { window: MomentWindow::new() }
+    /// The state at power-on: empty window, nothing cached.
+    pub const fn new() -> Self {
+        PipelineState { window: MomentWindow::new(), online_ve: None, temps: TempCache::new() }
     }
 }
 
@@ -116,10 +126,22 @@ impl<F: Float> Pipeline<F> {
         temp_c: F,
         source: VibrationSource,
     ) -> (Sample<F>, Vec3<F>) {
-        let mut s = self.cal.compensate(u_v, temp_c);
+        let mut s = self.cal.apply(u_v, state.temps.get(&self.cal, temp_c));
         let usable = self.cal.is_valid() && !s.status.contains(Status::NONFINITE_INPUT);
-        if usable {
-            state.window.push(&s.accel_g);
+        if source != VibrationSource::Online {
+            // The window serves the online source only: a block must not span a time when
+            // it was not selected.
+            if !state.window.is_empty() || state.online_ve.is_some() {
+                state.window.reset();
+                state.online_ve = None;
+            }
+        } else if usable && state.window.push(&s.accel_g) == Pushed::BlockDone {
+            state.online_ve = state.window.moments().map(|mut m| {
+                m.unscale(&self.vib.output_gains(&m));
+                let sigma_clamped = m.clamp_sigma(F::of(MAX_LEVEL_G));
+                let (e, clamped) = self.vib.correction_from_moments_g(&m, &m.mean_g);
+                (e, sigma_clamped || clamped)
+            });
         }
         let mut ve = [F::ZERO; 3];
         if usable {
@@ -135,12 +157,9 @@ impl<F: Float> Pipeline<F> {
                     }
                     None => s.status.insert(Status::VIBRATION_ESTIMATE_NOT_READY),
                 },
-                VibrationSource::Online => match state.window.moments() {
-                    Some(mut m) => {
-                        m.unscale(&self.vib.output_gains(&m));
-                        let sigma_clamped = m.clamp_sigma(F::of(MAX_LEVEL_G));
-                        let (e, clamped) = self.vib.correction_from_moments_g(&m, &m.mean_g);
-                        if sigma_clamped || clamped {
+                VibrationSource::Online => match state.online_ve {
+                    Some((e, clamped)) => {
+                        if clamped {
                             s.status.insert(Status::VIBRATION_OUT_OF_RANGE);
                         }
                         ve = e;

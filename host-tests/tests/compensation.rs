@@ -316,3 +316,30 @@ proptest! {
         prop_assert!(err <= 2e-6, "f32 error {} g", err);
     }
 }
+
+proptest! {
+    /// The temperature cache changes no result: with the cache kept across samples, readings
+    /// that repeat, leave the range or are not finite, and calibrations that change under it,
+    /// every output equals `compensate`'s bit for bit.
+    #[test]
+    fn temperature_cache_changes_no_result(
+        steps in proptest::collection::vec((0usize..4, 0usize..6, -0.6f32..0.6, -0.6f32..0.6, -0.6f32..0.6), 1..200)
+    ) {
+        let pwl = paper::two_range_model().unwrap();
+        let cals: [Calibration<f32>; 4] = [
+            paper::calibration(pwl, Method::CoefficientCorrection).unwrap(),
+            paper::calibration(pwl, Method::OutputCorrection(Form::Simplified)).unwrap(),
+            paper::calibration(paper::order3_model().unwrap(), Method::CoefficientCorrection).unwrap(),
+            Calibration::uncalibrated(),
+        ];
+        let temps = [20.0f32, 20.0, -12.5, 45.25, 99.0, f32::NAN];
+        let mut cache = bins_comp::TempCache::new();
+        for (c, t, x, y, z) in steps {
+            let (cal, t) = (&cals[c], temps[t]);
+            let cached = cal.apply([x, y, z], cache.get(cal, t));
+            let direct = cal.compensate([x, y, z], t);
+            prop_assert_eq!(cached.status, direct.status);
+            prop_assert_eq!(cached.accel_g.map(f32::to_bits), direct.accel_g.map(f32::to_bits));
+        }
+    }
+}

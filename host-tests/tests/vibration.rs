@@ -926,7 +926,10 @@ fn online_window_does_not_drift_in_f32_over_millions_of_samples() {
         if hist.len() > W {
             hist.pop_front();
         }
-        if hist.len() == W && (k % 4099 == 0 || k > 1_999_000) {
+        // The window holds the moments of the last complete block: the last W samples when
+        // a block has just completed.
+        let block_done = (k as usize + 1).is_multiple_of(W);
+        if hist.len() == W && block_done && ((k as usize + 1).is_multiple_of(8 * W) || k > 1_990_000) {
             let m = w.moments().unwrap();
             let [mean, v, m3, m4, cov, abs] = two_pass(&hist);
             for i in 0..3 {

@@ -3,21 +3,30 @@
 //!
 //! Run by `cargo xtask bench` under `-icount shift=0` (one instruction per ns). SysTick counts
 //! the 25 MHz core clock, so one count is 40 instructions; each case runs [`N`] steps over
-//! varying inputs read with `read_volatile`, minus the same loop without the step. The stack
-//! is painted below the current stack pointer before the heaviest case and scanned after it.
+//! varying inputs read with `read_volatile`, minus the same loop without the step: the mean
+//! per sample. The temperature reading changes every [`TEMP_EVERY`] samples, as a TMP117 at
+//! its fastest conversion cycle (15.5 ms) does at 1 kHz, or, in the "every sample" cases, on
+//! every sample. The worst single step (a new temperature on the sample that completes an
+//! online block) is timed alone, [`WORST_REPS`] times, and the largest kept. The stack is
+//! painted below the current stack pointer before the heaviest case and scanned after it.
 #![no_std]
 #![no_main]
 
 use bins_comp::pipeline::VibrationSource;
-use bins_comp::replay::{Input, Tick, WINDOW};
-use bins_comp::{Calibration, Form, Method, Pipeline, Status, TempModel, paper};
+use bins_comp::replay::{Input, SOURCE, Tick, WINDOW};
+use bins_comp::{Calibration, Form, Method, Pipeline, Status, TempModel, VibrationConfig, paper};
 use cortex_m::peripheral::SYST;
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m_rt::entry;
 use defmt_semihosting as _;
 
-/// Steps per case.
-const N: u32 = 2000;
+/// Steps per case (a multiple of the online block, so block completions are averaged
+/// exactly).
+const N: u32 = 2048;
+/// Samples per temperature reading in the normal cases.
+const TEMP_EVERY: u32 = 16;
+/// Worst-case steps timed.
+const WORST_REPS: u32 = 16;
 /// Instructions per SysTick count (`-icount shift=0`, 25 MHz SysTick).
 const INSNS_PER_COUNT: u32 = 40;
 /// Bytes painted below the stack pointer.
@@ -37,13 +46,14 @@ static mut INPUTS: [[f32; 4]; 8] = [
     [0.3, -0.3, 0.3, -35.0],
 ];
 
-fn input(i: u32) -> Input<f32> {
+/// Input `i` with a new temperature reading every `temp_every` samples.
+fn input(i: u32, temp_every: u32) -> Input<f32> {
     // SAFETY: `INPUTS` is a valid, aligned static; nothing writes it and there are no
     // interrupts in this program. Volatile so the inputs are not constant-folded.
     let a = unsafe { core::ptr::read_volatile(&raw const INPUTS) };
     let r = a.get((i % 8) as usize).copied().unwrap_or_default();
-    // The temperature moves every sample (as in a ramp), so no case can reuse K(T).
-    let t = r[3] + (i % 97) as f32 * 0.013;
+    let reading = i / temp_every.max(1);
+    let t = 20.0 + (reading % 97) as f32 * 0.37 - 17.0;
     Input { u_v: [r[0], r[1], r[2]], temp_c: t, status: Status::OK }
 }
 
@@ -61,7 +71,7 @@ fn counts(syst: &mut SYST, mut f: impl FnMut(u32) -> f32) -> u32 {
         t0.wrapping_sub(t1) & 0x00FF_FFFF
     };
     let full = run(&mut |i| f(i));
-    let empty = run(&mut |i| core::hint::black_box(input(i)).temp_c);
+    let empty = run(&mut |i| core::hint::black_box(input(i, TEMP_EVERY)).temp_c);
     full.saturating_sub(empty)
 }
 
@@ -74,24 +84,37 @@ fn cal(model: TempModel<f64>, method: Method) -> Calibration<f32> {
     paper::calibration::<f32>(model, method).unwrap_or(Calibration::uncalibrated())
 }
 
-/// The quadratic through Tables T1/T2 made order 3 (a small cubic term), so the Horner
-/// evaluation has its full length.
-fn order3() -> Option<TempModel<f64>> {
-    match paper::quadratic_truth().ok()? {
-        TempModel::Poly { mut coef, .. } => {
-            let c2 = coef.get(1).copied()?.to_array();
-            let c3 = c2.map(|c| c * 1e-3);
-            *coef.get_mut(2)? = bins_comp::CoefDelta::from_array(&c3);
-            Some(TempModel::Poly { order: 3, coef })
-        }
-        other => Some(other),
-    }
+#[inline(never)]
+fn step<const W: usize>(t: &mut Tick<f32, W>, i: u32, temp_every: u32, source: VibrationSource) -> f32 {
+    let inp = input(i, temp_every);
+    let s = t.pipeline.step(&mut t.state, inp.u_v, inp.temp_c, source);
+    s.accel_g[0] + s.accel_g[1] + s.accel_g[2]
 }
 
-#[inline(never)]
-fn step<const W: usize>(t: &mut Tick<f32, W>, i: u32) -> f32 {
-    let s = t.step(&input(i));
-    s.accel_g[0] + s.accel_g[1] + s.accel_g[2]
+/// SysTick counts of the single step `i` (a new temperature, completing an online block),
+/// minus the same measurement around nothing; the largest of [`WORST_REPS`].
+fn worst_counts<const W: usize>(syst: &mut SYST, t: &mut Tick<f32, W>) -> u32 {
+    let mut worst = 0;
+    let mut i = 0u32;
+    for _ in 0..WORST_REPS {
+        // Up to the sample before a block completes, at the previous temperature.
+        while !(i + 1).is_multiple_of(W as u32) {
+            step(t, i, u32::MAX, SOURCE);
+            i += 1;
+        }
+        syst.clear_current();
+        let t0 = SYST::get_current();
+        let acc = step(t, i ^ 0x5A5A, 1, SOURCE);
+        let t1 = SYST::get_current();
+        core::hint::black_box(acc);
+        syst.clear_current();
+        let e0 = SYST::get_current();
+        let e1 = SYST::get_current();
+        let dt = (t0.wrapping_sub(t1) & 0x00FF_FFFF).saturating_sub(e0.wrapping_sub(e1) & 0x00FF_FFFF);
+        worst = worst.max(dt);
+        i += 1;
+    }
+    worst
 }
 
 #[entry]
@@ -103,53 +126,47 @@ fn main() -> ! {
     syst.clear_current();
     syst.enable_counter();
 
-    let poly3 = order3().unwrap_or(TempModel::Poly { order: 1, coef: [bins_comp::CoefDelta::default(); 4] });
+    let poly3 =
+        paper::order3_model().unwrap_or(TempModel::Poly { order: 1, coef: [bins_comp::CoefDelta::default(); 4] });
     let pwl = paper::two_range_model().unwrap_or(poly3);
     let vib = bins_comp::vectors::vibration_config::<f32>(bins_comp::Variant::Exact);
-    let cases: [(&str, Calibration<f32>, bool); 6] = [
-        ("poly3 method 1 + online VE", cal(poly3, Method::CoefficientCorrection), true),
-        ("poly3 method 1", cal(poly3, Method::CoefficientCorrection), false),
-        ("pwl method 1", cal(pwl, Method::CoefficientCorrection), false),
-        ("pwl method 2 simplified", cal(pwl, Method::OutputCorrection(Form::Simplified)), false),
-        ("pwl method 2 simplified + online VE", cal(pwl, Method::OutputCorrection(Form::Simplified)), true),
-        ("pwl uncorrected", cal(pwl, Method::Uncorrected), false),
+    let m1 = Method::CoefficientCorrection;
+    let m2s = Method::OutputCorrection(Form::Simplified);
+    let online = VibrationSource::Online;
+    let none = VibrationSource::None;
+    let cases: [(&str, Calibration<f32>, VibrationSource, u32); 8] = [
+        ("poly3 method 1 + online VE", cal(poly3, m1), online, TEMP_EVERY),
+        ("poly3 method 1", cal(poly3, m1), none, TEMP_EVERY),
+        ("poly3 method 1, new temperature every sample", cal(poly3, m1), none, 1),
+        ("pwl method 1", cal(pwl, m1), none, TEMP_EVERY),
+        ("pwl method 2 simplified", cal(pwl, m2s), none, TEMP_EVERY),
+        ("pwl method 2 simplified, new temperature every sample", cal(pwl, m2s), none, 1),
+        ("pwl method 2 simplified + online VE", cal(pwl, m2s), online, TEMP_EVERY),
+        ("pwl uncorrected", cal(pwl, Method::Uncorrected), none, TEMP_EVERY),
     ];
-    for (i, (name, c, with_ve)) in cases.iter().enumerate() {
+    for (i, (name, c, source, temp_every)) in cases.iter().enumerate() {
         if !c.is_valid() {
             defmt::error!("case {=str}: calibration did not build", name);
         }
-        let p = if *with_ve { Pipeline::new(*c, vib) } else { Pipeline::new(*c, bins_comp::VibrationConfig::none()) };
+        let p = if *source == online { Pipeline::new(*c, vib) } else { Pipeline::new(*c, VibrationConfig::none()) };
         let mut t = Tick::<f32, WINDOW>::new(p);
-        // Fill the window so the VE cases take their full path.
+        // Complete a block so the VE cases take their full path.
         for k in 0..WINDOW as u32 {
-            step(&mut t, k);
+            step(&mut t, k, *temp_every, *source);
         }
-        let src_ok = !*with_ve || bins_comp::replay::SOURCE == VibrationSource::Online;
         if i == 0 {
             paint();
         }
-        let c = counts(syst, |k| if *with_ve { step(&mut t, k) } else { step_nove(&mut t, k) });
+        let c = counts(syst, |k| step(&mut t, k, *temp_every, *source));
         let x = per_sample_x100(c);
-        defmt::info!(
-            "BENCH {=str}: {=u32}.{=u32:02} instructions/sample (source ok: {})",
-            name,
-            x / 100,
-            x % 100,
-            src_ok
-        );
+        defmt::info!("BENCH {=str}: {=u32}.{=u32:02} instructions/sample", name, x / 100, x % 100);
         if i == 0 {
             defmt::info!("STACK step high-water: {=u32} bytes below main's frame", high_water());
+            let w = worst_counts(syst, &mut t) * INSNS_PER_COUNT;
+            defmt::info!("WORST {=str}: {=u32} instructions (one step, ±{=u32})", name, w, INSNS_PER_COUNT);
         }
     }
     semihosting::process::exit(0)
-}
-
-/// Without the VE (source `None`): the temperature step alone.
-#[inline(never)]
-fn step_nove<const W: usize>(t: &mut Tick<f32, W>, i: u32) -> f32 {
-    let inp = input(i);
-    let s = t.pipeline.step(&mut t.state, inp.u_v, inp.temp_c, VibrationSource::None);
-    s.accel_g[0] + s.accel_g[1] + s.accel_g[2]
 }
 
 static mut PAINT_TOP: usize = 0;

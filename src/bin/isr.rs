@@ -27,18 +27,18 @@ pub trait SampleIn {
 }
 
 /// Everything the interrupt owns: the per-tick state, the source and the output queue.
-pub struct Isr<S: 'static> {
+pub struct Isr<S: 'static, const Q: usize> {
     /// Pipeline and its running state.
     pub tick: Tick<f32, WINDOW>,
     /// Where the samples come from.
     pub source: S,
     /// The consumer's queue (drained by `main`).
-    pub output: Producer<'static, Sample<f32>>,
+    pub output: Producer<'static, Sample<f32>, Q>,
 }
 
-impl<S: SampleIn> Isr<S> {
+impl<S: SampleIn, const Q: usize> Isr<S, Q> {
     /// The interrupt's state at boot.
-    pub fn new(pipeline: Pipeline<f32>, source: S, output: Producer<'static, Sample<f32>>) -> Self {
+    pub fn new(pipeline: Pipeline<f32>, source: S, output: Producer<'static, Sample<f32>, Q>) -> Self {
         Isr { tick: Tick::new(pipeline), source, output }
     }
 
@@ -59,5 +59,21 @@ impl<S: SampleIn> Isr<S> {
             }
             Take::End => false,
         }
+    }
+}
+
+/// The flight sample source: the ADC and the temperature sensor through
+/// [`SampleSource`](bins_comp::drivers::SampleSource), whose fault policy never fails a slot
+/// (a driver fault gives held or NaN signals, or a stale temperature, flagged
+/// `SENSOR_FAULT` and counted).
+impl<SPI, DRDY, I2C> SampleIn for bins_comp::drivers::SampleSource<SPI, DRDY, I2C>
+where
+    SPI: embedded_hal::spi::SpiDevice<u8>,
+    DRDY: embedded_hal::digital::InputPin,
+    I2C: embedded_hal::i2c::I2c,
+{
+    fn take(&mut self) -> Take {
+        let r = self.read();
+        Take::Sample(Input { u_v: r.signals_v, temp_c: r.temp_c, status: r.status })
     }
 }

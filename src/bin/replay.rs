@@ -44,9 +44,9 @@ const OUT_PATH: &core::ffi::CStr = c"target/fw-replay/out.bin";
 const CORE_CLOCK_HZ: u32 = 25_000_000;
 /// Sampling rate [Hz]: `REPLAY_TICK_HZ` at build time, else 1000.
 const TICK_HZ: u32 = parse_hz(option_env!("REPLAY_TICK_HZ"), 1000);
-/// Samples the input queue holds (one less than its length).
+/// Length of the input queue (it holds one sample less).
 const IN_QUEUE: usize = 64;
-/// Results the output queue holds (one less than its length).
+/// Length of the output queue (it holds one result less).
 const OUT_QUEUE: usize = 64;
 /// Samples per file read and results per file write.
 const CHUNK: usize = 32;
@@ -65,11 +65,11 @@ static INPUT_DONE: AtomicBool = AtomicBool::new(false);
 /// Set by the interrupt when the input has ended: no more results will come.
 static ENDED: AtomicBool = AtomicBool::new(false);
 /// The interrupt's state, installed by `main` before SysTick starts.
-static ISR: Mutex<RefCell<Option<Isr<Replay>>>> = Mutex::new(RefCell::new(None));
+static ISR: Mutex<RefCell<Option<Isr<Replay, OUT_QUEUE>>>> = Mutex::new(RefCell::new(None));
 
 /// The replay source: the input queue; empty with the file done means the end.
 struct Replay {
-    input: Consumer<'static, Input<f32>>,
+    input: Consumer<'static, Input<f32>, IN_QUEUE>,
 }
 
 impl SampleIn for Replay {
@@ -194,7 +194,7 @@ fn run() -> Result<(), RunError> {
 
 /// Reads up to [`CHUNK`] samples (no more than the queue has room for) into the input queue;
 /// a short read is the end of the file and sets [`INPUT_DONE`].
-fn refill(file: &mut File, q: &mut Producer<'static, Input<f32>>, read: &mut u32) -> Result<(), RunError> {
+fn refill(file: &mut File, q: &mut Producer<'static, Input<f32>, IN_QUEUE>, read: &mut u32) -> Result<(), RunError> {
     let want = CHUNK.min(q.capacity() - q.len());
     let mut buf = [0u8; CHUNK * INPUT_BYTES];
     let Some(buf) = buf.get_mut(..want * INPUT_BYTES) else { return Ok(()) };

@@ -1,18 +1,20 @@
 //! Online estimate of the vibration from the compensated samples, for systems that sample
-//! fast enough to see it: running moments of each axis (mean, second to fourth central
-//! moments, mean absolute value) and the cross covariances over a sliding window of the last
-//! `W` samples, in a fixed ring buffer (no allocation, O(1) per sample).
+//! fast enough to see it: the moments of each axis (mean, second to fourth central moments,
+//! mean absolute value) and the cross covariances over consecutive blocks of `W` samples
+//! (a tumbling window: no ring buffer, one accumulation per sample, no allocation).
+//!
+//! A block's moments are available from the sample that completes it until the next block
+//! completes, so an estimate is at most `2W` samples old (128 ms with the firmware's 64
+//! samples at 1 kHz); flight-phase vibration changes over seconds. A sliding window would
+//! give a new estimate on every sample but costs three accumulations per sample (add the
+//! new sample, remove the oldest, and a drift-free second set) and `W` stored samples.
 //!
 //! # Numerics
 //!
-//! The sums are taken of deviations `d = x − c` from a centre `c` near the window mean, so a
-//! large static acceleration (10 g) does not swamp a small vibration (0.01 g) by cancellation
-//! in `f32`. The running sums are updated by adding the new sample's powers and subtracting
-//! the oldest's; the rounding errors this leaves would grow without bound, so a second set of
-//! sums is accumulated from scratch over each pass of `W` samples and replaces the running set
-//! when the pass completes (it then covers exactly the ring's contents). The error of the
-//! running sums is thus that of at most `2W` additions, whatever the run length, and the
-//! centre is moved to the latest window mean at every replacement.
+//! The sums are taken of deviations `d = x − c` from a centre `c`, the previous block's mean,
+//! so a large static acceleration (10 g) does not swamp a small vibration (0.01 g) by
+//! cancellation in `f32`. Each block's sums start from zero, so rounding errors never
+//! accumulate beyond `W` additions, whatever the run length.
 
 use super::{AccelAxes, Axis, VibMoments};
 use crate::float::Float;
@@ -60,7 +62,7 @@ impl<F: Float> Sums<F> {
     }
 }
 
-/// Moments of the last `W` samples, per unit axis x, y, z.
+/// Moments of one block of `W` samples, per unit axis x, y, z.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct WindowMoments<F> {
     /// Window mean [g]: the static acceleration `a_p`.
@@ -145,26 +147,35 @@ impl<F: Float> WindowMoments<F> {
     }
 }
 
-/// Sliding-window moment estimator over the last `W` samples (configuration-free state; `W`
-/// is the window length in samples). Choose `W` to span many vibration periods: the estimate
-/// of a sine's variance over a window of P periods is within about `1/(2πP)` of `a²/2`.
+/// What [`MomentWindow::push`] did with a sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Pushed {
+    /// Not finite: ignored.
+    Rejected,
+    /// Added to the current block.
+    Accepted,
+    /// Added, and it completed a block: [`MomentWindow::moments`] changed.
+    BlockDone,
+}
+
+/// Block moment estimator over consecutive blocks of `W` samples (configuration-free state;
+/// `W` is the block length in samples). Choose `W` to span many vibration periods: the
+/// estimate of a sine's variance over a block of P periods is within about `1/(2πP)` of
+/// `a²/2`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MomentWindow<F, const W: usize> {
-    ring: [Vec3<F>; W],
-    /// Next slot to overwrite.
-    head: usize,
-    /// Samples held (≤ W).
-    filled: usize,
-    /// Samples added to `fresh` since the last replacement.
+    /// Samples added to `acc` (< W).
     pass: usize,
-    /// Centre of `live`.
-    c_live: Vec3<F>,
-    /// Centre of `fresh`.
-    c_next: Vec3<F>,
-    /// Running sums over the ring's contents.
-    live: Sums<F>,
-    /// Sums over the current pass.
-    fresh: Sums<F>,
+    /// Centre of `acc`.
+    c_acc: Vec3<F>,
+    /// Sums over the current block.
+    acc: Sums<F>,
+    /// Centre of `done`.
+    c_done: Vec3<F>,
+    /// Sums over the last complete block.
+    done: Sums<F>,
+    /// Blocks completed (saturating).
+    blocks: u32,
 }
 
 impl<F: Float, const W: usize> Default for MomentWindow<F, W> {
@@ -175,90 +186,73 @@ impl<F: Float, const W: usize> Default for MomentWindow<F, W> {
 
 impl<F: Float, const W: usize> MomentWindow<F, W> {
     /// An empty window.
-    pub fn new() -> Self {
+    pub const fn new() -> Self {
         MomentWindow {
-            ring: [[F::ZERO; 3]; W],
-            head: 0,
-            filled: 0,
             pass: 0,
-            c_live: [F::ZERO; 3],
-            c_next: [F::ZERO; 3],
-            live: Sums::ZERO,
-            fresh: Sums::ZERO,
+            c_acc: [F::ZERO; 3],
+            acc: Sums::ZERO,
+            c_done: [F::ZERO; 3],
+            done: Sums::ZERO,
+            blocks: 0,
         }
     }
 
     /// Empties the window.
     pub fn reset(&mut self) {
-        self.head = 0;
-        self.filled = 0;
-        self.pass = 0;
-        self.live = Sums::ZERO;
-        self.fresh = Sums::ZERO;
+        *self = Self::new();
     }
 
-    /// Samples currently held (reaches `W` and stays there).
-    pub fn len(&self) -> usize {
-        self.filled
-    }
-
-    /// True before the first sample.
+    /// True before the first accepted sample.
     pub fn is_empty(&self) -> bool {
-        self.filled == 0
+        self.blocks == 0 && self.pass == 0
     }
 
-    /// True once `W` samples have been pushed (and `W > 0`).
+    /// True once a block of `W` samples has completed (and `W > 0`).
     pub fn is_full(&self) -> bool {
-        W > 0 && self.filled == W
+        W > 0 && self.blocks > 0
     }
 
-    /// Adds one sample [g] (x, y, z); the oldest drops out once the window is full. A sample
-    /// with a non-finite element is ignored (returns false). O(1), allocation- and panic-free.
-    pub fn push(&mut self, x: &Vec3<F>) -> bool {
-        if !(x[0].is_finite() && x[1].is_finite() && x[2].is_finite()) {
-            return false;
+    /// Blocks completed since the last reset (saturates at `u32::MAX`).
+    pub fn blocks(&self) -> u32 {
+        self.blocks
+    }
+
+    /// Adds one sample [g] (x, y, z) to the current block. A sample with a non-finite element
+    /// is ignored. O(1), allocation- and panic-free.
+    pub fn push(&mut self, x: &Vec3<F>) -> Pushed {
+        if !(x[0].is_finite() && x[1].is_finite() && x[2].is_finite()) || W == 0 {
+            return Pushed::Rejected;
         }
-        let Some(slot) = self.ring.get_mut(self.head) else { return false };
-        if self.filled == 0 {
-            self.c_live = *x;
-            self.c_next = *x;
+        if self.pass == 0 && self.blocks == 0 {
+            self.c_acc = *x;
         }
-        let old = *slot;
-        *slot = *x;
-        self.live.update(x, &self.c_live, F::ONE);
-        if self.filled == W {
-            self.live.update(&old, &self.c_live, -F::ONE);
-        } else {
-            self.filled += 1;
-        }
-        self.fresh.update(x, &self.c_next, F::ONE);
-        self.head += 1;
-        if self.head >= W {
-            self.head = 0;
-        }
+        self.acc.update(x, &self.c_acc, F::ONE);
         self.pass += 1;
-        if self.pass >= W {
-            // `fresh` now covers exactly the ring: it replaces the drifted running sums, and
-            // the next pass is centred on the current window mean.
-            self.live = self.fresh;
-            self.c_live = self.c_next;
-            let inv_n = F::ONE / F::of(W as f64);
-            for i in 0..3 {
-                self.c_next[i] = self.c_live[i] + self.live.s1[i] * inv_n;
-            }
-            self.fresh = Sums::ZERO;
-            self.pass = 0;
+        if self.pass < W {
+            return Pushed::Accepted;
         }
-        true
+        // The block is complete: it becomes the estimate, and the next block is centred on
+        // its mean.
+        self.done = self.acc;
+        self.c_done = self.c_acc;
+        let inv_n = F::ONE / F::of(W as f64);
+        for i in 0..3 {
+            self.c_acc[i] = self.c_done[i] + self.done.s1[i] * inv_n;
+        }
+        self.acc = Sums::ZERO;
+        self.pass = 0;
+        self.blocks = self.blocks.saturating_add(1);
+        Pushed::BlockDone
     }
 
-    /// The moments of the window, or `None` until it is full.
+    /// The moments of the last complete block, or `None` before the first.
     pub fn moments(&self) -> Option<WindowMoments<F>> {
         if !self.is_full() {
             return None;
         }
         let inv_n = F::ONE / F::of(W as f64);
-        let s = &self.live;
+        let s = &self.done;
+        let c = &self.c_done;
         let mut m = WindowMoments::default();
         let mut mu = [F::ZERO; 3];
         for i in 0..3 {
@@ -269,13 +263,13 @@ impl<F: Float, const W: usize> MomentWindow<F, W> {
             let r4 = s.s4[i] * inv_n;
             let u2 = u * u;
             mu[i] = u;
-            let mean = self.c_live[i] + u;
+            let mean = c[i] + u;
             m.mean_g[i] = mean;
             m.var_g2[i] = (r2 - u2).max(F::ZERO);
             m.m3_g3[i] = r3 - F::of(3.0) * u * r2 + F::of(2.0) * u2 * u;
             m.m4_g4[i] = (r4 - F::of(4.0) * u * r3 + F::of(6.0) * u2 * r2 - F::of(3.0) * u2 * u2).max(F::ZERO);
             // ⟨|x|⟩ − |mean| = Σ(|x| − |c|)/n + |c| − |mean| ≥ 0 (Jensen).
-            m.abs_excess_g[i] = (s.abs[i] * inv_n + (self.c_live[i].abs() - mean.abs())).max(F::ZERO);
+            m.abs_excess_g[i] = (s.abs[i] * inv_n + (c[i].abs() - mean.abs())).max(F::ZERO);
         }
         m.cov_g2[0] = s.cross[0] * inv_n - mu[0] * mu[1];
         m.cov_g2[1] = s.cross[1] * inv_n - mu[1] * mu[2];
