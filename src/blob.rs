@@ -657,7 +657,18 @@ impl core::fmt::Display for BlobError {
                     "vibration.profile at byte 0x{offset:04x}: {count} profiles unsupported (1 to {MAX_PROFILES})"
                 )
             }
-            BlobError::Vibration(e) => write!(f, "vibration configuration rejected: {e}"),
+            // Written out here rather than through the error's own Display, which prints the
+            // level limit as a float: the firmware logs these messages, and float formatting
+            // would add its code to the image.
+            BlobError::Vibration(VibrationConfigError::NonFiniteCoefficients(i)) => {
+                write!(f, "vibration: conversion function of accelerometer {i} has a non-finite coefficient")
+            }
+            BlobError::Vibration(VibrationConfigError::TooManyProfiles) => {
+                write!(f, "vibration.profile: more than {MAX_PROFILES} profiles")
+            }
+            BlobError::Vibration(VibrationConfigError::BadProfile(i)) => {
+                write!(f, "vibration.profile[{i}]: not finite, negative, or above the 10 g level limit")
+            }
             BlobError::BufferTooSmall { needed } => write!(f, "output buffer too small: {needed} bytes needed"),
         }
     }
