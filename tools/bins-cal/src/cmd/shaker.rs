@@ -607,3 +607,52 @@ fn residual_rms(ps: &[ShakePosition<f64>], model: impl Fn(&ShakePosition<f64>) -
     let n = ps.len().max(1) as f64;
     (ps.iter().map(|p| (p.du_v - model(p)).powi(2)).sum::<f64>() / n).sqrt()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_sine_is_removed_from_the_mean_over_any_number_of_periods() {
+        let w = 2.0 * std::f64::consts::PI * 16.0;
+        for n in [137usize, 150, 151] {
+            let t: Vec<f64> = (0..n).map(|k| 3.0 + k as f64 / 100.0).collect();
+            let u: Vec<f64> = t.iter().map(|&x| 0.7 + 6.4 * (w * x + 0.3).sin()).collect();
+            let plain = u.iter().sum::<f64>() / n as f64;
+            let (m, resid) = mean_without_sine(&t, &u, 16.0);
+            assert!((m - 0.7).abs() < 1e-12, "n = {n}: {m}");
+            assert!(resid < 1e-12, "n = {n}: {resid}");
+            if n == 137 {
+                assert!((plain - 0.7).abs() > 1e-3, "the plain mean keeps part of the sine: {plain}");
+            }
+        }
+    }
+
+    #[test]
+    fn frequencies_the_samples_cannot_separate_fall_back_to_the_mean() {
+        let t: Vec<f64> = (0..200).map(|k| k as f64 / 100.0).collect();
+        // At the sample rate the cosine column is constant, at Nyquist the sine column is
+        // zero: the constant is still the mean of what remains.
+        for f in [100.0, 50.0, 0.0] {
+            let u: Vec<f64> = t.iter().enumerate().map(|(k, _)| 0.25 + if k % 2 == 0 { 1e-3 } else { -1e-3 }).collect();
+            let (m, _) = mean_without_sine(&t, &u, f);
+            assert!(m.is_finite() && (m - 0.25).abs() < 1.1e-3, "f = {f}: {m}");
+        }
+    }
+
+    #[test]
+    fn standard_errors_of_a_straight_line() {
+        let x = [-2.0, -1.0, 0.5, 1.0, 3.0];
+        let rows: Vec<[f64; 7]> = x.iter().map(|&x| [1.0, x, 0.0, 0.0, 0.0, 0.0, 0.0]).collect();
+        let mut active = [false; 7];
+        active[0] = true;
+        active[1] = true;
+        let se = standard_errors(&rows, &active, 2.0);
+        let n = x.len() as f64;
+        let mx = x.iter().sum::<f64>() / n;
+        let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
+        assert!((se[1] - 2.0 / sxx.sqrt()).abs() < 1e-12, "{se:?}");
+        assert!((se[0] - 2.0 * (1.0 / n + mx * mx / sxx).sqrt()).abs() < 1e-12, "{se:?}");
+        assert_eq!(&se[2..], &[0.0; 5]);
+    }
+}
