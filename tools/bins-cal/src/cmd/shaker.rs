@@ -64,6 +64,8 @@ pub struct Hold {
     pub temp_c: f64,
     /// Why it is not used.
     pub rejected: Option<String>,
+    /// For a shaking hold paired with its quiet hold: `ΔU` [V].
+    pub du_v: Option<[f64; 3]>,
 }
 
 impl Hold {
@@ -221,6 +223,7 @@ fn hold(path: &Path, run: Run, opt: &super::segments::Options) -> Hold {
         std_u_v: std,
         temp_c: temp,
         rejected,
+        du_v: None,
     }
 }
 
@@ -275,15 +278,19 @@ fn axis_name(i: usize) -> &'static str {
 
 /// Prints the holds of the shake-table recordings.
 fn print_holds(holds: &[Hold]) {
-    println!("\nshake-table holds (ΔU is filled in for the shaking holds, against their quiet hold):");
+    println!("\nshake-table holds (ΔU = shaking hold − quiet hold at the same position; std about the fitted sine):");
     println!(
-        "  {:<24} {:<5} {:<6} {:>7} {:>8} {:>8} {:>5} {:>8} {:>10}  status",
-        "file", "pos", "vib", "level_g", "from_s", "to_s", "rows", "temp_C", "std_mV"
+        "  {:<24} {:<5} {:<6} {:>7} {:>8} {:>8} {:>5} {:>8} {:>10} {:>10} {:>10} {:>10}  status",
+        "file", "pos", "vib", "level_g", "from_s", "to_s", "rows", "temp_C", "std_mV", "dUx_uV", "dUy_uV", "dUz_uV"
     );
     for h in holds {
         let name = h.file.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+        let du = match h.du_v {
+            Some(d) => d.map(|x| format!("{:>10.3}", x * 1e6)).join(" "),
+            None => format!("{:>10} {:>10} {:>10}", "-", "-", "-"),
+        };
         println!(
-            "  {:<24} {:<5} {:<6} {:>7.3} {:>8.1} {:>8.1} {:>5} {:>8.2} {:>10.4}  {}",
+            "  {:<24} {:<5} {:<6} {:>7.3} {:>8.1} {:>8.1} {:>5} {:>8.2} {:>10.4} {}  {}",
             name,
             h.pos,
             kind_of(&h.vib),
@@ -293,6 +300,7 @@ fn print_holds(holds: &[Hold]) {
             h.n,
             h.temp_c,
             h.std_u_v.iter().fold(0.0f64, |a, b| a.max(*b)) * 1e3,
+            du,
             h.rejected.as_deref().unwrap_or("used")
         );
     }
@@ -410,6 +418,10 @@ pub fn calibrate(
         holds.extend(find(p, opt)?);
     }
     let pairs_idx = pair(&mut holds);
+    for &(k, j) in &pairs_idx {
+        let q = holds[j].mean_u_v;
+        holds[k].du_v = Some(std::array::from_fn(|i| holds[k].mean_u_v[i] - q[i]));
+    }
     print_holds(&holds);
     let pairs: Vec<Pair<'_>> = pairs_idx
         .iter()
