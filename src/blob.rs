@@ -6,7 +6,9 @@
 //! The parser is zero-copy over `&[u8]`, allocates nothing and cannot panic; every way a blob
 //! can be wrong is a typed [`BlobError`] naming the field (as the calibration file spells it,
 //! see [`Field`]) and the byte offset where that applies. A blob that parses is a calibration
-//! [`Calibration::new`] accepts: [`parse`] runs its checks too.
+//! [`Calibration::new`] accepts (and, with the optional vibration sections, a configuration
+//! [`VibrationConfig::new`] accepts): [`parse`] runs their checks too. [`load_region`] gives
+//! the firmware both configurations of the per-sample step from the CALIB region.
 //!
 //! # Layout (format version 1, all integers and floats little-endian)
 //!
@@ -30,6 +32,10 @@ use crate::compensate::{Calibration, CalibrationError, CalibrationParams, Form, 
 use crate::float::Float;
 use crate::model::Constants;
 use crate::temperature::{CoefDelta, MAX_KNOTS, MAX_POLY_ORDER, TempModel};
+use crate::vibration::{
+    ConversionFunction, MAX_LEVEL_G, MAX_PROFILES, Variant, Vibration, VibrationConfig, VibrationConfigError,
+    VibrationParams,
+};
 
 /// The first four bytes of every blob.
 pub const MAGIC: [u8; 4] = *b"BCAL";
@@ -65,9 +71,11 @@ pub mod section {
     pub const METHOD: u16 = 0x0003;
     /// The calibrated temperature range (required).
     pub const TEMP_RANGE: u16 = 0x0004;
-    /// Reserved for the vibration-error coefficients (a later version).
+    /// The vibration error: the variant and the conversion-function coefficients of each
+    /// accelerometer (optional; written REQUIRED).
     pub const VIBRATION: u16 = 0x0005;
-    /// Reserved for the flight-phase profiles (a later version).
+    /// The flight-phase vibration profiles (optional, only with [`VIBRATION`]; written
+    /// REQUIRED).
     pub const FLIGHT_PHASES: u16 = 0x0006;
     /// The unit's serial number, printable ASCII (optional).
     pub const SERIAL: u16 = 0x0101;
@@ -76,7 +84,8 @@ pub mod section {
     /// The version of the tool that produced the calibration, printable ASCII (optional).
     pub const TOOL_VERSION: u16 = 0x0103;
     /// Every id this version of the parser understands.
-    pub const KNOWN: [u16; 7] = [CONSTANTS, TEMP_MODEL, METHOD, TEMP_RANGE, SERIAL, CAL_DATE, TOOL_VERSION];
+    pub const KNOWN: [u16; 9] =
+        [CONSTANTS, TEMP_MODEL, METHOD, TEMP_RANGE, VIBRATION, FLIGHT_PHASES, SERIAL, CAL_DATE, TOOL_VERSION];
     /// The ids a version-1 blob must contain.
     pub const MANDATORY: [u16; 4] = [CONSTANTS, TEMP_MODEL, METHOD, TEMP_RANGE];
 }
@@ -94,6 +103,29 @@ pub const MODEL_HEADER_BYTES: usize = 8;
 /// Size of one coefficient set in the model section: ΔU0 (3 × f64), then ΔK/K row-major
 /// (9 × f64), the order of [`CoefDelta::to_array`].
 pub const COEF_SET_BYTES: usize = 12 * 8;
+
+/// Size of the vibration section's own header: variant u8, 7 reserved bytes.
+pub const VIBRATION_HEADER_BYTES: usize = 8;
+/// Size of one accelerometer's conversion function in the vibration section: the 10
+/// coefficients of [`ConversionFunction::to_array`] as f64.
+pub const CONVERSION_FUNCTION_BYTES: usize = 10 * 8;
+/// Size of the vibration section: header and the x, y, z conversion functions.
+pub const VIBRATION_BYTES: usize = VIBRATION_HEADER_BYTES + 3 * CONVERSION_FUNCTION_BYTES;
+/// Size of the flight-phase section's own header: count u8, 7 reserved bytes.
+pub const PROFILES_HEADER_BYTES: usize = 8;
+/// Size of one profile: kind u8, 7 reserved bytes, 5 f64.
+pub const PROFILE_BYTES: usize = 48;
+
+/// Vibration-section code of [`Variant::Paper`].
+pub const VARIANT_PAPER: u8 = 1;
+/// Vibration-section code of [`Variant::Exact`].
+pub const VARIANT_EXACT: u8 = 2;
+/// Profile kind code of [`Vibration::None`].
+pub const PROFILE_NONE: u8 = 0;
+/// Profile kind code of [`Vibration::Harmonic`].
+pub const PROFILE_SINE: u8 = 1;
+/// Profile kind code of [`Vibration::Random`].
+pub const PROFILE_RANDOM: u8 = 2;
 
 /// Model-section kind code of [`TempModel::Poly`].
 pub const KIND_POLY: u8 = 1;
@@ -119,6 +151,17 @@ pub mod limits {
     pub const DU0_MAX_V: f64 = 100.0;
     /// Largest relative change of a scale factor one temperature term may make [1].
     pub const REL_SCALE_MAX: f64 = 1.0;
+    /// Largest |a0| of a conversion function [g].
+    pub const A0_MAX_G: f64 = 1.0;
+    /// Largest |δ_1A| (scale-factor asymmetry) [1].
+    pub const DELTA_1A_MAX: f64 = 0.1;
+    /// Largest |m1|, |m2| (additive cross-sensitivity) [g/g].
+    pub const M_LINEAR_MAX: f64 = 0.5;
+    /// The nonlinear terms k2…k5, m31, m32 may contribute at most this much each [g] at the
+    /// full scale [`crate::vibration::MAX_STATIC_G`] (10 g): |k_n|·10ⁿ ≤ 1 g, |m3j|·10² ≤ 1 g.
+    pub const NONLINEAR_TERM_MAX_G: f64 = 1.0;
+    /// Highest profile frequency or band edge [Hz].
+    pub const FREQ_MAX_HZ: f64 = 1e5;
     /// Earliest calibration year.
     pub const YEAR_MIN: u16 = 1970;
     /// Latest calibration year.
@@ -201,6 +244,103 @@ pub enum Field {
     CalDate,
     /// `tool_version`
     ToolVersion,
+    /// `vibration.variant`
+    VibVariant,
+    /// `vibration.<x|y|z>.<key>`: coefficient `coef` (index in
+    /// [`ConversionFunction::to_array`], key [`CONVERSION_FUNCTION_KEYS`]) of an accelerometer.
+    VibCoef {
+        /// Accelerometer.
+        axis: u8,
+        /// Coefficient index.
+        coef: u8,
+    },
+    /// The number of `vibration.profile` entries.
+    ProfileCount,
+    /// `vibration.profile[profile].kind`
+    ProfileKind {
+        /// Profile index.
+        profile: u8,
+    },
+    /// `vibration.profile[profile].amp_g[axis]` (sine)
+    ProfileAmp {
+        /// Profile index.
+        profile: u8,
+        /// Axis.
+        axis: u8,
+    },
+    /// `vibration.profile[profile].freq_Hz` (sine)
+    ProfileFreq {
+        /// Profile index.
+        profile: u8,
+    },
+    /// `vibration.profile[profile].sigma_g[axis]` (random)
+    ProfileSigma {
+        /// Profile index.
+        profile: u8,
+        /// Axis.
+        axis: u8,
+    },
+    /// `vibration.profile[profile].band_Hz[end]` (random; 0 = low, 1 = high)
+    ProfileBand {
+        /// Profile index.
+        profile: u8,
+        /// 0 = low edge, 1 = high edge.
+        end: u8,
+    },
+}
+
+/// The calibration file's keys of the ten conversion-function coefficients, in the order of
+/// [`ConversionFunction::to_array`] (the order of the vibration section).
+pub const CONVERSION_FUNCTION_KEYS: [&str; 10] = [
+    "a0_g",
+    "delta_1a",
+    "k2_g_per_g2",
+    "k3_g_per_g3",
+    "k4_g_per_g4",
+    "k5_g_per_g5",
+    "m1_g_per_g",
+    "m2_g_per_g",
+    "m31_g_per_g2",
+    "m32_g_per_g2",
+];
+
+/// Largest magnitude of conversion-function coefficient `coef` ([`limits`]): the nonlinear
+/// ones so that their term stays within [`limits::NONLINEAR_TERM_MAX_G`] at 10 g.
+pub const fn coefficient_limit(coef: u8) -> f64 {
+    let t = limits::NONLINEAR_TERM_MAX_G;
+    match coef {
+        0 => limits::A0_MAX_G,
+        1 => limits::DELTA_1A_MAX,
+        2 => t * 1e-2,
+        3 => t * 1e-3,
+        4 => t * 1e-4,
+        5 => t * 1e-5,
+        6 | 7 => limits::M_LINEAR_MAX,
+        _ => t * 1e-2,
+    }
+}
+
+const fn coef_key(coef: u8) -> &'static str {
+    match coef {
+        0 => "a0_g",
+        1 => "delta_1a",
+        2 => "k2_g_per_g2",
+        3 => "k3_g_per_g3",
+        4 => "k4_g_per_g4",
+        5 => "k5_g_per_g5",
+        6 => "m1_g_per_g",
+        7 => "m2_g_per_g",
+        8 => "m31_g_per_g2",
+        _ => "m32_g_per_g2",
+    }
+}
+
+const fn axis_name(axis: u8) -> &'static str {
+    match axis {
+        0 => "x",
+        1 => "y",
+        _ => "z",
+    }
 }
 
 impl Field {
@@ -224,6 +364,14 @@ impl Field {
             Field::Serial => "serial",
             Field::CalDate => "calibration_date",
             Field::ToolVersion => "tool_version",
+            Field::VibVariant => "vibration.variant",
+            Field::VibCoef { coef, .. } => coef_key(*coef),
+            Field::ProfileCount => "vibration.profile",
+            Field::ProfileKind { .. } => "vibration.profile.kind",
+            Field::ProfileAmp { .. } => "vibration.profile.amp_g",
+            Field::ProfileFreq { .. } => "vibration.profile.freq_Hz",
+            Field::ProfileSigma { .. } => "vibration.profile.sigma_g",
+            Field::ProfileBand { .. } => "vibration.profile.band_Hz",
         }
     }
 
@@ -247,6 +395,18 @@ impl Field {
             Field::Form => "full, simplified or linearized for output-correction; none otherwise",
             Field::Serial | Field::ToolVersion => "1 to 32 printable ASCII characters",
             Field::CalDate => "a calendar date, year 1970 to 9999",
+            Field::VibVariant => "paper or exact",
+            Field::VibCoef { coef: 0, .. } => "finite, |a0| <= 1 g",
+            Field::VibCoef { coef: 1, .. } => "finite, |δ_1A| <= 0.1",
+            Field::VibCoef { coef: 2..=5, .. } => "finite, |k_n|·10^n <= 1 g (each term within 1 g at 10 g)",
+            Field::VibCoef { coef: 6 | 7, .. } => "finite, |m1|, |m2| <= 0.5 g/g",
+            Field::VibCoef { .. } => "finite, |m31|, |m32|·10² <= 1 g (within 1 g at 10 g)",
+            Field::ProfileCount => "1 to 8 profiles",
+            Field::ProfileKind { .. } => "none, sine or random",
+            Field::ProfileAmp { .. } => "finite, |amplitude| <= 10 g",
+            Field::ProfileFreq { .. } => "finite, within [0, 1e5] Hz",
+            Field::ProfileSigma { .. } => "finite, σ within [0, 10] g",
+            Field::ProfileBand { .. } => "finite, 0 <= low < high <= 1e5 Hz",
         }
     }
 }
@@ -264,6 +424,12 @@ impl core::fmt::Display for Field {
             Field::TermRelK { term, row, col } => {
                 write!(f, "temperature_model.term[{term}].rel_k_per_Cn[{row}][{col}]")
             }
+            Field::VibCoef { axis, coef } => write!(f, "vibration.{}.{}", axis_name(axis), coef_key(coef)),
+            Field::ProfileKind { profile } => write!(f, "vibration.profile[{profile}].kind"),
+            Field::ProfileAmp { profile, axis } => write!(f, "vibration.profile[{profile}].amp_g[{axis}]"),
+            Field::ProfileFreq { profile } => write!(f, "vibration.profile[{profile}].freq_Hz"),
+            Field::ProfileSigma { profile, axis } => write!(f, "vibration.profile[{profile}].sigma_g[{axis}]"),
+            Field::ProfileBand { profile, end } => write!(f, "vibration.profile[{profile}].band_Hz[{end}]"),
             other => f.write_str(other.name()),
         }
     }
@@ -396,6 +562,16 @@ pub enum BlobError {
     SingularInRange,
     /// Any other rejection by [`Calibration::new`].
     Calibration(CalibrationError),
+    /// Flight-phase profile count outside 1..=[`MAX_PROFILES`].
+    ProfileCount {
+        /// The count.
+        count: u8,
+        /// Offset of the count byte.
+        offset: usize,
+    },
+    /// A rejection by [`VibrationConfig::new`] (not reached for a blob whose values passed
+    /// the checks above; kept so that nothing unchecked is ever used).
+    Vibration(VibrationConfigError),
     /// The encoder's output buffer is too small.
     BufferTooSmall {
         /// Bytes needed.
@@ -475,6 +651,24 @@ impl core::fmt::Display for BlobError {
                 "temperature_model: K(T) becomes singular, or a scale factor leaves [1/2, 2]x its T0 value, inside temp_range_C"
             ),
             BlobError::Calibration(e) => write!(f, "calibration rejected: {e}"),
+            BlobError::ProfileCount { count, offset } => {
+                write!(
+                    f,
+                    "vibration.profile at byte 0x{offset:04x}: {count} profiles unsupported (1 to {MAX_PROFILES})"
+                )
+            }
+            // Written out here rather than through the error's own Display, which prints the
+            // level limit as a float: the firmware logs these messages, and float formatting
+            // would add its code to the image.
+            BlobError::Vibration(VibrationConfigError::NonFiniteCoefficients(i)) => {
+                write!(f, "vibration: conversion function of accelerometer {i} has a non-finite coefficient")
+            }
+            BlobError::Vibration(VibrationConfigError::TooManyProfiles) => {
+                write!(f, "vibration.profile: more than {MAX_PROFILES} profiles")
+            }
+            BlobError::Vibration(VibrationConfigError::BadProfile(i)) => {
+                write!(f, "vibration.profile[{i}]: not finite, negative, or above the 10 g level limit")
+            }
             BlobError::BufferTooSmall { needed } => write!(f, "output buffer too small: {needed} bytes needed"),
         }
     }
@@ -700,12 +894,16 @@ pub struct Meta<'a> {
     pub tool_version: &'a str,
 }
 
-/// A fully checked blob: the calibration parameters, the traceability data and the container
-/// (for sections added by later versions, e.g. [`section::VIBRATION`]).
+/// A fully checked blob: the calibration parameters, the vibration-error configuration, the
+/// traceability data and the container (for sections added by later versions).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParsedCalibration<'a> {
     /// What [`Calibration::new`] needs; it has accepted these.
     pub params: CalibrationParams,
+    /// The vibration-error coefficients and flight-phase profiles (sections
+    /// [`section::VIBRATION`] and [`section::FLIGHT_PHASES`]); `None` when the blob has no
+    /// vibration section. [`VibrationConfig::new`] has accepted these.
+    pub vibration: Option<VibrationParams>,
     /// Serial, date, tool version.
     pub meta: Meta<'a>,
     /// The container.
@@ -718,6 +916,31 @@ impl ParsedCalibration<'_> {
     pub fn calibration<F: Float>(&self) -> Result<Calibration<F>, BlobError> {
         Calibration::new(&self.params).map_err(BlobError::from)
     }
+
+    /// The vibration-error configuration in the working precision:
+    /// [`VibrationConfig::none`] (no VE model, nothing subtracted) for a blob without a
+    /// vibration section. [`parse`] has already run the same checks, so this does not fail for
+    /// a parsed blob.
+    pub fn vibration_config<F: Float>(&self) -> Result<VibrationConfig<F>, BlobError> {
+        match &self.vibration {
+            None => Ok(VibrationConfig::none()),
+            Some(p) => VibrationConfig::new(p).map_err(BlobError::Vibration),
+        }
+    }
+
+    /// Both configurations of the per-sample step ([`crate::Pipeline::new`]): the calibration
+    /// and the vibration-error configuration, in the working precision.
+    pub fn configs<F: Float>(&self) -> Result<(Calibration<F>, VibrationConfig<F>), BlobError> {
+        Ok((self.calibration()?, self.vibration_config()?))
+    }
+}
+
+/// Parses the blob at the start of a flash region ([`parse_region`]) and returns the
+/// calibration and vibration-error configuration the per-sample step needs (`Pipeline::new(cal,
+/// vib)`): what the firmware calls once at boot. A blob without a vibration section gives
+/// [`VibrationConfig::none`].
+pub fn load_region<F: Float>(region: &[u8]) -> Result<(Calibration<F>, VibrationConfig<F>), BlobError> {
+    parse_region(region)?.configs()
 }
 
 /// A section's payload and where it starts in the blob.
@@ -959,10 +1182,96 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
         meta.date = Some(date);
     }
 
+    let vibration = parse_vibration(&blob)?;
+
     let params =
         CalibrationParams { constants: Constants { k_v_per_g: k, u0_v }, t0_c, model, method, temp_range_c: (lo, hi) };
     Calibration::<f64>::new(&params)?;
-    Ok(ParsedCalibration { params, meta, blob })
+    if let Some(v) = &vibration {
+        VibrationConfig::<f64>::new(v).map_err(BlobError::Vibration)?;
+    }
+    Ok(ParsedCalibration { params, vibration, meta, blob })
+}
+
+/// The vibration section and the flight-phase profiles, if present (see
+/// `docs/calibration-blob.md`). Profiles without a vibration section are refused: they mean
+/// nothing without the coefficients.
+fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError> {
+    let Some(p) = Payload::get(blob, section::VIBRATION) else {
+        return match Payload::get(blob, section::FLIGHT_PHASES) {
+            Some(_) => Err(BlobError::MissingSection(section::VIBRATION)),
+            None => Ok(None),
+        };
+    };
+    p.expect_len(VIBRATION_BYTES)?;
+    let variant = match p.byte(0) {
+        VARIANT_PAPER => Variant::Paper,
+        VARIANT_EXACT => Variant::Exact,
+        code => return Err(BlobError::BadCode { field: Field::VibVariant, offset: p.base, code }),
+    };
+    p.reserved_zero(1..VIBRATION_HEADER_BYTES)?;
+    let mut cf = [ConversionFunction::<f64>::default(); 3];
+    for (axis, c) in cf.iter_mut().enumerate() {
+        let mut a = [0.0; 10];
+        for (n, x) in a.iter_mut().enumerate() {
+            let lim = coefficient_limit(n as u8);
+            let at = VIBRATION_HEADER_BYTES + CONVERSION_FUNCTION_BYTES * axis + 8 * n;
+            *x = p.value(at, Field::VibCoef { axis: axis as u8, coef: n as u8 }, |v| v.abs() <= lim)?;
+        }
+        *c = ConversionFunction::from_array(&a);
+    }
+    let mut out = VibrationParams::new(cf, variant);
+    let Some(p) = Payload::get(blob, section::FLIGHT_PHASES) else { return Ok(Some(out)) };
+    if p.bytes.len() < PROFILES_HEADER_BYTES {
+        return Err(p.length_error());
+    }
+    let count = p.byte(0);
+    let n = count as usize;
+    if !(1..=MAX_PROFILES).contains(&n) {
+        return Err(BlobError::ProfileCount { count, offset: p.base });
+    }
+    p.reserved_zero(1..PROFILES_HEADER_BYTES)?;
+    p.expect_len(PROFILES_HEADER_BYTES + PROFILE_BYTES * n)?;
+    for (i, slot) in out.profiles.iter_mut().enumerate().take(n) {
+        let at = PROFILES_HEADER_BYTES + PROFILE_BYTES * i;
+        let profile = i as u8;
+        let v = at + 8;
+        let level = |axis: usize, field: Field, ok: &dyn Fn(f64) -> bool| p.value(v + 8 * axis, field, ok);
+        let freq_ok = |x: f64| (0.0..=limits::FREQ_MAX_HZ).contains(&x);
+        let kind = p.byte(at);
+        p.reserved_zero(at + 1..at + 8)?;
+        *slot = match kind {
+            PROFILE_NONE => {
+                p.reserved_zero(v..v + 40)?;
+                Vibration::None
+            }
+            PROFILE_SINE => {
+                let mut amp_g = [0.0; 3];
+                for (j, a) in amp_g.iter_mut().enumerate() {
+                    *a = level(j, Field::ProfileAmp { profile, axis: j as u8 }, &|x| x.abs() <= MAX_LEVEL_G)?;
+                }
+                let freq_hz = p.value(v + 24, Field::ProfileFreq { profile }, freq_ok)?;
+                p.reserved_zero(v + 32..v + 40)?;
+                Vibration::Harmonic { amp_g, freq_hz }
+            }
+            PROFILE_RANDOM => {
+                let mut sigma_g = [0.0; 3];
+                for (j, s) in sigma_g.iter_mut().enumerate() {
+                    *s = level(j, Field::ProfileSigma { profile, axis: j as u8 }, &|x| {
+                        (0.0..=MAX_LEVEL_G).contains(&x)
+                    })?;
+                }
+                let lo = p.value(v + 24, Field::ProfileBand { profile, end: 0 }, freq_ok)?;
+                let hi = p.value(v + 32, Field::ProfileBand { profile, end: 1 }, |x| freq_ok(x) && x > lo)?;
+                Vibration::Random { sigma_g, band_hz: (lo, hi) }
+            }
+            code => {
+                return Err(BlobError::BadCode { field: Field::ProfileKind { profile }, offset: p.base + at, code });
+            }
+        };
+    }
+    out.n_profiles = count;
+    Ok(Some(out))
 }
 
 /// Parses the blob at the start of a flash region (e.g. the whole CALIB region): the blob's
@@ -979,16 +1288,23 @@ pub fn parse_region(region: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
 
 /// The ids, flags and payload lengths the encoder writes for `params` and `meta`, in id
 /// order; unused slots have id 0.
-fn layout(params: &CalibrationParams, meta: &Meta<'_>) -> ([SectionEntry; MAX_SECTIONS], usize) {
+fn layout(
+    params: &CalibrationParams,
+    vib: Option<&VibrationParams>,
+    meta: &Meta<'_>,
+) -> ([SectionEntry; MAX_SECTIONS], usize) {
     let model_len = match params.model {
         TempModel::Poly { order, .. } => MODEL_HEADER_BYTES + COEF_SET_BYTES * order as usize,
         TempModel::Pwl { n_knots, .. } => MODEL_HEADER_BYTES + (8 + COEF_SET_BYTES) * n_knots as usize,
     };
+    let n_profiles = vib.map_or(0, |v| v.n_profiles as usize);
     let all = [
         (section::CONSTANTS, FLAG_REQUIRED, CONSTANTS_BYTES, true),
         (section::TEMP_MODEL, FLAG_REQUIRED, model_len, true),
         (section::METHOD, FLAG_REQUIRED, METHOD_BYTES, true),
         (section::TEMP_RANGE, FLAG_REQUIRED, TEMP_RANGE_BYTES, true),
+        (section::VIBRATION, FLAG_REQUIRED, VIBRATION_BYTES, vib.is_some()),
+        (section::FLIGHT_PHASES, FLAG_REQUIRED, PROFILES_HEADER_BYTES + PROFILE_BYTES * n_profiles, n_profiles > 0),
         (section::SERIAL, 0, meta.serial.len(), !meta.serial.is_empty()),
         (section::CAL_DATE, 0, CAL_DATE_BYTES, meta.date.is_some()),
         (section::TOOL_VERSION, 0, meta.tool_version.len(), !meta.tool_version.is_empty()),
@@ -1041,6 +1357,24 @@ impl Writer<'_> {
 /// coefficients above the order and knots beyond the count are not stored (they are zero
 /// after parsing).
 pub fn encode(params: &CalibrationParams, meta: &Meta<'_>, out: &mut [u8]) -> Result<usize, BlobError> {
+    encode_with_vibration(params, None, meta, out)
+}
+
+/// [`encode`] with the vibration-error configuration: with `vib`, the vibration section
+/// ([`section::VIBRATION`]) and, when it has profiles, the flight-phase section
+/// ([`section::FLIGHT_PHASES`]) are written too, both [`FLAG_REQUIRED`]. Profiles beyond
+/// `n_profiles` are not stored.
+pub fn encode_with_vibration(
+    params: &CalibrationParams,
+    vib: Option<&VibrationParams>,
+    meta: &Meta<'_>,
+    out: &mut [u8],
+) -> Result<usize, BlobError> {
+    if let Some(v) = vib
+        && v.n_profiles as usize > MAX_PROFILES
+    {
+        return Err(BlobError::ProfileCount { count: v.n_profiles, offset: 0 });
+    }
     match params.model {
         TempModel::Poly { order, .. } if !(1..=MAX_POLY_ORDER).contains(&(order as usize)) => {
             return Err(BlobError::UnsupportedOrder { order, offset: 0 });
@@ -1050,7 +1384,7 @@ pub fn encode(params: &CalibrationParams, meta: &Meta<'_>, out: &mut [u8]) -> Re
         }
         _ => {}
     }
-    let (mut entries, n) = layout(params, meta);
+    let (mut entries, n) = layout(params, vib, meta);
     let mut at = align8(HEADER_BYTES + ENTRY_BYTES * n);
     for e in entries.iter_mut().take(n) {
         e.offset = at as u32;
@@ -1122,6 +1456,39 @@ pub fn encode(params: &CalibrationParams, meta: &Meta<'_>, out: &mut [u8]) -> Re
                 w.put(at, &code)?;
             }
             section::TEMP_RANGE => w.f64s(at, &[params.temp_range_c.0, params.temp_range_c.1])?,
+            section::VIBRATION => {
+                if let Some(v) = vib {
+                    let code = match v.variant {
+                        Variant::Paper => VARIANT_PAPER,
+                        Variant::Exact => VARIANT_EXACT,
+                    };
+                    w.put(at, &[code])?;
+                    for (axis, cf) in v.cf.iter().enumerate() {
+                        w.f64s(at + VIBRATION_HEADER_BYTES + CONVERSION_FUNCTION_BYTES * axis, &cf.to_array())?;
+                    }
+                }
+            }
+            section::FLIGHT_PHASES => {
+                if let Some(v) = vib {
+                    w.put(at, &[v.n_profiles])?;
+                    for (i, prof) in v.profiles.iter().take(v.n_profiles as usize).enumerate() {
+                        let p = at + PROFILES_HEADER_BYTES + PROFILE_BYTES * i;
+                        match prof {
+                            Vibration::None => w.put(p, &[PROFILE_NONE])?,
+                            Vibration::Harmonic { amp_g, freq_hz } => {
+                                w.put(p, &[PROFILE_SINE])?;
+                                w.f64s(p + 8, amp_g)?;
+                                w.f64s(p + 32, &[*freq_hz])?;
+                            }
+                            Vibration::Random { sigma_g, band_hz } => {
+                                w.put(p, &[PROFILE_RANDOM])?;
+                                w.f64s(p + 8, sigma_g)?;
+                                w.f64s(p + 32, &[band_hz.0, band_hz.1])?;
+                            }
+                        }
+                    }
+                }
+            }
             section::SERIAL => w.put(at, meta.serial.as_bytes())?,
             section::TOOL_VERSION => w.put(at, meta.tool_version.as_bytes())?,
             section::CAL_DATE => {

@@ -2,7 +2,8 @@
 //! no out-of-bounds access" (the sanitizer's job) it checks two properties on every input
 //! the parser accepts:
 //!
-//! - the parsed calibration builds in `f32` (parse ran the same checks), and
+//! - the parsed calibration and vibration configuration build in `f32` (parse ran the same
+//!   checks), and
 //! - encoding the parsed contents and parsing that again gives the same contents.
 //!
 //! Inputs whose declared length is honoured and whose CRC matches are rare for random bytes,
@@ -16,11 +17,13 @@ use libfuzzer_sys::fuzz_target;
 fn check(bytes: &[u8]) {
     let _ = blob::parse_region(bytes);
     if let Ok(parsed) = blob::parse(bytes) {
-        assert!(parsed.calibration::<f32>().is_ok(), "parsed but does not build");
+        assert!(parsed.configs::<f32>().is_ok(), "parsed but does not build");
         let mut buf = [0u8; blob::MAX_BLOB_BYTES];
-        let n = blob::encode(&parsed.params, &parsed.meta, &mut buf).expect("parsed contents re-encode");
+        let n = blob::encode_with_vibration(&parsed.params, parsed.vibration.as_ref(), &parsed.meta, &mut buf)
+            .expect("parsed contents re-encode");
         let again = blob::parse(&buf[..n]).expect("re-encoded blob parses");
         assert_eq!(again.params, parsed.params);
+        assert_eq!(again.vibration, parsed.vibration);
         assert_eq!(again.meta, parsed.meta);
     }
 }

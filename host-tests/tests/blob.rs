@@ -2,11 +2,17 @@
 //! here byte by byte from the spec equals the encoder's, round trips are lossless, every
 //! single-bit flip and every truncation of a typical blob is rejected with the error its
 //! position implies, and physically impossible values under a valid CRC are rejected naming
-//! the field and its byte offset.
+//! the field and its byte offset. The same holds for blobs with the optional vibration
+//! sections (0x0005 coefficients, 0x0006 flight-phase profiles); a blob without them gives
+//! no vibration-error model.
 
 use bins_comp::blob::{self, BlobError, CalDate, Field, Meta, section};
 use bins_comp::temperature::{MAX_KNOTS, MAX_POLY_ORDER};
-use bins_comp::{Calibration, CalibrationParams, CoefDelta, Constants, Form, Method, TempModel, paper};
+use bins_comp::vibration::{MAX_PROFILES, tables};
+use bins_comp::{
+    Calibration, CalibrationParams, CoefDelta, Constants, ConversionFunction, Form, Method, TempModel, Variant,
+    Vibration, VibrationConfig, VibrationParams, paper,
+};
 use proptest::prelude::*;
 
 // ---- independent references -------------------------------------------------------------
@@ -81,6 +87,55 @@ fn coef_values(c: &CoefDelta<f64>) -> Vec<f64> {
 
 /// The payloads of the spec's sections for `p` and `meta`, in id order.
 fn spec_sections(p: &CalibrationParams, serial: &str, date: Option<(u16, u8, u8)>, tool: &str) -> Vec<Sec> {
+    spec_sections_vib(p, None, serial, date, tool)
+}
+
+/// The vibration sections as the spec lays them out: 0x0005 = variant (1 paper, 2 exact), 7
+/// zero bytes, then per accelerometer a0, δ_1A, k2…k5, m1, m2, m31, m32; 0x0006 = count, 7
+/// zero bytes, then per profile kind (0 none, 1 sine, 2 random), 7 zero bytes and five f64
+/// (sine: amplitudes x, y, z, frequency, 0; random: σ x, y, z, band low, band high).
+fn spec_vibration(v: &VibrationParams) -> Vec<Sec> {
+    let mut vib = vec![if v.variant == Variant::Paper { 1u8 } else { 2 }, 0, 0, 0, 0, 0, 0, 0];
+    for cf in &v.cf {
+        vib.extend(f64s(&[
+            cf.a0_g,
+            cf.delta_1a,
+            cf.k2_g_per_g2,
+            cf.k3_g_per_g3,
+            cf.k4_g_per_g4,
+            cf.k5_g_per_g5,
+            cf.m1_g_per_g,
+            cf.m2_g_per_g,
+            cf.m31_g_per_g2,
+            cf.m32_g_per_g2,
+        ]));
+    }
+    let mut out = vec![(0x0005, 1, vib)];
+    let n = v.n_profiles as usize;
+    if n > 0 {
+        let mut prof = vec![n as u8, 0, 0, 0, 0, 0, 0, 0];
+        for p in &v.profiles[..n] {
+            let (kind, vals) = match *p {
+                Vibration::None => (0u8, [0.0; 5]),
+                Vibration::Harmonic { amp_g: a, freq_hz } => (1, [a[0], a[1], a[2], freq_hz, 0.0]),
+                Vibration::Random { sigma_g: s, band_hz } => (2, [s[0], s[1], s[2], band_hz.0, band_hz.1]),
+            };
+            prof.extend([kind, 0, 0, 0, 0, 0, 0, 0]);
+            prof.extend(f64s(&vals));
+        }
+        out.push((0x0006, 1, prof));
+    }
+    out
+}
+
+/// [`spec_sections`] with the vibration sections.
+fn spec_sections_vib(
+    p: &CalibrationParams,
+    vib: Option<&VibrationParams>,
+    serial: &str,
+    date: Option<(u16, u8, u8)>,
+    tool: &str,
+) -> Vec<Sec> {
     let mut constants = vec![p.t0_c];
     for row in &p.constants.k_v_per_g {
         constants.extend_from_slice(row);
@@ -117,6 +172,9 @@ fn spec_sections(p: &CalibrationParams, serial: &str, date: Option<(u16, u8, u8)
         (0x0003, 1, [method[0], method[1], 0, 0, 0, 0, 0, 0].to_vec()),
         (0x0004, 1, f64s(&[p.temp_range_c.0, p.temp_range_c.1])),
     ];
+    if let Some(v) = vib {
+        out.extend(spec_vibration(v));
+    }
     if !serial.is_empty() {
         out.push((0x0101, 0, serial.as_bytes().to_vec()));
     }
@@ -149,6 +207,25 @@ fn meta() -> Meta<'static> {
 fn typical() -> Vec<u8> {
     let mut buf = [0u8; blob::MAX_BLOB_BYTES];
     let n = blob::encode(&paper_params(), &meta(), &mut buf).expect("encode");
+    buf[..n].to_vec()
+}
+
+/// The AL-15 on every axis (exact variant) with the seven flight profiles of Tables V2/V3
+/// and a quiet phase: every profile kind.
+fn vib_params() -> VibrationParams {
+    let mut v = VibrationParams::new([tables::AL15; 3], Variant::Exact);
+    let (profiles, n) = tables::flight_profiles();
+    for p in &profiles[..n as usize] {
+        v.push_profile(*p).unwrap();
+    }
+    v.push_profile(Vibration::None).unwrap();
+    v
+}
+
+/// The typical blob with the vibration sections.
+fn typical_vib() -> Vec<u8> {
+    let mut buf = [0u8; blob::MAX_BLOB_BYTES];
+    let n = blob::encode_with_vibration(&paper_params(), Some(&vib_params()), &meta(), &mut buf).expect("encode");
     buf[..n].to_vec()
 }
 
@@ -188,6 +265,14 @@ fn get_f64(b: &[u8], off: usize) -> f64 {
 /// Applies `edit` to a copy of the typical blob, re-seals it and parses it.
 fn parse_edited(edit: impl FnOnce(&mut Vec<u8>)) -> Result<(), BlobError> {
     let mut b = typical();
+    edit(&mut b);
+    seal(&mut b);
+    blob::parse(&b).map(|_| ())
+}
+
+/// [`parse_edited`] on the typical blob with the vibration sections.
+fn parse_edited_vib(edit: impl FnOnce(&mut Vec<u8>)) -> Result<(), BlobError> {
+    let mut b = typical_vib();
     edit(&mut b);
     seal(&mut b);
     blob::parse(&b).map(|_| ())
@@ -287,13 +372,17 @@ fn parse_region_ignores_erased_flash_after_the_blob() {
 
 #[test]
 fn every_single_bit_flip_is_rejected_with_the_error_of_its_region() {
-    let b = typical();
+    assert_every_bit_flip_rejected(&typical());
+    assert_every_bit_flip_rejected(&typical_vib());
+}
+
+fn assert_every_bit_flip_rejected(b: &[u8]) {
     let len = b.len();
     let stored = u32::from_le_bytes(b[len - 4..].try_into().unwrap());
     let mut checked = 0;
     for byte in 0..len {
         for bit in 0..8 {
-            let mut c = b.clone();
+            let mut c = b.to_vec();
             c[byte] ^= 1 << bit;
             let got = blob::parse(&c);
             let expected = match byte {
@@ -329,13 +418,17 @@ fn every_single_bit_flip_is_rejected_with_the_error_of_its_region() {
 
 #[test]
 fn every_truncation_is_rejected() {
-    let b = typical();
+    assert_every_truncation_rejected(&typical());
+    assert_every_truncation_rejected(&typical_vib());
+}
+
+fn assert_every_truncation_rejected(b: &[u8]) {
     let len = b.len();
     for k in 0..len {
         let needed = if k < 16 { 16 } else { len };
         assert_eq!(blob::parse(&b[..k]).map(|_| ()), Err(BlobError::Truncated { needed, got: k }), "prefix {k}");
     }
-    let mut longer = b.clone();
+    let mut longer = b.to_vec();
     longer.push(0);
     assert_eq!(blob::parse(&longer).map(|_| ()), Err(BlobError::LengthMismatch { declared: len, actual: len + 1 }));
 }
@@ -637,6 +730,177 @@ fn error_messages_name_field_and_offset() {
     assert!(!BlobError::CrcMismatch { stored: 1, computed: 2 }.to_string().contains('\n'));
 }
 
+// ---- vibration sections ---------------------------------------------------------------------
+
+#[test]
+fn vibration_sections_equal_the_spec_and_parse_to_their_configuration() {
+    let v = vib_params();
+    let b = typical_vib();
+    assert_eq!((typical().len(), b.len()), (596, 1260), "sizes quoted in README.md");
+    assert_eq!(b, build(&spec_sections_vib(&paper_params(), Some(&v), SERIAL, Some((2024, 2, 29)), TOOL)));
+    // Both sections written REQUIRED, in id order between the range and the serial.
+    let ids: Vec<(u16, u16)> = table(&b).iter().map(|e| (e.0, e.1)).collect();
+    assert_eq!(&ids[3..6], &[(0x0004, 1), (0x0005, 1), (0x0006, 1)]);
+    assert_eq!(table(&b)[entry_index(&b, section::VIBRATION)].3, 8 + 3 * 80);
+    assert_eq!(table(&b)[entry_index(&b, section::FLIGHT_PHASES)].3, 8 + 8 * 48);
+    let parsed = blob::parse(&b).expect("valid");
+    assert_eq!(parsed.params, paper_params());
+    assert_eq!(parsed.vibration, Some(v));
+    assert_eq!(parsed.meta, meta());
+    // The pair the firmware builds equals the configurations built directly.
+    let (cal, vib) = parsed.configs::<f32>().unwrap();
+    assert_eq!(cal, Calibration::<f32>::new(&paper_params()).unwrap());
+    assert_eq!(vib, VibrationConfig::<f32>::new(&v).unwrap());
+    let mut region = [0xffu8; blob::MAX_BLOB_BYTES];
+    region[..b.len()].copy_from_slice(&b);
+    assert_eq!(blob::load_region::<f32>(&region), Ok((cal, vib)));
+    // Without the sections (every blob written before them): no VE model.
+    let plain = typical();
+    let old = blob::parse(&plain).unwrap();
+    assert_eq!(old.vibration, None);
+    assert_eq!(old.vibration_config::<f32>(), Ok(VibrationConfig::none()));
+    let mut region = [0xffu8; blob::MAX_BLOB_BYTES];
+    region[..typical().len()].copy_from_slice(&typical());
+    assert_eq!(blob::load_region::<f64>(&region).map(|p| p.1), Ok(VibrationConfig::none()));
+    assert_eq!(blob::load_region::<f32>(&[0xffu8; 64]), Err(BlobError::BadMagic));
+    // Coefficients without profiles: no 0x0006 section.
+    let mut buf = [0u8; 4096];
+    let bare = VibrationParams::new([tables::AL15; 3], Variant::Paper);
+    let n = blob::encode_with_vibration(&paper_params(), Some(&bare), &Meta::default(), &mut buf).unwrap();
+    assert!(table(&buf[..n]).iter().all(|e| e.0 != section::FLIGHT_PHASES));
+    assert_eq!(blob::parse(&buf[..n]).unwrap().vibration, Some(bare));
+}
+
+#[test]
+fn largest_blob_fits_the_region() {
+    let mut p = paper_params();
+    let mut knots_c = [0.0; MAX_KNOTS];
+    for (i, k) in knots_c.iter_mut().enumerate() {
+        *k = -40.0 + 110.0 * i as f64 / (MAX_KNOTS - 1) as f64;
+    }
+    p.model = TempModel::Pwl { n_knots: MAX_KNOTS as u8, knots_c, at_knot: [CoefDelta::zero(); MAX_KNOTS] };
+    let mut v = VibrationParams::new([tables::AL15; 3], Variant::Exact);
+    for _ in 0..MAX_PROFILES {
+        v.push_profile(Vibration::Random { sigma_g: [1.0; 3], band_hz: (20.0, 2000.0) }).unwrap();
+    }
+    let long = "X".repeat(32);
+    let m = Meta { serial: &long, date: Some(DATE), tool_version: &long };
+    let mut buf = [0u8; 4096];
+    let n = blob::encode_with_vibration(&p, Some(&v), &m, &mut buf).unwrap();
+    assert!(n <= 2048, "{n} bytes");
+    let too_many = VibrationParams { n_profiles: 9, ..v };
+    assert_eq!(
+        blob::encode_with_vibration(&p, Some(&too_many), &m, &mut buf),
+        Err(BlobError::ProfileCount { count: 9, offset: 0 })
+    );
+}
+
+#[test]
+fn bad_vibration_sections_are_rejected_naming_the_field() {
+    let b = typical_vib();
+    let v = payload_offset(&b, section::VIBRATION);
+    let coef = |axis: usize, n: usize| v + 8 + 80 * axis + 8 * n;
+    // Codes and reserved bytes.
+    for code in [0u8, 3, 255] {
+        assert_eq!(
+            parse_edited_vib(|b| b[v] = code),
+            Err(BlobError::BadCode { field: Field::VibVariant, offset: v, code })
+        );
+    }
+    assert_eq!(parse_edited_vib(|b| b[v] = 1), Ok(()));
+    assert_eq!(parse_edited_vib(|b| b[v + 7] = 1), Err(BlobError::ReservedNotZero { offset: v + 7 }));
+    // Coefficients: non-finite, and each beyond its limit (just inside is accepted).
+    for (n, lim) in
+        [(0usize, 1.0), (1, 0.1), (2, 1e-2), (3, 1e-3), (4, 1e-4), (5, 1e-5), (6, 0.5), (7, 0.5), (8, 1e-2), (9, 1e-2)]
+    {
+        let axis = n % 3;
+        let off = coef(axis, n);
+        let field = Field::VibCoef { axis: axis as u8, coef: n as u8 };
+        assert_eq!(blob::coefficient_limit(n as u8), lim);
+        assert_eq!(parse_edited_vib(|b| put_f64(b, off, -lim)), Ok(()), "{field}");
+        assert_eq!(
+            parse_edited_vib(|b| put_f64(b, off, lim * 1.001)),
+            Err(BlobError::OutOfRange { field, offset: off })
+        );
+        for bad in [f64::NAN, f64::INFINITY] {
+            assert_eq!(parse_edited_vib(|b| put_f64(b, off, bad)), Err(BlobError::OutOfRange { field, offset: off }));
+        }
+    }
+    let ve = table_entry(&b, section::VIBRATION);
+    assert_eq!(
+        parse_edited_vib(|b| b[ve + 8] = 240),
+        Err(BlobError::SectionLength { id: section::VIBRATION, offset: v, len: 240 })
+    );
+    // Profiles: count, kinds, levels, bands.
+    let f = payload_offset(&b, section::FLIGHT_PHASES);
+    let prof = |i: usize| f + 8 + 48 * i;
+    assert_eq!(b[f], 8);
+    assert_eq!(parse_edited_vib(|b| b[f] = 0), Err(BlobError::ProfileCount { count: 0, offset: f }));
+    assert_eq!(parse_edited_vib(|b| b[f] = 9), Err(BlobError::ProfileCount { count: 9, offset: f }));
+    assert_eq!(
+        parse_edited_vib(|b| b[f] = 7),
+        Err(BlobError::SectionLength { id: section::FLIGHT_PHASES, offset: f, len: 8 + 8 * 48 })
+    );
+    assert_eq!(parse_edited_vib(|b| b[f + 3] = 1), Err(BlobError::ReservedNotZero { offset: f + 3 }));
+    assert_eq!(
+        parse_edited_vib(|b| b[prof(3)] = 3),
+        Err(BlobError::BadCode { field: Field::ProfileKind { profile: 3 }, offset: prof(3), code: 3 })
+    );
+    assert_eq!(parse_edited_vib(|b| b[prof(3) + 1] = 1), Err(BlobError::ReservedNotZero { offset: prof(3) + 1 }));
+    // Profile 0 is a sine: amplitudes signed within 10 g, the fifth value reserved.
+    assert_eq!(b[prof(0)], 1);
+    assert_eq!(parse_edited_vib(|b| put_f64(b, prof(0) + 16, -10.0)), Ok(()));
+    assert_eq!(
+        parse_edited_vib(|b| put_f64(b, prof(0) + 16, 10.5)),
+        Err(BlobError::OutOfRange { field: Field::ProfileAmp { profile: 0, axis: 1 }, offset: prof(0) + 16 })
+    );
+    assert_eq!(
+        parse_edited_vib(|b| put_f64(b, prof(0) + 32, -1.0)),
+        Err(BlobError::OutOfRange { field: Field::ProfileFreq { profile: 0 }, offset: prof(0) + 32 })
+    );
+    assert_eq!(parse_edited_vib(|b| b[prof(0) + 40] = 1), Err(BlobError::ReservedNotZero { offset: prof(0) + 40 }));
+    // Profile 2 is random: σ ≥ 0, band ordered.
+    assert_eq!(b[prof(2)], 2);
+    assert_eq!(
+        parse_edited_vib(|b| put_f64(b, prof(2) + 8, -0.1)),
+        Err(BlobError::OutOfRange { field: Field::ProfileSigma { profile: 2, axis: 0 }, offset: prof(2) + 8 })
+    );
+    assert_eq!(
+        parse_edited_vib(|b| put_f64(b, prof(2) + 40, 10.0)),
+        Err(BlobError::OutOfRange { field: Field::ProfileBand { profile: 2, end: 1 }, offset: prof(2) + 40 })
+    );
+    assert_eq!(
+        parse_edited_vib(|b| put_f64(b, prof(2) + 32, f64::NAN)),
+        Err(BlobError::OutOfRange { field: Field::ProfileBand { profile: 2, end: 0 }, offset: prof(2) + 32 })
+    );
+    // Profile 7 is "none": its values must be zero.
+    assert_eq!(b[prof(7)], 0);
+    assert_eq!(parse_edited_vib(|b| b[prof(7) + 20] = 1), Err(BlobError::ReservedNotZero { offset: prof(7) + 20 }));
+    // Profiles without the coefficients (0x0005 renamed to an unknown optional id).
+    let e = 16 + 12 * entry_index(&b, section::VIBRATION);
+    assert_eq!(
+        parse_edited_vib(|b| b[e..e + 4].copy_from_slice(&[0x77, 0x00, 0, 0])),
+        Err(BlobError::MissingSection(section::VIBRATION))
+    );
+    // A parser that did not know the sections would refuse the blob (they are REQUIRED): here
+    // the flags are checked as written.
+    assert!(table(&b).iter().filter(|e| e.0 == 0x0005 || e.0 == 0x0006).all(|e| e.1 == 1));
+}
+
+fn table_entry(b: &[u8], id: u16) -> usize {
+    16 + 12 * entry_index(b, id)
+}
+
+#[test]
+fn vibration_error_messages_name_the_key() {
+    let e = BlobError::OutOfRange { field: Field::VibCoef { axis: 1, coef: 3 }, offset: 0x1a0 };
+    assert!(e.to_string().starts_with("vibration.y.k3_g_per_g3 at byte 0x01a0 out of range"), "{e}");
+    let e = BlobError::OutOfRange { field: Field::ProfileBand { profile: 4, end: 1 }, offset: 0x300 };
+    assert!(e.to_string().starts_with("vibration.profile[4].band_Hz[1] at byte 0x0300"), "{e}");
+    let e = BlobError::ProfileCount { count: 9, offset: 0x2f0 };
+    assert!(e.to_string().contains("vibration.profile") && e.to_string().contains("9 profiles"), "{e}");
+}
+
 // ---- round trip over random valid calibrations -------------------------------------------------
 
 prop_compose! {
@@ -693,6 +957,16 @@ fn arb_model(range: (f64, f64)) -> impl Strategy<Value = TempModel<f64>> {
     prop_oneof![poly, pwl]
 }
 
+fn arb_profile() -> impl Strategy<Value = Vibration<f64>> {
+    prop_oneof![
+        Just(Vibration::None),
+        (prop::array::uniform3(-10.0f64..=10.0), 0.0f64..1e5)
+            .prop_map(|(amp_g, freq_hz)| Vibration::Harmonic { amp_g, freq_hz }),
+        (prop::array::uniform3(0.0f64..=10.0), 0.0f64..5e4, 1.0f64..5e4)
+            .prop_map(|(sigma_g, lo, w)| Vibration::Random { sigma_g, band_hz: (lo, lo + w) }),
+    ]
+}
+
 fn arb_method() -> impl Strategy<Value = Method> {
     prop::sample::select(all_methods().to_vec())
 }
@@ -724,6 +998,42 @@ proptest! {
         let parsed = blob::parse(&buf[..n]).expect("parses");
         prop_assert_eq!(param_bits(&parsed.params), param_bits(&p));
         prop_assert_eq!(parsed.meta, meta);
+    }
+
+    /// The same with the vibration sections: coefficients within their limits, profiles of
+    /// every kind.
+    #[test]
+    fn round_trip_with_vibration_is_lossless(
+        p in arb_params(),
+        cf in prop::array::uniform3(prop::array::uniform10(-1.0f64..1.0)),
+        paper_variant in any::<bool>(),
+        profiles in prop::collection::vec(arb_profile(), 0..=MAX_PROFILES),
+    ) {
+        let cf = cf.map(|a| {
+            let mut out = [0.0; 10];
+            for (n, x) in a.iter().enumerate() {
+                out[n] = x * blob::coefficient_limit(n as u8);
+            }
+            ConversionFunction::from_array(&out)
+        });
+        let mut v = VibrationParams::new(cf, if paper_variant { Variant::Paper } else { Variant::Exact });
+        for prof in &profiles {
+            v.push_profile(*prof).unwrap();
+        }
+        let mut buf = [0u8; blob::MAX_BLOB_BYTES];
+        let n = blob::encode_with_vibration(&p, Some(&v), &Meta::default(), &mut buf).expect("encodes");
+        prop_assert_eq!(&buf[..n], &build(&spec_sections_vib(&p, Some(&v), "", None, ""))[..]);
+        let parsed = blob::parse(&buf[..n]).expect("parses");
+        prop_assert_eq!(param_bits(&parsed.params), param_bits(&p));
+        let back = parsed.vibration.expect("vibration section");
+        let bits = |v: &VibrationParams| -> Vec<u64> {
+            let mut out: Vec<u64> = v.cf.iter().flat_map(|c| c.to_array()).map(f64::to_bits).collect();
+            out.push(v.n_profiles as u64);
+            out
+        };
+        prop_assert_eq!(bits(&back), bits(&v));
+        prop_assert_eq!(back, v);
+        prop_assert!(parsed.configs::<f32>().is_ok());
     }
 
     /// Arbitrary bytes are rejected without a panic (random bytes never carry the magic, a

@@ -1,5 +1,6 @@
 //! The calibration file: one unit's calibration as TOML, with units in the key names (see
-//! `docs/calibration-blob.md`). Owns its serde types, the structural checks that name the
+//! `docs/calibration-blob.md`), optionally with its vibration-error model (`[vibration]`).
+//! Owns its serde types, the structural checks that name the
 //! offending key, and the conversions to and from [`CalibrationParams`] and the blob.
 //!
 //! Physical checks are not duplicated here: [`CalibrationFile::to_blob`] runs the core's
@@ -8,7 +9,11 @@
 
 use bins_comp::blob::{self, BlobError, CalDate, Meta};
 use bins_comp::temperature::{MAX_KNOTS, MAX_POLY_ORDER};
-use bins_comp::{CalibrationParams, CoefDelta, Constants, Form, Method, TempModel};
+use bins_comp::vibration::MAX_PROFILES;
+use bins_comp::{
+    CalibrationParams, CoefDelta, Constants, ConversionFunction, Form, Method, TempModel, Variant, Vibration,
+    VibrationParams,
+};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use toml::value::{Date, Datetime};
@@ -42,6 +47,186 @@ pub struct CalibrationFile {
     pub method: MethodSpec,
     /// Temperature model.
     pub temperature_model: ModelSpec,
+    /// Vibration-error model (conversion functions, variant, flight-phase profiles); absent:
+    /// no VE model.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vibration: Option<VibrationSpec>,
+}
+
+/// `[vibration]`: the VE model of the unit (blob sections 0x0005, 0x0006).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VibrationSpec {
+    /// `variant`: the formulas of the profiles' VE.
+    pub variant: VariantKind,
+    /// `[vibration.x]`: the x accelerometer's conversion function (absent: all zero).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub x: Option<ConversionSpec>,
+    /// `[vibration.y]`
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub y: Option<ConversionSpec>,
+    /// `[vibration.z]`
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub z: Option<ConversionSpec>,
+    /// `[[vibration.profile]]`: flight-phase profiles, index 0, 1, … in order (at most 8).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub profile: Vec<ProfileSpec>,
+}
+
+/// `vibration.variant`
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum VariantKind {
+    /// V(13)/V(14) as printed.
+    Paper,
+    /// The exact time mean.
+    Exact,
+}
+
+/// `[vibration.x]` etc.: the conversion function V(2) in acceleration units; a missing key is
+/// zero. Keys are [`blob::CONVERSION_FUNCTION_KEYS`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ConversionSpec {
+    /// a0 [g].
+    pub a0_g: f64,
+    /// δ_1A [1].
+    pub delta_1a: f64,
+    /// k2 [g/g²].
+    pub k2_g_per_g2: f64,
+    /// k3 [g/g³].
+    pub k3_g_per_g3: f64,
+    /// k4 [g/g⁴].
+    pub k4_g_per_g4: f64,
+    /// k5 [g/g⁵].
+    pub k5_g_per_g5: f64,
+    /// m1 [g/g].
+    pub m1_g_per_g: f64,
+    /// m2 [g/g].
+    pub m2_g_per_g: f64,
+    /// m31 [g/g²].
+    pub m31_g_per_g2: f64,
+    /// m32 [g/g²].
+    pub m32_g_per_g2: f64,
+}
+
+impl ConversionSpec {
+    /// The core's conversion function.
+    pub fn to_cf(&self) -> ConversionFunction<f64> {
+        ConversionFunction {
+            a0_g: self.a0_g,
+            delta_1a: self.delta_1a,
+            k2_g_per_g2: self.k2_g_per_g2,
+            k3_g_per_g3: self.k3_g_per_g3,
+            k4_g_per_g4: self.k4_g_per_g4,
+            k5_g_per_g5: self.k5_g_per_g5,
+            m1_g_per_g: self.m1_g_per_g,
+            m2_g_per_g: self.m2_g_per_g,
+            m31_g_per_g2: self.m31_g_per_g2,
+            m32_g_per_g2: self.m32_g_per_g2,
+        }
+    }
+
+    /// The inverse of [`to_cf`](Self::to_cf).
+    pub fn from_cf(c: &ConversionFunction<f64>) -> Self {
+        ConversionSpec {
+            a0_g: c.a0_g,
+            delta_1a: c.delta_1a,
+            k2_g_per_g2: c.k2_g_per_g2,
+            k3_g_per_g3: c.k3_g_per_g3,
+            k4_g_per_g4: c.k4_g_per_g4,
+            k5_g_per_g5: c.k5_g_per_g5,
+            m1_g_per_g: c.m1_g_per_g,
+            m2_g_per_g: c.m2_g_per_g,
+            m31_g_per_g2: c.m31_g_per_g2,
+            m32_g_per_g2: c.m32_g_per_g2,
+        }
+    }
+}
+
+/// `[[vibration.profile]]`: one flight-phase vibration environment, by `kind`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ProfileSpec {
+    /// `kind = "none"`: no vibration (nothing subtracted in this phase).
+    None,
+    /// `kind = "sine"`: harmonic, in phase on all axes.
+    Sine {
+        /// Peak amplitude per axis x, y, z [g], signed.
+        amp_g: [f64; 3],
+        /// Frequency [Hz].
+        #[serde(rename = "freq_Hz")]
+        freq_hz: f64,
+    },
+    /// `kind = "random"`: flat band, fully correlated components.
+    Random {
+        /// σ per axis x, y, z [g].
+        sigma_g: [f64; 3],
+        /// Band [low, high] [Hz].
+        #[serde(rename = "band_Hz")]
+        band_hz: [f64; 2],
+    },
+}
+
+impl ProfileSpec {
+    /// The core's vibration.
+    pub fn to_vibration(&self) -> Vibration<f64> {
+        match *self {
+            ProfileSpec::None => Vibration::None,
+            ProfileSpec::Sine { amp_g, freq_hz } => Vibration::Harmonic { amp_g, freq_hz },
+            ProfileSpec::Random { sigma_g, band_hz } => {
+                Vibration::Random { sigma_g, band_hz: (band_hz[0], band_hz[1]) }
+            }
+        }
+    }
+
+    /// The inverse of [`to_vibration`](Self::to_vibration).
+    pub fn from_vibration(v: &Vibration<f64>) -> Self {
+        match *v {
+            Vibration::None => ProfileSpec::None,
+            Vibration::Harmonic { amp_g, freq_hz } => ProfileSpec::Sine { amp_g, freq_hz },
+            Vibration::Random { sigma_g, band_hz } => ProfileSpec::Random { sigma_g, band_hz: [band_hz.0, band_hz.1] },
+        }
+    }
+}
+
+impl VibrationSpec {
+    /// The core's parameters; structural checks only (the profile count), physical ranges are
+    /// the encoder's.
+    pub fn to_params(&self) -> Result<VibrationParams, CalFileError> {
+        let cf = [&self.x, &self.y, &self.z].map(|c| c.unwrap_or_default().to_cf());
+        let variant = match self.variant {
+            VariantKind::Paper => Variant::Paper,
+            VariantKind::Exact => Variant::Exact,
+        };
+        let mut p = VibrationParams::new(cf, variant);
+        if self.profile.len() > MAX_PROFILES {
+            return Err(key_error(
+                "vibration.profile",
+                format!("{} profiles; at most {MAX_PROFILES}", self.profile.len()),
+            ));
+        }
+        for (i, prof) in self.profile.iter().enumerate() {
+            p.push_profile(prof.to_vibration())
+                .map_err(|e| key_error(format!("vibration.profile[{i}]"), e.to_string()))?;
+        }
+        Ok(p)
+    }
+
+    /// The `[vibration]` table of parameters (every axis written, also an all-zero one).
+    pub fn from_params(p: &VibrationParams) -> Self {
+        let [x, y, z] = p.cf.map(|c| Some(ConversionSpec::from_cf(&c)));
+        VibrationSpec {
+            variant: match p.variant {
+                Variant::Paper => VariantKind::Paper,
+                Variant::Exact => VariantKind::Exact,
+            },
+            x,
+            y,
+            z,
+            profile: p.profiles.iter().take(p.n_profiles as usize).map(ProfileSpec::from_vibration).collect(),
+        }
+    }
 }
 
 /// `[method]`
@@ -295,17 +480,31 @@ impl CalibrationFile {
         Ok((params, meta))
     }
 
-    /// The blob: [`to_params`](Self::to_params), then the core's encoder (which checks
-    /// everything the firmware checks).
+    /// The vibration-error parameters (`[vibration]`), `None` when the file has none.
+    pub fn to_vibration(&self) -> Result<Option<VibrationParams>, CalFileError> {
+        self.vibration.as_ref().map(VibrationSpec::to_params).transpose()
+    }
+
+    /// The blob: [`to_params`](Self::to_params) and [`to_vibration`](Self::to_vibration),
+    /// then the core's encoder (which checks everything the firmware checks).
     pub fn to_blob(&self) -> Result<Vec<u8>, CalFileError> {
         let (params, meta) = self.to_params()?;
+        let vib = self.to_vibration()?;
         let mut buf = [0u8; blob::MAX_BLOB_BYTES];
-        let n = blob::encode(&params, &meta.as_meta(), &mut buf).map_err(CalFileError::Blob)?;
+        let n = blob::encode_with_vibration(&params, vib.as_ref(), &meta.as_meta(), &mut buf)
+            .map_err(CalFileError::Blob)?;
         Ok(buf[..n].to_vec())
     }
 
-    /// The file for parameters and traceability data (the inverse of
-    /// [`to_params`](Self::to_params)).
+    /// The file for parameters, a vibration-error model and traceability data.
+    pub fn from_parts(params: &CalibrationParams, vib: Option<&VibrationParams>, meta: &Meta<'_>) -> Self {
+        let mut f = Self::from_params(params, meta);
+        f.vibration = vib.map(VibrationSpec::from_params);
+        f
+    }
+
+    /// The file for parameters and traceability data, without a vibration-error model (the
+    /// inverse of [`to_params`](Self::to_params)).
     pub fn from_params(params: &CalibrationParams, meta: &Meta<'_>) -> Self {
         let method = match params.method {
             Method::Uncorrected => MethodSpec { kind: MethodKind::Uncorrected, form: None },
@@ -356,13 +555,14 @@ impl CalibrationFile {
             u0_v: params.constants.u0_v,
             method,
             temperature_model,
+            vibration: None,
         }
     }
 
     /// The file a blob holds; the blob is fully checked first.
     pub fn from_blob(bytes: &[u8]) -> Result<Self, BlobError> {
         let parsed = blob::parse(bytes)?;
-        Ok(Self::from_params(&parsed.params, &parsed.meta))
+        Ok(Self::from_parts(&parsed.params, parsed.vibration.as_ref(), &parsed.meta))
     }
 }
 

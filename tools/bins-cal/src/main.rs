@@ -4,7 +4,7 @@
 //! | subcommand | module | does |
 //! |---|---|---|
 //! | `blob encode\|decode\|check` | [`cmd::blob`] | calibration file (TOML) ⇄ calibration blob, checks |
-//! | `calibrate` | [`cmd::calibrate`] | tilter recordings → calibration file, blob |
+//! | `calibrate` | [`cmd::calibrate`], [`cmd::shaker`] | tilter (and shake-table) recordings → calibration file, blob |
 //! | `verify` | [`cmd::verify`] | check recordings + calibration → \|g\| errors, table, plots |
 //! | `diagnose` | [`cmd::diagnose`] | SIM vs REAL recording → mismatch located, mechanisms named and fitted, report, plots |
 //! | `replay` | [`cmd::replay`] | recording + calibration → the firmware's per-sample output on the host; replay streams |
@@ -31,8 +31,9 @@ struct Cli {
 enum Command {
     /// The calibration blob flashed into the CALIB region.
     Blob(cmd::blob::Args),
-    /// Calibrate from tilter recordings: constants per temperature, temperature model.
-    Calibrate(cmd::calibrate::Args),
+    /// Calibrate from tilter recordings: constants per temperature, temperature model; with
+    /// --shaker also the vibration-error coefficients.
+    Calibrate(Box<cmd::calibrate::Args>),
     /// Check a calibration on check-position recordings: |g| error per method (T(13)).
     Verify(cmd::verify::Args),
     /// Locate a sim-vs-real mismatch, name the missing physics, model it (report, plots).
@@ -51,7 +52,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Blob(args) => cmd::blob::run(args),
-        Command::Calibrate(args) => cmd::calibrate::run(args),
+        Command::Calibrate(args) => cmd::calibrate::run(*args),
         Command::Verify(args) => cmd::verify::run(args),
         Command::Diagnose(args) => cmd::diagnose::run(args),
         Command::Replay(args) => cmd::replay::run(args),

@@ -1,11 +1,15 @@
 //! The calibration file (TOML): the checked-in sample is the paper's unit, TOML → blob → TOML
-//! is lossless for random valid calibrations of both model kinds and every method, and
-//! malformed files are rejected naming the key.
+//! is lossless for random valid calibrations of both model kinds and every method, with and
+//! without a vibration-error model, and malformed files are rejected naming the key.
 
 use bins_cal::calfile::{CalFileError, CalibrationFile};
 use bins_comp::blob::{self, CalDate, Meta};
 use bins_comp::temperature::{MAX_KNOTS, MAX_POLY_ORDER};
-use bins_comp::{CalibrationParams, CoefDelta, Constants, Form, Method, TempModel, paper};
+use bins_comp::vibration::tables;
+use bins_comp::{
+    CalibrationParams, CoefDelta, Constants, ConversionFunction, Form, Method, TempModel, Variant, Vibration,
+    VibrationParams, paper,
+};
 use proptest::prelude::*;
 use std::path::PathBuf;
 
@@ -232,6 +236,118 @@ proptest! {
         let (back, back_meta) = file.to_params().expect("structurally valid");
         prop_assert_eq!(bits(&back), bits(&p));
         prop_assert_eq!(back_meta.as_meta(), meta);
+        let blob = file.to_blob().expect("valid calibration encodes");
+        let again = CalibrationFile::from_blob(&blob).expect("blob parses");
+        prop_assert_eq!(again.to_toml(), text);
+        prop_assert_eq!(again, file);
+    }
+}
+
+// ---- the vibration-error model ------------------------------------------------------------
+
+fn vib_sample() -> VibrationParams {
+    let mut v = VibrationParams::new([tables::AL15, ConversionFunction::default(), tables::AL15], Variant::Exact);
+    let (profiles, n) = tables::flight_profiles();
+    for p in &profiles[..n as usize] {
+        v.push_profile(*p).unwrap();
+    }
+    v.push_profile(Vibration::None).unwrap();
+    v
+}
+
+fn vib_text() -> String {
+    CalibrationFile::from_parts(&sample_params(), Some(&vib_sample()), &SAMPLE_META).to_toml()
+}
+
+#[test]
+fn vibration_model_round_trips_through_toml_and_blob() {
+    let text = vib_text();
+    assert!(text.contains("[vibration]\nvariant = \"exact\""), "{text}");
+    assert!(text.contains("[vibration.x]") && text.contains("k2_g_per_g2 = 0.000105"), "{text}");
+    assert!(text.contains("[[vibration.profile]]\nkind = \"sine\""), "{text}");
+    assert!(text.contains("kind = \"random\"") && text.contains("band_Hz = [320.0, 640.0]"), "{text}");
+    let file = CalibrationFile::from_toml(&text).unwrap();
+    assert_eq!(file.to_vibration().unwrap(), Some(vib_sample()));
+    let bytes = file.to_blob().unwrap();
+    let parsed = blob::parse(&bytes).unwrap();
+    assert_eq!(parsed.vibration, Some(vib_sample()));
+    let back = CalibrationFile::from_blob(&bytes).unwrap();
+    assert_eq!(back, file);
+    assert_eq!(back.to_toml(), text);
+    // Without `[vibration]`: no VE model, no vibration section.
+    let plain = CalibrationFile::from_toml(&sample_text()).unwrap();
+    assert_eq!(plain.to_vibration().unwrap(), None);
+    assert_eq!(blob::parse(&plain.to_blob().unwrap()).unwrap().vibration, None);
+}
+
+#[test]
+fn vibration_tables_may_omit_axes_and_coefficients() {
+    let s = sample_text()
+        + "\n[vibration]\nvariant = \"paper\"\n\n[vibration.y]\nk2_g_per_g2 = 1e-4\nm31_g_per_g2 = 2e-5\n";
+    let v = CalibrationFile::from_toml(&s).unwrap().to_vibration().unwrap().unwrap();
+    assert_eq!(v.variant, Variant::Paper);
+    assert_eq!(v.cf[0], ConversionFunction::default());
+    assert_eq!(v.cf[1], ConversionFunction { k2_g_per_g2: 1e-4, m31_g_per_g2: 2e-5, ..Default::default() });
+    assert_eq!(v.n_profiles, 0);
+}
+
+#[test]
+fn malformed_vibration_keys_are_rejected_naming_the_key() {
+    let s = vib_text();
+    let nine = s.clone() + &"\n[[vibration.profile]]\nkind = \"none\"\n".repeat(2);
+    let cases: [(String, &str); 9] = [
+        (s.replace("variant = \"exact\"", "variant = \"approximate\""), "approximate"),
+        (s.replace("variant = \"exact\"\n", ""), "variant"),
+        (s.replace("k3_g_per_g3 = 0.000087", "k3_g_per_g3 = 0.000087\nk6_g_per_g6 = 1.0"), "k6_g_per_g6"),
+        (s.replacen("kind = \"sine\"", "kind = \"square\"", 1), "square"),
+        (s.replacen("freq_Hz", "frequency_Hz", 1), "frequency_Hz"),
+        (nine, "vibration.profile"),
+        (s.replacen("k2_g_per_g2 = 0.000105", "k2_g_per_g2 = 0.05", 1), "vibration.x.k2_g_per_g2"),
+        (s.replace("band_Hz = [320.0, 640.0]", "band_Hz = [320.0, 300.0]"), "vibration.profile[6].band_Hz[1]"),
+        (s.replacen("delta_1a = 0.000015", "delta_1a = nan", 1), "vibration.x.delta_1a"),
+    ];
+    for (text, key) in &cases {
+        assert_ne!(text, &s, "edit applies for {key}");
+        let e = error_of(text);
+        assert!(e.contains(key), "error {e:?} should name {key:?}");
+        assert!(!e.contains('\n'), "one line: {e:?}");
+        assert!(!e.contains("byte"), "{e}");
+    }
+}
+
+fn arb_vibration() -> impl Strategy<Value = VibrationParams> {
+    let profile = prop_oneof![
+        Just(Vibration::None),
+        (prop::array::uniform3(-10.0f64..=10.0), 0.0f64..1e4)
+            .prop_map(|(amp_g, freq_hz)| Vibration::Harmonic { amp_g, freq_hz }),
+        (prop::array::uniform3(0.0f64..=10.0), 0.0f64..1e4, 1.0f64..1e4)
+            .prop_map(|(sigma_g, lo, w)| Vibration::Random { sigma_g, band_hz: (lo, lo + w) }),
+    ];
+    (prop::array::uniform3(prop::array::uniform10(-1.0f64..1.0)), any::<bool>(), prop::collection::vec(profile, 0..=8))
+        .prop_map(|(cf, paper, profiles)| {
+            let cf = cf.map(|a| {
+                let mut out = [0.0; 10];
+                for (n, x) in a.iter().enumerate() {
+                    out[n] = x * blob::coefficient_limit(n as u8);
+                }
+                ConversionFunction::from_array(&out)
+            });
+            let mut v = VibrationParams::new(cf, if paper { Variant::Paper } else { Variant::Exact });
+            for p in profiles {
+                v.push_profile(p).unwrap();
+            }
+            v
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(128))]
+
+    #[test]
+    fn toml_blob_toml_with_vibration_is_lossless(p in arb_params(), v in arb_vibration()) {
+        let text = CalibrationFile::from_parts(&p, Some(&v), &SAMPLE_META).to_toml();
+        let file = CalibrationFile::from_toml(&text).expect("own output parses");
+        prop_assert_eq!(file.to_vibration().expect("structurally valid"), Some(v));
         let blob = file.to_blob().expect("valid calibration encodes");
         let again = CalibrationFile::from_blob(&blob).expect("blob parses");
         prop_assert_eq!(again.to_toml(), text);

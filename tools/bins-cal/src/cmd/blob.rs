@@ -139,6 +139,13 @@ fn summary(p: &ParsedCalibration<'_>) -> String {
         p.params.temp_range_c.0,
         p.params.temp_range_c.1
     );
+    if let Some(v) = &p.vibration {
+        let variant = match v.variant {
+            bins_comp::Variant::Paper => "paper",
+            bins_comp::Variant::Exact => "exact",
+        };
+        s += &format!(", vibration model ({variant}, {} profile(s))", v.n_profiles);
+    }
     if !p.meta.serial.is_empty() {
         s += &format!(", serial {}", p.meta.serial);
     }

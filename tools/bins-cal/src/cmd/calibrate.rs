@@ -9,6 +9,10 @@
 //!    `ident::poly_from_constants`). With one temperature only the T0 constants can be
 //!    written (`--model none`, or `auto`), and the file says so.
 //!
+//! 4. With `--shaker`: the vibration-error coefficients from shake-table recordings
+//!    ([`shaker`](super::shaker)), written as the file's `[vibration]` table and the blob's
+//!    vibration section.
+//!
 //! Every fit's residual and the dwells it used are printed as a table.
 
 use super::segments::{self, Segment};
@@ -61,6 +65,13 @@ pub struct Args {
     /// Only dwells whose label starts with this (`""`: every labelled dwell).
     #[arg(long, default_value = "TP")]
     pos_prefix: String,
+    /// Shake-table recordings (format v1 with `pos`, fx/fy/fz and the vibration columns): the
+    /// vibration-error coefficients of each accelerometer shaken on a plan (physics §8).
+    #[arg(long, num_args = 1..)]
+    shaker: Vec<PathBuf>,
+    /// VE formulas the firmware uses for the flight-phase profiles: exact or paper.
+    #[arg(long, default_value = "exact", requires = "shaker")]
+    ve_variant: String,
     #[command(flatten)]
     seg: segments::Options,
 }
@@ -201,6 +212,11 @@ fn rms(v: &[[f64; 3]]) -> f64 {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let model_arg = parse_model(&args.model)?;
     let method = parse_method(args.method, &args.form)?;
+    let ve_variant = match args.ve_variant.as_str() {
+        "exact" => bins_comp::Variant::Exact,
+        "paper" => bins_comp::Variant::Paper,
+        v => bail!("--ve-variant `{v}`: expected exact or paper"),
+    };
     let (all, files) = segments::find_all(&args.tilter, &args.seg)?;
     let all: Vec<Segment> = all.into_iter().filter(|s| s.pos.starts_with(&args.pos_prefix)).collect();
     print_segments(&all);
@@ -324,8 +340,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         println!("  {:>9.2} {:>12.4} {:>14.2}", f.temp_c, du * 1e3, dk * 1e6);
     }
+    let vibration = if args.shaker.is_empty() {
+        None
+    } else {
+        let r = super::shaker::calibrate(&args.shaker, &args.seg, ve_variant, |t| params.constants_at(t))?;
+        notes.extend(r.notes);
+        Some(r.params)
+    };
     let meta = Meta { serial: args.serial.as_deref().unwrap_or(""), date: None, tool_version: bins_cal::TOOL_VERSION };
-    let file = CalibrationFile::from_params(&params, &meta);
+    let file = CalibrationFile::from_parts(&params, vibration.as_ref(), &meta);
     // Everything is computed and checked before anything is written.
     let blob = file.to_blob().map_err(|e| anyhow!("{files}: the calibration is not valid: {e}"))?;
     let hex = match &args.ihex {
@@ -338,6 +361,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut header = String::from("# bins-cal calibrate from: ");
     header.push_str(&files);
     header.push('\n');
+    if !args.shaker.is_empty() {
+        header.push_str("# shake table: ");
+        header.push_str(&args.shaker.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "));
+        header.push('\n');
+    }
     for n in &notes {
         header.push_str("# note: ");
         header.push_str(n);

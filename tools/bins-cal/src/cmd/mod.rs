@@ -5,6 +5,7 @@ pub mod calibrate;
 pub mod diagnose;
 pub mod replay;
 pub mod segments;
+pub mod shaker;
 pub mod simulate;
 pub mod tempco;
 pub mod verify;

@@ -899,6 +899,7 @@ impl UnitSpec {
                     u0_v: c0.u0_v,
                     method: MethodSpec { kind: MethodKind::Uncorrected, form: None },
                     temperature_model: m.clone(),
+                    vibration: None,
                 };
                 file.to_params().map_err(|e| Issue { key: None, reason: format!("unit.{e}") })?.0.model
             }
