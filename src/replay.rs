@@ -13,11 +13,10 @@
 //! `temp_c` f32 [°C], little-endian), and the results come back as [`OUTPUT_BYTES`]-byte
 //! records (`accel_g` f32×3 [g], status u32, little-endian), one per input in input order.
 
-use crate::compensate::{Calibration, Sample, Status};
+use crate::compensate::{Sample, Status};
 use crate::float::Float;
 use crate::linalg::Vec3;
 use crate::pipeline::{Pipeline, PipelineState, VibrationSource};
-use crate::vibration::Variant;
 
 /// Bytes of one input record: `u_v` f32×3, `temp_c` f32.
 pub const INPUT_BYTES: usize = 16;
@@ -84,12 +83,6 @@ fn from_words(w: [u32; 4]) -> [u8; 16] {
         c.copy_from_slice(&x.to_le_bytes());
     }
     b
-}
-
-/// The replay's pipeline: the calibration with the VE model of the AL-15 on all three axes
-/// (exact variant, [`crate::vectors::vibration_config`]).
-pub fn pipeline<F: Float>(cal: Calibration<F>) -> Pipeline<F> {
-    Pipeline::new(cal, crate::vectors::vibration_config(Variant::Exact))
 }
 
 /// The sampling interrupt's configuration and state: the pipeline (`&self` of the step, fixed

@@ -103,14 +103,20 @@ pub fn vibration_variant(index: u32) -> Option<(Variant, u8)> {
     }
 }
 
-/// The VE configuration of the vibration variants: AL-15 on all three accelerometers, the
-/// flight profiles of Tables V2/V3; [`VibrationConfig::none`] if it failed to build.
-pub fn vibration_config<F: Float>(variant: Variant) -> VibrationConfig<F> {
+/// The VE parameters of the vibration variants: AL-15 on all three accelerometers, the
+/// flight profiles of Tables V2/V3.
+pub fn vibration_params(variant: Variant) -> VibrationParams {
     let mut p = VibrationParams::new([tables::AL15; 3], variant);
     let (profiles, n) = tables::flight_profiles();
     p.profiles = profiles;
     p.n_profiles = n;
-    VibrationConfig::new(&p).unwrap_or(VibrationConfig::none())
+    p
+}
+
+/// The VE configuration of [`vibration_params`]; [`VibrationConfig::none`] if it failed to
+/// build.
+pub fn vibration_config<F: Float>(variant: Variant) -> VibrationConfig<F> {
+    VibrationConfig::new(&vibration_params(variant)).unwrap_or(VibrationConfig::none())
 }
 
 /// One decoded input record.

@@ -7,8 +7,8 @@
 //! by QEMU's generic loader: `-device loader,file=CAL.bin,addr=0x003ff000`). It is read once,
 //! at boot, and checked completely (`bins_comp::blob::parse_region`) before anything uses it.
 
-use bins_comp::Calibration;
 use bins_comp::blob::{self, BlobError, MAX_BLOB_BYTES, ParsedCalibration};
+use bins_comp::{Calibration, VibrationConfig};
 
 /// A copy of the CALIB region in RAM (at most [`MAX_BLOB_BYTES`]).
 pub struct Region {
@@ -47,9 +47,14 @@ pub fn read_region() -> Region {
     region
 }
 
-/// The calibration the region holds, checked completely, with the parsed blob (serial,
-/// date, tool version). An error means: compensate with [`Calibration::uncalibrated`].
-pub fn calibration(region: &Region) -> Result<(Calibration<f32>, ParsedCalibration<'_>), BlobError> {
+/// The calibration and the vibration-error configuration the region holds (sections
+/// 0x0005/0x0006; [`VibrationConfig::none`] without them), checked completely, with the
+/// parsed blob (serial, date, tool version). An error means: compensate with
+/// [`Calibration::uncalibrated`] and subtract nothing.
+pub fn calibration(
+    region: &Region,
+) -> Result<(Calibration<f32>, VibrationConfig<f32>, ParsedCalibration<'_>), BlobError> {
     let parsed = blob::parse_region(region.bytes())?;
-    Ok((parsed.calibration::<f32>()?, parsed))
+    let (cal, vib) = parsed.configs::<f32>()?;
+    Ok((cal, vib, parsed))
 }

@@ -140,7 +140,7 @@ fn run() -> Result<Totals, RunError> {
 fn flashed_calibration() -> Calibration<f32> {
     let region = calib::read_region();
     match calib::calibration(&region) {
-        Ok((cal, parsed)) => {
+        Ok((cal, _, parsed)) => {
             defmt::info!(
                 "CALIB: valid calibration blob, {} bytes, unit {=str}, by {=str}",
                 parsed.blob.bytes().len(),

@@ -174,8 +174,11 @@ mod bus {
 #[entry]
 fn main() -> ! {
     let mut cals = vectors::calibrations();
-    if let Ok((cal, _)) = calib::calibration(&calib::read_region()) {
+    let mut flashed =
+        bins_comp::Pipeline::new(bins_comp::Calibration::uncalibrated(), bins_comp::VibrationConfig::none());
+    if let Ok((cal, vib, _)) = calib::calibration(&calib::read_region()) {
         cals[vectors::FLASHED_VARIANT] = cal;
+        flashed = bins_comp::Pipeline::new(cal, vib);
     }
     let vib_pipeline = bins_comp::Pipeline::new(
         cals.get(1).copied().unwrap_or(bins_comp::Calibration::uncalibrated()),
@@ -192,7 +195,7 @@ fn main() -> ! {
     // interrupt's state and the consumer below.
     let Some(queue) = (unsafe { (&raw mut QUEUE_ISR).as_mut() }) else { semihosting::process::exit(1) };
     let (producer, mut consumer) = queue.split();
-    let mut isr = isr::Isr::new(bins_comp::replay::pipeline(*vib_pipeline.calibration()), Slots(source), producer);
+    let mut isr = isr::Isr::new(flashed, Slots(source), producer);
     // SAFETY: as for `OUTPUT` below.
     unsafe {
         core::ptr::write_volatile(

@@ -23,7 +23,7 @@ mod calib;
 mod isr;
 
 use bins_comp::replay::{self, INPUT_BYTES, Input, OUTPUT_BYTES};
-use bins_comp::{Calibration, Sample};
+use bins_comp::{Calibration, Pipeline, Sample, VibrationConfig};
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::{SCB, SYST};
 use cortex_m_rt::{ExceptionFrame, entry, exception};
@@ -131,7 +131,7 @@ enum RunError {
 }
 
 fn run() -> Result<(), RunError> {
-    let cal = flashed_calibration();
+    let pipeline = flashed_pipeline();
     // SAFETY: `main` runs once and these are the only references ever taken to the two
     // queues; the halves are then owned by exactly one context each (producer and consumer).
     let in_q: Option<&'static mut Queue<Input<f32>, IN_QUEUE>> = unsafe { (&raw mut IN_Q).as_mut() };
@@ -145,7 +145,7 @@ fn run() -> Result<(), RunError> {
 
     let mut read = 0u32;
     refill(&mut input, &mut in_p, &mut read)?;
-    let isr = Isr::new(replay::pipeline(cal), Replay { input: in_c }, out_p);
+    let isr = Isr::new(pipeline, Replay { input: in_c }, out_p);
     critical_section::with(|cs| ISR.borrow(cs).replace(Some(isr)));
 
     let mut cp = cortex_m::Peripherals::take().ok_or(RunError::NoPeripherals)?;
@@ -230,17 +230,23 @@ fn read_full(file: &mut File, buf: &mut [u8]) -> Result<usize, RunError> {
     Ok(filled)
 }
 
-/// The calibration in the CALIB region, parsed once at boot; uncalibrated if it is invalid.
-fn flashed_calibration() -> Calibration<f32> {
+/// The calibration and vibration-error model in the CALIB region, read and checked once, at
+/// boot; on any error, logged, the uncalibrated stand-in with no VE model (every sample
+/// flagged `INVALID_CALIBRATION`).
+fn flashed_pipeline() -> Pipeline<f32> {
     let region = calib::read_region();
     match calib::calibration(&region) {
-        Ok((cal, parsed)) => {
-            defmt::info!("CALIB: valid calibration blob, unit {=str}", parsed.meta.serial);
-            cal
+        Ok((cal, vib, parsed)) => {
+            defmt::info!(
+                "CALIB: valid calibration blob, unit {=str}, {=usize} vibration profiles",
+                parsed.meta.serial,
+                vib.n_profiles()
+            );
+            Pipeline::new(cal, vib)
         }
         Err(e) => {
             defmt::error!("CALIB: {}: running uncalibrated", defmt::Display2Format(&e));
-            Calibration::uncalibrated()
+            Pipeline::new(Calibration::uncalibrated(), VibrationConfig::none())
         }
     }
 }

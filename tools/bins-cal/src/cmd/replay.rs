@@ -12,7 +12,7 @@ use bins_cal::calfile::{CalibrationFile, describe};
 use bins_cal::fsio::AtomicFile;
 use bins_cal::recording::{Reader, Row};
 use bins_comp::replay::{self, Input, OUTPUT_BYTES, Tick, WINDOW};
-use bins_comp::{Calibration, Sample, Status};
+use bins_comp::{Calibration, Pipeline, Sample, Status, VibrationConfig};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -72,7 +72,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     } else {
         let Some(calib) = &args.calib else { bail!("--calib is required") };
-        let mut tick = Tick::<f32, WINDOW>::new(replay::pipeline(load_calibration(calib)?));
+        let mut tick = Tick::<f32, WINDOW>::new(load_pipeline(calib)?);
         while reader.read_row(&mut row)? {
             write_row(csv.writer(), row.t_s, &tick.step(&input_of(&row)))?;
         }
@@ -94,14 +94,22 @@ fn write_row(w: &mut impl Write, t_s: f64, s: &Sample<f32>) -> std::io::Result<(
     writeln!(w, ",{}", s.status.0)
 }
 
-/// The `f32` calibration of a blob or (by its `.toml` extension) a calibration file.
-pub fn load_calibration(path: &Path) -> anyhow::Result<Calibration<f32>> {
+/// The `f32` calibration and vibration-error model of a blob or (by its `.toml` extension) a
+/// calibration file: the pipeline the firmware builds from the same blob.
+pub fn load_pipeline(path: &Path) -> anyhow::Result<Pipeline<f32>> {
+    let err = |e: String| anyhow::anyhow!("{}: {e}", path.display());
     if path.extension().is_some_and(|e| e == "toml") {
-        let (params, _) =
-            CalibrationFile::read(path)?.to_params().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        return Calibration::new(&params).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()));
+        let file = CalibrationFile::read(path)?;
+        let (params, _) = file.to_params().map_err(|e| err(e.to_string()))?;
+        let cal = Calibration::new(&params).map_err(|e| err(e.to_string()))?;
+        let vib = match file.to_vibration().map_err(|e| err(e.to_string()))? {
+            Some(p) => VibrationConfig::new(&p).map_err(|e| err(e.to_string()))?,
+            None => VibrationConfig::none(),
+        };
+        return Ok(Pipeline::new(cal, vib));
     }
     let bytes = std::fs::read(path).with_context(|| path.display().to_string())?;
-    let parsed = bins_comp::blob::parse(&bytes).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), describe(&e)))?;
-    parsed.calibration::<f32>().map_err(|e| anyhow::anyhow!("{}: {}", path.display(), describe(&e)))
+    let parsed = bins_comp::blob::parse(&bytes).map_err(|e| err(describe(&e)))?;
+    let (cal, vib) = parsed.configs::<f32>().map_err(|e| err(describe(&e)))?;
+    Ok(Pipeline::new(cal, vib))
 }
