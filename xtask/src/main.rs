@@ -59,7 +59,9 @@ fn main() -> ExitCode {
         Some("bench") => x.bench(),
         _ => {
             eprintln!("usage: cargo xtask <test|demo|replay|bench>");
-            eprintln!("  bench  instructions per sample in QEMU, stack depth, flash/RAM of the replay firmware");
+            eprintln!(
+                "  bench  instructions per sample in QEMU, stack depth, flash/RAM of the firmware images, host samples per second"
+            );
             eprintln!("  test   fmt, clippy, host tests, thumb clippy, vectors, firmware build + link check, QEMU run");
             eprintln!("  demo   build and run the demo in QEMU");
             eprintln!("  replay REC.csv --calib CAL.bin -o OUT.csv   a recording through the replay firmware in QEMU");
@@ -335,9 +337,10 @@ impl Xtask {
         ok
     }
 
-    /// `cargo xtask bench`: instructions per sample of each method/model case and the step's
-    /// stack high-water mark (the `bench` firmware in QEMU, `-icount shift=0`), then flash and
-    /// static RAM of the replay firmware (`llvm-size`).
+    /// `cargo xtask bench`: instructions per sample of each method/model case, the worst
+    /// single step and the step's stack high-water mark (the `bench` firmware in QEMU,
+    /// `-icount shift=0`), flash and static RAM of the replay firmware and of the link-check
+    /// image (`llvm-size`), and the host's samples per second (criterion).
     fn bench(&mut self) -> bool {
         let started = Instant::now();
         let ok = self.step(1, "toolchain", Xtask::setup_toolchain)
@@ -347,10 +350,14 @@ impl Xtask {
                 x.run(x.thumb_cargo("build", args)?)
             })
             && self.step(3, "instructions per sample (QEMU)", |x| x.run_qemu_in(&x.elf("bench"), &x.root))
-            && self.step(4, "size of the replay firmware", |x| {
+            && self.step(4, "size of the replay firmware and the link-check image", |x| {
+                x.run(x.thumb_cargo("build", ["--release", "--features", "firmware", "--bin", "linkcheck"])?)?;
                 let mut c = x.command("llvm-size");
-                c.arg(x.elf("replay"));
+                c.arg(x.elf("replay")).arg(x.elf("linkcheck"));
                 x.run(c)
+            })
+            && self.step(5, "host samples per second (criterion)", |x| {
+                x.run(x.host_cargo(["bench", "-p", "host-tests", "--bench", "throughput"]))
             });
         self.summary(started);
         ok
