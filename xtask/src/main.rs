@@ -326,8 +326,8 @@ impl Xtask {
             })
             && {
                 let t = Instant::now();
-                let (hex, work) = (self.root.join(BLOB_HEX), self.root.join("target/replay"));
-                match self.replay_firmware(&rec, &calib, &hex, &out, &work) {
+                let work = self.root.join("target/replay");
+                match self.calib_hex(&work).and_then(|hex| self.replay_firmware(&rec, &calib, &hex, &out, &work)) {
                     Ok(()) => {
                         println!("replay: {} in {:.1} s wall", out.display(), t.elapsed().as_secs_f64());
                         true
@@ -340,6 +340,18 @@ impl Xtask {
             };
         self.summary(started);
         ok
+    }
+
+    /// An Intel HEX file in `work` whose address is the CALIB origin (the sample calibration,
+    /// encoded by `bins-cal`, which places it at the ORIGIN of CALIB in `memory.x`): where
+    /// QEMU's loader puts any blob.
+    fn calib_hex(&self, work: &Path) -> Result<PathBuf> {
+        std::fs::create_dir_all(work).map_err(|e| format!("{}: {e}", work.display()))?;
+        let hex = work.join("calib-origin.hex");
+        let mut c = self.bins_cal();
+        c.args(["blob", "encode", CALIBRATION, "-o"]).arg(work.join("calib-origin.bin")).arg("--ihex").arg(&hex);
+        self.run(c)?;
+        Ok(hex)
     }
 
     /// `cargo xtask bench`: instructions per sample of each method/model case and the step's
