@@ -690,7 +690,7 @@ fn demo_summary(dir: &Path) -> Result {
                     pairs[k].2 = v;
                 }
             }
-            let label = if *m == "T0 constants" { "-".to_string() } else { model.to_string() };
+            let label = if *m == "T0 constants" { "–".to_string() } else { model.to_string() };
             let method = if fw { fw_label.clone() } else { m.to_string() };
             match rows.iter_mut().find(|r| r.0 == label && r.1 == method && (r.2 - t).abs() < 0.5) {
                 Some(r) => r.3 = r.3.max(v.abs()),
@@ -716,7 +716,7 @@ fn demo_summary(dir: &Path) -> Result {
     println!("\nmax |Δg| [mg] in the check positions CP1..CP6 (tolerance ±0.3 mg at T0, ±1 mg over the range):");
     print!("| model | method |");
     for t in &temps {
-        print!(" {t:+.1} °C |");
+        print!(" {} °C |", format!("{t:+.1}").replace('-', "−"));
     }
     println!();
     println!("|---|---|{}", "---:|".repeat(temps.len()));
