@@ -63,7 +63,9 @@ fn main() -> ExitCode {
                 "  bench  instructions per sample in QEMU, stack depth, flash/RAM of the firmware images, host samples per second"
             );
             eprintln!("  test   fmt, clippy, host tests, thumb clippy, vectors, firmware build + link check, QEMU run");
-            eprintln!("  demo   build and run the demo in QEMU");
+            eprintln!(
+                "  demo   simulate, calibrate, replay in QEMU, verify: the paper's check end to end (target/demo)"
+            );
             eprintln!("  replay REC.csv --calib CAL.bin -o OUT.csv   a recording through the replay firmware in QEMU");
             return ExitCode::from(2);
         }
@@ -117,9 +119,10 @@ impl Xtask {
                 x.build_firmware()?;
                 x.build_linkcheck()
             }),
-            ("qemu", |x| x.run_qemu_with_blob(&x.elf("firmware"), &x.root, &x.root.join(BLOB))),
+            ("qemu", |x| x.run_qemu_with_blob(&x.elf("firmware"), &x.root, &x.root.join(BLOB), &x.root.join(BLOB_HEX))),
             ("qemu (corrupted calibration blob)", |x| {
-                x.run_qemu_with_blob(&x.elf("firmware"), &x.root.join(CORRUPT_DIR), &x.root.join(CORRUPT_BLOB))
+                let (elf, hex) = (x.elf("firmware"), x.root.join(BLOB_HEX));
+                x.run_qemu_with_blob(&elf, &x.root.join(CORRUPT_DIR), &x.root.join(CORRUPT_BLOB), &hex)
             }),
             ("replay: QEMU vs host, bit for bit", Xtask::replay_test),
             ("fuzz (blob parser, short pass)", Xtask::fuzz_short),
@@ -175,7 +178,10 @@ impl Xtask {
 
     fn demo(&mut self) -> bool {
         let started = Instant::now();
-        let ok = self.step(1, "toolchain", Xtask::setup_toolchain) && self.step(2, "demo", demo_body);
+        let mut ok = self.step(1, "toolchain", Xtask::setup_toolchain);
+        for (i, (name, f)) in DEMO_STEPS.iter().enumerate() {
+            ok = ok && self.step(i + 2, name, *f);
+        }
         self.summary(started);
         ok
     }
@@ -322,7 +328,8 @@ impl Xtask {
             })
             && {
                 let t = Instant::now();
-                match self.replay_firmware(&rec, &calib, &out, &self.root.join("target/replay")) {
+                let work = self.root.join("target/replay");
+                match self.calib_hex(&work).and_then(|hex| self.replay_firmware(&rec, &calib, &hex, &out, &work)) {
                     Ok(()) => {
                         println!("replay: {} in {:.1} s wall", out.display(), t.elapsed().as_secs_f64());
                         true
@@ -335,6 +342,18 @@ impl Xtask {
             };
         self.summary(started);
         ok
+    }
+
+    /// An Intel HEX file in `work` whose address is the CALIB origin (the sample calibration,
+    /// encoded by `bins-cal`, which places it at the ORIGIN of CALIB in `memory.x`): where
+    /// QEMU's loader puts any blob.
+    fn calib_hex(&self, work: &Path) -> Result<PathBuf> {
+        std::fs::create_dir_all(work).map_err(|e| format!("{}: {e}", work.display()))?;
+        let hex = work.join("calib-origin.hex");
+        let mut c = self.bins_cal();
+        c.args(["blob", "encode", CALIBRATION, "-o"]).arg(work.join("calib-origin.bin")).arg("--ihex").arg(&hex);
+        self.run(c)?;
+        Ok(hex)
     }
 
     /// `cargo xtask bench`: instructions per sample of each method/model case, the worst
@@ -369,14 +388,15 @@ impl Xtask {
     }
 
     /// A recording through the replay firmware in QEMU, in `work`: the recording as the input
-    /// stream, the blob in CALIB, the output stream back to CSV (`t_s` from the recording).
-    fn replay_firmware(&self, rec: &Path, calib: &Path, out: &Path, work: &Path) -> Result {
+    /// stream, the blob in CALIB (at the address of the Intel HEX file `hex`), the output
+    /// stream back to CSV (`t_s` from the recording).
+    fn replay_firmware(&self, rec: &Path, calib: &Path, hex: &Path, out: &Path, work: &Path) -> Result {
         let stream_dir = work.join("target/fw-replay");
         std::fs::create_dir_all(&stream_dir).map_err(|e| format!("{}: {e}", stream_dir.display()))?;
         let mut c = self.bins_cal();
         c.arg("replay").arg("--rec").arg(rec).arg("--write-stream").arg(stream_dir.join("in.bin"));
         self.run(c)?;
-        self.run_qemu_with_blob(&self.elf("replay"), work, calib)?;
+        self.run_qemu_with_blob(&self.elf("replay"), work, calib, hex)?;
         let mut c = self.bins_cal();
         c.arg("replay").arg("--rec").arg(rec).arg("--read-stream").arg(stream_dir.join("out.bin")).arg("-o").arg(out);
         self.run(c)
@@ -407,23 +427,30 @@ impl Xtask {
         self.run(c)?;
         for (name, blob) in [("method2", self.root.join(BLOB)), ("method1", m1_blob)] {
             let (fw, host) = (dir.join(format!("{name}-qemu.csv")), dir.join(format!("{name}-host.csv")));
-            self.replay_firmware(&rec, &blob, &fw, &dir)?;
-            let mut c = self.bins_cal();
-            c.arg("replay").arg("--rec").arg(&rec).arg("--calib").arg(&blob).arg("-o").arg(&host);
-            self.run(c)?;
-            let (a, b) = (read(&fw)?, read(&host)?);
-            let rows = a.iter().filter(|&&c| c == b'\n').count().saturating_sub(1);
-            if a != b {
-                let line = a.split(|&c| c == b'\n').zip(b.split(|&c| c == b'\n')).position(|(x, y)| x != y);
-                return Err(format!(
-                    "{name}: {} and {} differ (first at line {})",
-                    fw.display(),
-                    host.display(),
-                    line.map_or(0, |l| l + 1)
-                ));
-            }
-            println!("replay {name}: QEMU and host bit-identical, {rows} rows");
+            self.replay_firmware(&rec, &blob, &self.root.join(BLOB_HEX), &fw, &dir)?;
+            self.replay_host_identical(name, &rec, &blob, &fw, &host)?;
         }
+        Ok(())
+    }
+
+    /// `bins-cal replay` of `rec` with `blob` on the host into `host`, which must equal the
+    /// firmware's output `fw` byte for byte.
+    fn replay_host_identical(&self, name: &str, rec: &Path, blob: &Path, fw: &Path, host: &Path) -> Result {
+        let mut c = self.bins_cal();
+        c.arg("replay").arg("--rec").arg(rec).arg("--calib").arg(blob).arg("-o").arg(host);
+        self.run(c)?;
+        let (a, b) = (read(fw)?, read(host)?);
+        let rows = a.iter().filter(|&&c| c == b'\n').count().saturating_sub(1);
+        if a != b {
+            let line = a.split(|&c| c == b'\n').zip(b.split(|&c| c == b'\n')).position(|(x, y)| x != y);
+            return Err(format!(
+                "{name}: {} and {} differ (first at line {})",
+                fw.display(),
+                host.display(),
+                line.map_or(0, |l| l + 1)
+            ));
+        }
+        println!("replay {name}: QEMU and host bit-identical, {rows} rows");
         Ok(())
     }
 
@@ -439,10 +466,10 @@ impl Xtask {
 
     /// Runs an ELF in QEMU with `cwd` as its working directory and `blob` in the CALIB
     /// region, placed by QEMU's generic loader at the address of the CALIB origin (taken from
-    /// [`BLOB_HEX`], which `bins-cal` writes at the ORIGIN of CALIB in `memory.x`).
-    fn run_qemu_with_blob(&self, elf: &Path, cwd: &Path, blob: &Path) -> Result {
-        let hex = std::fs::read_to_string(self.root.join(BLOB_HEX)).map_err(|e| format!("{BLOB_HEX}: {e}"))?;
-        let addr = ihex_start(&hex).ok_or(format!("{BLOB_HEX}: no extended-address and data record"))?;
+    /// the Intel HEX file `hex`, which `bins-cal` writes at the ORIGIN of CALIB in `memory.x`).
+    fn run_qemu_with_blob(&self, elf: &Path, cwd: &Path, blob: &Path, hex: &Path) -> Result {
+        let text = std::fs::read_to_string(hex).map_err(|e| format!("{}: {e}", hex.display()))?;
+        let addr = ihex_start(&text).ok_or(format!("{}: no extended-address and data record", hex.display()))?;
         let limit = env::var("XTASK_QEMU_TIMEOUT").ok().and_then(|s| s.parse().ok()).unwrap_or(QEMU_TIMEOUT_S);
         let mut c = self.command(self.root.join(RUNNER));
         c.env("QEMU_EXTRA", format!("-device loader,file={},addr=0x{addr:08x}", blob.display()));
@@ -528,95 +555,207 @@ const FUZZ_SECONDS: u32 = 30;
 
 // ---- the demo ---------------------------------------------------------------------------
 
-/// The demo's scenario, run by `cargo xtask demo` after the toolchain step.
-///
-/// The whole pipeline on the paper's twin: simulate the temperature paper's tilter campaign
-/// (scenarios/paper-tilter.toml), calibrate with the paper's two-range model and with a
-/// quadratic one, write the blob, run the firmware in QEMU, verify both calibrations in the
-/// check positions (−10, +20, +45 °C) and print the summary; plots in `target/demo/`.
-fn demo_body(x: &mut Xtask) -> Result {
-    let dir = x.root.join("target/demo");
+/// Output directory of the demo, relative to the repository root; also the replay firmware's
+/// and the vector firmware's working directory in QEMU.
+const DEMO_DIR: &str = "target/demo";
+/// The demo's tilter campaign (calibration and checks) and shaker campaign (same unit).
+const DEMO_TILTER: &str = "scenarios/paper-tilter.toml";
+const DEMO_SHAKER: &str = "scenarios/paper-unit-shaker.toml";
+/// The method of the blob the replay firmware runs (the poly:2 calibration), as `verify`
+/// labels it: the host's number the firmware's is compared with.
+const DEMO_BLOB_METHOD: &str = "method 1";
+
+/// A file in the demo directory, as a string argument.
+fn demo_path(x: &Xtask, name: &str) -> String {
+    x.root.join(DEMO_DIR).join(name).to_string_lossy().into_owned()
+}
+
+/// `bins-cal` (release, built by the first call) with these arguments.
+fn demo_bins_cal(x: &Xtask, args: &[&str]) -> Command {
+    let mut c = x.host_cargo(["run", "--release", "-q", "-p", "bins-cal", "--"]);
+    c.args(args);
+    c
+}
+
+/// The demo's steps after the toolchain: the whole pipeline on the paper's twin. Simulate the
+/// temperature paper's tilter campaign and the shake-table plan on the same unit, calibrate
+/// with the paper's two-range model and with a quadratic one (with the vibration error, into
+/// the blob), replay the tilter recording through the replay firmware in QEMU with that blob
+/// (bit for bit against the host), verify both calibrations in the check positions (−10, +20,
+/// +45 °C), the firmware's output beside the host's, run the firmware on its test vectors and
+/// print the summary; everything in `target/demo/`.
+const DEMO_STEPS: [(&str, StepFn); 7] = [
+    ("simulate: tilter and shaker campaigns", demo_simulate),
+    ("calibrate: two-range (method 2); poly:2 (method 1) + shaker, blob", demo_calibrate),
+    ("build firmware", |x| x.build_firmware()),
+    ("replay the tilter recording in QEMU, bit for bit against the host", demo_replay),
+    ("verify in the check positions (host; firmware's output)", demo_verify),
+    ("firmware test vectors in QEMU", demo_vectors),
+    ("summary", |x| demo_summary(&x.root.join(DEMO_DIR))),
+];
+
+fn demo_simulate(x: &mut Xtask) -> Result {
+    let dir = x.root.join(DEMO_DIR);
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let p = |name: &str| dir.join(name).to_string_lossy().into_owned();
-    let scenario = x.root.join("scenarios/paper-tilter.toml").to_string_lossy().into_owned();
-    let bins_cal = |args: &[&str]| {
-        let mut c = x.host_cargo(["run", "--release", "-q", "-p", "bins-cal", "--"]);
-        c.args(args);
-        c
-    };
-    let rec = p("paper-tilter.csv");
-    x.run(bins_cal(&["simulate", &scenario, "-o", &rec, "--seed", "1"]))?;
-    // The paper's model: two ranges through −40/+20/+70 °C; then the quadratic (T(11)).
-    x.run(bins_cal(&["calibrate", "--tilter", &rec, "--model", "pwl", "--method", "2", "-o", &p("cal-pwl.toml")]))?;
-    x.run(bins_cal(&[
-        "calibrate",
-        "--tilter",
-        &rec,
-        "--model",
-        "poly:2",
-        "--method",
-        "1",
-        "-o",
-        &p("cal-poly2.toml"),
-        "--blob",
-        &p("cal-poly2.bin"),
-    ]))?;
-    x.run(bins_cal(&["verify", "--check", &rec, "--calib", &p("cal-pwl.toml"), "-o", &p("verify-pwl")]))?;
-    x.run(bins_cal(&["verify", "--check", &rec, "--calib", &p("cal-poly2.toml"), "-o", &p("verify-poly2")]))?;
-    // The firmware in QEMU on its test vectors.
+    for (scenario, rec) in [(DEMO_TILTER, "paper-tilter.csv"), (DEMO_SHAKER, "paper-shaker.csv")] {
+        let scenario = x.root.join(scenario).to_string_lossy().into_owned();
+        x.run(demo_bins_cal(x, &["simulate", &scenario, "-o", &demo_path(x, rec), "--seed", "1"]))?;
+    }
+    Ok(())
+}
+
+fn demo_calibrate(x: &mut Xtask) -> Result {
+    let (rec, shaker) = (demo_path(x, "paper-tilter.csv"), demo_path(x, "paper-shaker.csv"));
+    // The paper's model: two ranges through −40/+20/+70 °C; then the quadratic (T(11)) with
+    // the vibration error from the shaker, written into the blob the firmware runs.
+    let pwl = demo_path(x, "cal-pwl.toml");
+    x.run(demo_bins_cal(x, &["calibrate", "--tilter", &rec, "--model", "pwl", "--method", "2", "-o", &pwl]))?;
+    let (toml, bin, hex) =
+        (demo_path(x, "cal-poly2.toml"), demo_path(x, "cal-poly2.bin"), demo_path(x, "cal-poly2.hex"));
+    x.run(demo_bins_cal(
+        x,
+        &[
+            "calibrate",
+            "--tilter",
+            &rec,
+            "--shaker",
+            &shaker,
+            "--model",
+            "poly:2",
+            "--method",
+            "1",
+            "-o",
+            &toml,
+            "--blob",
+            &bin,
+            "--ihex",
+            &hex,
+        ],
+    ))
+}
+
+fn demo_replay(x: &mut Xtask) -> Result {
+    let dir = x.root.join(DEMO_DIR);
+    let (rec, blob, hex) = (dir.join("paper-tilter.csv"), dir.join("cal-poly2.bin"), dir.join("cal-poly2.hex"));
+    let (fw, host) = (dir.join("replay-qemu.csv"), dir.join("replay-host.csv"));
+    let t = Instant::now();
+    x.replay_firmware(&rec, &blob, &hex, &fw, &dir)?;
+    println!("replay firmware: {} in {:.1} s wall", fw.display(), t.elapsed().as_secs_f64());
+    x.replay_host_identical("paper-tilter", &rec, &blob, &fw, &host)
+}
+
+fn demo_verify(x: &mut Xtask) -> Result {
+    let rec = demo_path(x, "paper-tilter.csv");
+    let (pwl, poly) = (demo_path(x, "cal-pwl.toml"), demo_path(x, "cal-poly2.toml"));
+    x.run(demo_bins_cal(x, &["verify", "--check", &rec, "--calib", &pwl, "-o", &demo_path(x, "verify-pwl")]))?;
+    let (fw, out) = (demo_path(x, "replay-qemu.csv"), demo_path(x, "verify-poly2"));
+    x.run(demo_bins_cal(x, &["verify", "--check", &rec, "--calib", &poly, "--replayed", &fw, "-o", &out]))
+}
+
+/// The firmware in QEMU on its test vectors (the demo set) and their report.
+fn demo_vectors(x: &mut Xtask) -> Result {
+    let dir = x.root.join(DEMO_DIR);
     let input = dir.join("target/fw-vectors/in.bin");
     let output = dir.join("target/fw-vectors/out.bin");
     let (inp, out) = (input.to_string_lossy().into_owned(), output.to_string_lossy().into_owned());
     x.run(x.host_cargo(["run", "--release", "-q", "-p", "host-tests", "--bin", "gen-vectors", "--", "--demo", &inp]))?;
-    x.build_firmware()?;
     x.run_qemu_in(&x.elf("firmware"), &dir)?;
-    x.run(x.host_cargo(["run", "--release", "-q", "-p", "host-tests", "--bin", "demo-report", "--", &inp, &out]))?;
-    demo_summary(&dir)
+    x.run(x.host_cargo(["run", "--release", "-q", "-p", "host-tests", "--bin", "demo-report", "--", &inp, &out]))
 }
 
-/// max |Δg| [mg] per check temperature and method, from the two `verify.csv` files.
+/// max |Δg| [mg] per check temperature and method, from the two `verify.csv` files; the
+/// poly:2 file also has the firmware's output (`replayed`), set under the host's number it
+/// reproduces, and the replay's bit-identity is checked once more.
 fn demo_summary(dir: &Path) -> Result {
+    let fw_label = format!("{DEMO_BLOB_METHOD}: replay firmware in QEMU (blob)");
     let mut rows: Vec<(String, String, f64, f64)> = Vec::new(); // (model, method, temp, max)
+    // (temp, pos, host, firmware) [mg], to compare dwell by dwell.
+    let mut pairs: Vec<(f64, String, f64, f64)> = Vec::new();
     for (model, sub) in [("two-range (paper)", "verify-pwl"), ("poly:2", "verify-poly2")] {
         let path = dir.join(sub).join("verify.csv");
         let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         for line in text.lines().skip(1) {
             let c: Vec<&str> = line.split(',').collect();
-            let (Some(t), Some(m), Some(v)) = (c.first(), c.get(2), c.get(3)) else { continue };
+            let (Some(t), Some(pos), Some(m), Some(v)) = (c.first(), c.get(1), c.get(2), c.get(3)) else { continue };
             let (Ok(t), Ok(v)) = (t.parse::<f64>(), v.parse::<f64>()) else { continue };
-            if model.starts_with("poly") && *m == "T0 constants" {
+            let poly = model.starts_with("poly");
+            if poly && *m == "T0 constants" {
                 continue;
             }
-            let label = if *m == "T0 constants" { "-".to_string() } else { model.to_string() };
-            match rows.iter_mut().find(|r| r.0 == label && r.1 == *m && (r.2 - t).abs() < 0.5) {
+            let fw = *m == "replayed";
+            if poly && (fw || *m == DEMO_BLOB_METHOD) {
+                let k = match pairs.iter().position(|p| p.0 == t && p.1 == *pos) {
+                    Some(k) => k,
+                    None => {
+                        pairs.push((t, pos.to_string(), f64::NAN, f64::NAN));
+                        pairs.len() - 1
+                    }
+                };
+                if fw {
+                    pairs[k].3 = v;
+                } else {
+                    pairs[k].2 = v;
+                }
+            }
+            let label = if *m == "T0 constants" { "–".to_string() } else { model.to_string() };
+            let method = if fw { fw_label.clone() } else { m.to_string() };
+            match rows.iter_mut().find(|r| r.0 == label && r.1 == method && (r.2 - t).abs() < 0.5) {
                 Some(r) => r.3 = r.3.max(v.abs()),
-                None => rows.push((label, m.to_string(), t, v.abs())),
+                None => rows.push((label, method, t, v.abs())),
             }
         }
     }
     let mut temps: Vec<f64> = rows.iter().map(|r| r.2).collect();
     temps.sort_by(f64::total_cmp);
     temps.dedup();
+    // One line per (model, method) in file order, the firmware's under the host's.
+    let mut lines: Vec<(String, String)> = Vec::new();
+    for r in &rows {
+        if !lines.contains(&(r.0.clone(), r.1.clone())) {
+            lines.push((r.0.clone(), r.1.clone()));
+        }
+    }
+    if let Some(k) = lines.iter().position(|l| l.1 == fw_label) {
+        let fw = lines.remove(k);
+        let host = lines.iter().position(|l| l.0 == fw.0 && l.1 == DEMO_BLOB_METHOD).map_or(lines.len(), |h| h + 1);
+        lines.insert(host, fw);
+    }
     println!("\nmax |Δg| [mg] in the check positions CP1..CP6 (tolerance ±0.3 mg at T0, ±1 mg over the range):");
     print!("| model | method |");
     for t in &temps {
-        print!(" {t:+.1} °C |");
+        print!(" {} °C |", format!("{t:+.1}").replace('-', "−"));
     }
     println!();
     println!("|---|---|{}", "---:|".repeat(temps.len()));
-    let mut seen: Vec<(String, String)> = Vec::new();
-    for r in &rows {
-        if seen.contains(&(r.0.clone(), r.1.clone())) {
-            continue;
-        }
-        seen.push((r.0.clone(), r.1.clone()));
-        print!("| {} | {} |", r.0, r.1);
+    for (model, method) in &lines {
+        print!("| {model} | {method} |");
         for t in &temps {
-            let v = rows.iter().find(|q| q.0 == r.0 && q.1 == r.1 && q.2 == *t).map_or(f64::NAN, |q| q.3);
+            let v = rows.iter().find(|q| q.0 == *model && q.1 == *method && q.2 == *t).map_or(f64::NAN, |q| q.3);
             print!(" {v:.3} |");
         }
         println!();
     }
+    let verify = dir.join("verify-poly2/verify.csv");
+    if pairs.is_empty() || pairs.iter().any(|p| p.2.is_nan() || p.3.is_nan()) {
+        return Err(format!(
+            "{}: not every check dwell has a host {DEMO_BLOB_METHOD} and a `replayed` value",
+            verify.display()
+        ));
+    }
+    let worst = pairs.iter().map(|p| (p.3 - p.2).abs()).fold(0.0f64, f64::max);
+    let (fw, host) = (dir.join("replay-qemu.csv"), dir.join("replay-host.csv"));
+    let replayed = read(&fw)?;
+    if replayed != read(&host)? {
+        return Err(format!("{} and {} differ", fw.display(), host.display()));
+    }
+    let n = replayed.iter().filter(|&&c| c == b'\n').count().saturating_sub(1);
+    println!(
+        "replay firmware in QEMU = bins-cal replay on the host, bit for bit ({n} rows, {}); its |g| error minus the \
+         host's {DEMO_BLOB_METHOD} (f64, no VE) in the {} check dwells: at most {:.1} µg",
+        fw.display(),
+        pairs.len(),
+        worst * 1e3
+    );
     println!(
         "plots: {} and {}",
         dir.join("verify-pwl/verify.png").display(),

@@ -1,7 +1,8 @@
 //! `bins-cal calibrate` and `bins-cal verify` run as a user would: the real binary on a small
 //! simulated campaign (scenarios/test-tilter-3t.toml: the paper's unit, quadratic truth,
 //! tilter at +20/−40/+70 °C, checks at +20/−10/+45 °C, 5 s holds, 4100 rows) and on the real
-//! imucal recording; bad inputs give one-line errors and leave no output.
+//! imucal recording; `verify --replayed` on the output of `bins-cal replay`; bad inputs give
+//! one-line errors and leave no output.
 
 use bins_cal::calfile::CalibrationFile;
 use bins_comp::paper;
@@ -194,4 +195,78 @@ fn bad_inputs_give_one_line_errors_and_no_output() {
     let e = err(&["verify", "--check", s(&few), "--calib", s(&cal), "--pos-prefix", "XX", "-o", s(&vdir)]);
     assert!(e.contains("few.csv") && e.contains("no stationary check dwell"), "{e}");
     assert!(!vdir.join("verify.csv").exists());
+}
+
+/// The `(temp_C, pos) → dg_mg` rows of one method in verify.csv.
+fn dg_rows(csv: &Path, method: &str) -> Vec<(String, String, f64)> {
+    let text = std::fs::read_to_string(csv).unwrap();
+    text.lines()
+        .skip(1)
+        .filter_map(|l| {
+            let c: Vec<&str> = l.split(',').collect();
+            (c[2] == method).then(|| (c[0].to_string(), c[1].to_string(), c[3].parse().unwrap()))
+        })
+        .collect()
+}
+
+#[test]
+fn verify_replayed_reads_the_replay_output_in_the_same_dwells() {
+    let dir = campaign();
+    let rec = dir.join("t3.csv");
+    let (cal, blob, out) = (dir.join("r-poly2.toml"), dir.join("r-poly2.bin"), dir.join("r-replay.csv"));
+    ok(&["calibrate", "--tilter", s(&rec), "--model", "poly:2", "--method", "1", "-o", s(&cal), "--blob", s(&blob)]);
+    ok(&["replay", "--rec", s(&rec), "--calib", s(&blob), "-o", s(&out)]);
+    let v = dir.join("verify-replayed");
+    let table = ok(&["verify", "--check", s(&rec), "--calib", s(&cal), "--replayed", s(&out), "-o", s(&v)]);
+    assert!(table.contains("replayed"), "{table}");
+    let host = dg_rows(&v.join("verify.csv"), "method 1");
+    let replayed = dg_rows(&v.join("verify.csv"), "replayed");
+    assert_eq!(host.len(), 18, "6 positions at 3 temperatures");
+    assert_eq!(replayed.len(), host.len());
+    for (h, r) in host.iter().zip(&replayed) {
+        assert_eq!((&h.0, &h.1), (&r.0, &r.1));
+        // The replay is the f32 per-sample step, the host's method 1 the f64 one.
+        assert!((h.2 - r.2).abs() < 1e-3, "{} {}: host {} mg, replayed {} mg", h.0, h.1, h.2, r.2);
+    }
+    let png = std::fs::read(v.join("verify.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+
+    // Bad inputs: one line naming the replay output; no verify.csv.
+    let text = std::fs::read_to_string(&out).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let bad_dir = tmp.path().join("v");
+    let verify = |replayed: &[&Path]| {
+        let mut args = vec!["verify", "--check", s(&rec), "--calib", s(&cal), "--replayed"];
+        args.extend(replayed.iter().map(|p| s(p)));
+        args.extend(["-o", s(&bad_dir)]);
+        err(&args)
+    };
+    let short = tmp.path().join("short.csv");
+    std::fs::write(&short, text.lines().take(text.lines().count() / 2).collect::<Vec<_>>().join("\n") + "\n").unwrap();
+    let e = verify(&[&short]);
+    assert!(e.contains("short.csv") && e.contains("not the replay of that recording"), "{e}");
+    let header = tmp.path().join("header.csv");
+    std::fs::write(&header, text.replacen("t_s,ax_g", "time,ax_g", 1)).unwrap();
+    let e = verify(&[&header]);
+    assert!(e.contains("header.csv") && e.contains("line 1"), "{e}");
+    let field = tmp.path().join("field.csv");
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    lines[3] = lines[3].replacen(',', ",x", 1);
+    std::fs::write(&field, lines.join("\n") + "\n").unwrap();
+    let e = verify(&[&field]);
+    assert!(e.contains("field.csv") && e.contains("line 4") && e.contains("not a number"), "{e}");
+    let flagged = tmp.path().join("flagged.csv");
+    let uncal: Vec<String> = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| if i == 0 { l.to_string() } else { format!("{},4", l.rsplit_once(',').unwrap().0) })
+        .collect();
+    std::fs::write(&flagged, uncal.join("\n") + "\n").unwrap();
+    let e = verify(&[&flagged]);
+    assert!(e.contains("flagged.csv") && e.contains("INVALID_CALIBRATION"), "{e}");
+    let e = verify(&[&out, &out]);
+    assert!(e.contains("--replayed") && e.contains("2 file(s) for 1 check recording"), "{e}");
+    let e = verify(&[&tmp.path().join("missing.csv")]);
+    assert!(e.contains("missing.csv"), "{e}");
+    assert!(!bad_dir.join("verify.csv").exists());
 }

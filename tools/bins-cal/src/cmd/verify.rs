@@ -5,14 +5,19 @@
 //! `verify.csv`) and one PNG in the style of the paper's Figures 5/6: a panel per check
 //! temperature, grouped bars per check position and method, the ±0.3 mg and ±1 mg tolerances
 //! as lines.
+//!
+//! With `--replayed` (the output CSV of `bins-cal replay` or of the replay firmware, one per
+//! check recording) the same dwells are also averaged from that per-sample output: a column
+//! `replayed` beside the host's, so the firmware's |g| error is read on the very dwells the
+//! host's is.
 
 use super::segments::{self, Segment};
 use anyhow::{Context, anyhow, bail};
 use bins_cal::calfile::CalibrationFile;
 use bins_cal::fsio;
-use bins_comp::{Calibration, CalibrationParams, Form, Method};
+use bins_comp::{Calibration, CalibrationParams, Form, Method, Status};
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `bins-cal verify`.
 #[derive(clap::Args)]
@@ -29,6 +34,11 @@ pub struct Args {
     /// Only dwells whose label starts with this (`""`: every labelled dwell).
     #[arg(long, default_value = "CP")]
     pos_prefix: String,
+    /// Per-sample output of the calibration's method on each check recording, in the same
+    /// order (`t_s,ax_g,ay_g,az_g,status`, from `bins-cal replay` or `cargo xtask replay`): its
+    /// Δg in the same dwells is added as the method `replayed`.
+    #[arg(long, num_args = 1.., value_name = "OUT.csv")]
+    replayed: Vec<PathBuf>,
     #[command(flatten)]
     seg: segments::Options,
 }
@@ -56,8 +66,81 @@ pub fn dg(cal: &Calibration<f64>, s: &Segment) -> f64 {
     norm(sum.map(|x| x / n)) - norm(s.f_g)
 }
 
-/// One panel: check temperature, then (position, Δg [mg] per method).
-pub type Panel = (f64, Vec<(String, [f64; 5])>);
+/// The label of the `--replayed` column.
+pub const REPLAYED: &str = "replayed";
+
+/// One panel: check temperature, then (position, Δg [mg] per method, in the order of the
+/// method labels).
+pub type Panel = (f64, Vec<(String, Vec<f64>)>);
+
+/// A replayed output CSV: rows `(t_s, accel [g], status bits)` in file order.
+pub struct Replayed {
+    path: PathBuf,
+    rows: Vec<(f64, [f64; 3], u32)>,
+}
+
+impl Replayed {
+    /// Reads `t_s,ax_g,ay_g,az_g,status`; errors name the file and the line.
+    pub fn read(path: &Path) -> anyhow::Result<Replayed> {
+        let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+        let mut lines = text.lines();
+        let header = lines.next().unwrap_or_default();
+        if header.trim_end() != "t_s,ax_g,ay_g,az_g,status" {
+            bail!(
+                "{}: line 1: expected the header `t_s,ax_g,ay_g,az_g,status` of a replay output, got `{}`",
+                path.display(),
+                header
+            );
+        }
+        let mut rows = Vec::new();
+        for (k, line) in lines.enumerate() {
+            let bad = |what: &str| anyhow!("{}: line {}: {what}: `{line}`", path.display(), k + 2);
+            let c: Vec<&str> = line.trim_end().split(',').collect();
+            if c.len() != 5 {
+                return Err(bad("expected 5 fields"));
+            }
+            let num = |i: usize| c[i].parse::<f64>().map_err(|_| bad("not a number"));
+            let status = c[4].parse::<u32>().map_err(|_| bad("status is not an unsigned integer"))?;
+            rows.push((num(0)?, [num(1)?, num(2)?, num(3)?], status));
+        }
+        Ok(Replayed { path: path.to_path_buf(), rows })
+    }
+
+    /// Δg [g] of one dwell from the replayed output: the mean of its rows in the dwell's time
+    /// span, which must be as many as the recording's (else it is not this recording's
+    /// replay) and calibrated.
+    pub fn dg(&self, s: &Segment) -> anyhow::Result<f64> {
+        let first = self.rows.partition_point(|r| r.0 < s.t_s.0);
+        let end = self.rows.partition_point(|r| r.0 <= s.t_s.1);
+        let rows = self.rows.get(first..end).unwrap_or_default();
+        if rows.len() != s.rows.len() {
+            bail!(
+                "{}: {} rows in {} … {} s (dwell {} of {}), the recording has {}: not the replay of that recording",
+                self.path.display(),
+                rows.len(),
+                s.t_s.0,
+                s.t_s.1,
+                s.pos,
+                s.file.display(),
+                s.rows.len()
+            );
+        }
+        if rows.iter().any(|r| r.2 & Status::INVALID_CALIBRATION.0 != 0) {
+            bail!(
+                "{}: dwell {} of {} ({} … {} s): samples flagged INVALID_CALIBRATION (no valid calibration was used)",
+                self.path.display(),
+                s.pos,
+                s.file.display(),
+                s.t_s.0,
+                s.t_s.1
+            );
+        }
+        let n = rows.len() as f64;
+        let mean: [f64; 3] = std::array::from_fn(|i| rows.iter().map(|r| r.1[i]).sum::<f64>() / n);
+        let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        Ok(norm(mean) - norm(s.f_g))
+    }
+}
 
 /// Runs `bins-cal verify`.
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -68,31 +151,39 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|(_, m)| Calibration::new(&params.with_method(*m)))
         .collect::<Result<_, _>>()
         .map_err(|e| anyhow!("{}: {e}", args.calib.display()))?;
+    if !args.replayed.is_empty() && args.replayed.len() != args.check.len() {
+        bail!(
+            "--replayed: {} file(s) for {} check recording(s): give one replay output per recording, in the same order",
+            args.replayed.len(),
+            args.check.len()
+        );
+    }
+    let replayed: Vec<Replayed> = args.replayed.iter().map(|p| Replayed::read(p)).collect::<Result<_, _>>()?;
+    let mut names: Vec<&str> = METHODS.iter().map(|m| m.0).collect();
+    if !replayed.is_empty() {
+        names.push(REPLAYED);
+    }
     let (all, files) = segments::find_all(&args.check, &args.seg)?;
     let all: Vec<Segment> = all.into_iter().filter(|s| s.pos.starts_with(&args.pos_prefix)).collect();
     let groups = segments::by_temperature(&all, args.seg.temp_tol_c);
     if groups.is_empty() {
         bail!("{files}: no stationary check dwell with a settled temperature");
     }
-    let panels: Vec<Panel> = groups
-        .iter()
-        .map(|(t, segs)| {
-            let rows = segs
-                .iter()
-                .map(|s| {
-                    let mut v = [0.0; 5];
-                    for (k, c) in cals.iter().enumerate() {
-                        v[k] = dg(c, s) * 1e3;
-                    }
-                    (s.pos.clone(), v)
-                })
-                .collect();
-            (*t, rows)
-        })
-        .collect();
-    let (csv, table) = tables(&panels, &params);
+    let mut panels: Vec<Panel> = Vec::new();
+    for (t, segs) in &groups {
+        let mut rows = Vec::new();
+        for s in segs {
+            let mut v: Vec<f64> = cals.iter().map(|c| dg(c, s) * 1e3).collect();
+            if let Some(r) = args.check.iter().position(|p| *p == s.file).and_then(|k| replayed.get(k)) {
+                v.push(r.dg(s)? * 1e3);
+            }
+            rows.push((s.pos.clone(), v));
+        }
+        panels.push((*t, rows));
+    }
+    let (csv, table) = tables(&panels, &params, &names);
     std::fs::create_dir_all(&args.output).with_context(|| format!("{}", args.output.display()))?;
-    let png = plot(&panels, &format!("T0 = {:.2} °C, {}", params.t0_c, args.calib.display()))?;
+    let png = plot(&panels, &names, &format!("T0 = {:.2} °C, {}", params.t0_c, args.calib.display()))?;
     print!("{table}");
     fsio::write_atomic(&args.output.join("verify.csv"), csv.as_bytes())?;
     fsio::write_atomic(&args.output.join("verify.png"), &png)?;
@@ -101,8 +192,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// The CSV (`temp_C,pos,method,dg_mg`) and the printed table (Δg [mg] per dwell and method,
-/// then max |Δg| per temperature).
-pub fn tables(panels: &[Panel], params: &CalibrationParams) -> (String, String) {
+/// then max |Δg| per temperature); `names` labels the methods of each row's values.
+pub fn tables(panels: &[Panel], params: &CalibrationParams, names: &[&str]) -> (String, String) {
     let mut csv = String::from("temp_C,pos,method,dg_mg\n");
     let mut t = String::new();
     let _ = writeln!(
@@ -111,18 +202,19 @@ pub fn tables(panels: &[Panel], params: &CalibrationParams) -> (String, String) 
         params.t0_c, params.temp_range_c.0, params.temp_range_c.1
     );
     let _ = write!(t, "{:>9} {:<6}", "temp_C", "pos");
-    for (name, _) in METHODS {
+    for name in names {
         let _ = write!(t, " {name:>20}");
     }
     let _ = writeln!(t);
     for (temp, rows) in panels {
-        let mut max = [0.0f64; 5];
+        let mut max = vec![0.0f64; names.len()];
         for (pos, v) in rows {
             let _ = write!(t, "{temp:>9.2} {pos:<6}");
-            for k in 0..5 {
-                let _ = write!(t, " {:>+20.4}", v[k]);
-                let _ = writeln!(csv, "{temp},{pos},{},{}", METHODS[k].0, v[k]);
-                max[k] = max[k].max(v[k].abs());
+            for (k, name) in names.iter().enumerate() {
+                let x = v.get(k).copied().unwrap_or(f64::NAN);
+                let _ = write!(t, " {x:>+20.4}");
+                let _ = writeln!(csv, "{temp},{pos},{name},{x}");
+                max[k] = max[k].max(x.abs());
             }
             let _ = writeln!(t);
         }
@@ -138,8 +230,8 @@ pub fn tables(panels: &[Panel], params: &CalibrationParams) -> (String, String) 
 /// The font the plots use (DejaVu Sans, embedded; licence in `assets/DejaVuSans.LICENSE`).
 static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
-/// Renders the panels as a PNG (bytes).
-pub fn plot(panels: &[Panel], title: &str) -> anyhow::Result<Vec<u8>> {
+/// Renders the panels as a PNG (bytes): a bar per method of `names` (at most six).
+pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec<u8>> {
     use plotters::prelude::*;
     use plotters::style::{FontStyle, register_font};
     let _ = register_font("sans-serif", FontStyle::Normal, FONT);
@@ -163,14 +255,16 @@ pub fn plot(panels: &[Panel], title: &str) -> anyhow::Result<Vec<u8>> {
             RGBColor(214, 39, 40),
             RGBColor(255, 127, 14),
             RGBColor(44, 160, 44),
+            RGBColor(148, 103, 189),
         ];
+        let m = names.len().min(colors.len());
         // The legend, once, under the title.
         let font = ("sans-serif", 14).into_font();
         let mut x = 20;
-        for (k, (name, _)) in METHODS.iter().enumerate() {
+        for (k, name) in names.iter().take(m).enumerate() {
             top.draw(&Rectangle::new([(x, 45), (x + 14, 59)], colors[k].filled())).map_err(|e| anyhow!("plot: {e}"))?;
             top.draw(&Text::new(name.to_string(), (x + 20, 45), font.clone())).map_err(|e| anyhow!("plot: {e}"))?;
-            x += 40 + 8 * name.len() as i32;
+            x += 30 + 7 * name.len() as i32;
         }
         for (label, style) in [("±0.3 mg", BLACK.stroke_width(2)), ("±1 mg", RGBColor(150, 0, 150).stroke_width(1))] {
             top.draw(&PathElement::new([(x, 52), (x + 20, 52)], style)).map_err(|e| anyhow!("plot: {e}"))?;
@@ -178,7 +272,7 @@ pub fn plot(panels: &[Panel], title: &str) -> anyhow::Result<Vec<u8>> {
             x += 100;
         }
         for ((temp, rows), area) in panels.iter().zip(areas) {
-            let lim = rows.iter().flat_map(|r| r.1).fold(1.2f64, |a, b| a.max(b.abs() * 1.1));
+            let lim = rows.iter().flat_map(|r| r.1.iter()).fold(1.2f64, |a, b| a.max(b.abs() * 1.1));
             let n = rows.len().max(1);
             let mut chart = ChartBuilder::on(&area)
                 .caption(format!("check at {temp:+.1} °C"), ("sans-serif", 18))
@@ -204,13 +298,12 @@ pub fn plot(panels: &[Panel], title: &str) -> anyhow::Result<Vec<u8>> {
                 .label_style(("sans-serif", 14))
                 .draw()
                 .map_err(|e| anyhow!("plot: {e}"))?;
-            let bw = 0.8 / 5.0;
-            for k in 0..5 {
-                let c = colors[k];
+            let bw = 0.8 / m as f64;
+            for (k, c) in colors.iter().take(m).enumerate() {
                 chart
                     .draw_series(rows.iter().enumerate().map(|(i, r)| {
                         let x0 = i as f64 + 0.1 + k as f64 * bw;
-                        Rectangle::new([(x0, 0.0), (x0 + bw * 0.9, r.1[k])], c.filled())
+                        Rectangle::new([(x0, 0.0), (x0 + bw * 0.9, r.1.get(k).copied().unwrap_or(0.0))], c.filled())
                     }))
                     .map_err(|e| anyhow!("plot: {e}"))?;
             }
