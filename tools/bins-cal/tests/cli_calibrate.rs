@@ -7,36 +7,10 @@
 use bins_cal::calfile::CalibrationFile;
 use bins_comp::paper;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_bins-cal"))
-}
-
-fn repo(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(rel)
-}
-
-fn run(args: &[&str]) -> Output {
-    bin().args(args).output().expect("bins-cal runs")
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = run(args);
-    assert!(o.status.success(), "{args:?} failed: {}", String::from_utf8_lossy(&o.stderr));
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-/// The one-line error of a run that must fail.
-fn err(args: &[&str]) -> String {
-    let o = run(args);
-    assert!(!o.status.success(), "{args:?} should fail");
-    let e = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert_eq!(e.trim_end().lines().count(), 1, "one line: {e}");
-    assert!(e.starts_with("bins-cal: error: "), "{e}");
-    e
-}
+mod common;
+use common::{err, ok, repo};
 
 /// The simulated campaign, made once (the directory lives for the test process).
 fn campaign() -> &'static Path {

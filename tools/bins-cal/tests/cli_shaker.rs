@@ -11,37 +11,11 @@ use bins_comp::vibration::shake::ten_position_plan;
 use bins_comp::vibration::tables::{AL15, AL15_K1_V_PER_G};
 use bins_comp::vibration::{ConversionFunction, VibMoments, exact_terms, harmonic_abs_excess_g};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 use std::sync::OnceLock;
 use std::time::Instant;
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_bins-cal"))
-}
-
-fn repo(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(rel)
-}
-
-fn run(args: &[&str]) -> Output {
-    bin().args(args).output().expect("bins-cal runs")
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = run(args);
-    assert!(o.status.success(), "{args:?} failed: {}", String::from_utf8_lossy(&o.stderr));
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-/// The one-line error of a run that must fail.
-fn err(args: &[&str]) -> String {
-    let o = run(args);
-    assert!(!o.status.success(), "{args:?} should fail");
-    let e = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert_eq!(e.trim_end().lines().count(), 1, "one line: {e}");
-    assert!(e.starts_with("bins-cal: error: "), "{e}");
-    e
-}
+mod common;
+use common::{err, ok, repo};
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
