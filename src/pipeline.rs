@@ -19,8 +19,10 @@
 //!   ([`output_gains`](VibrationConfig::output_gains); the AL-15 at 6 g magnifies the
 //!   vibration by 2.5 %, which would overstate the VE by 5 %); the exact moment form is used
 //!   and `a_p` is solved from the block mean the same way. The VE depends on the block alone,
-//!   so it is computed once, on the sample that completes the block, and subtracted from
-//!   every sample until the next block completes. The window is fed only while `Online` is
+//!   so it is computed once per block, spread over four steps so that no step carries all of
+//!   it (the moments on the step that completes the block, one accelerometer's VE on each of
+//!   the next three), and subtracted from every sample from then until the next block's is
+//!   ready. The window is fed only while `Online` is
 //!   selected and emptied by any other source, so after switching to `Online` the first
 //!   estimate comes with the first complete block (flagged not ready until then).
 //!
@@ -42,8 +44,8 @@
 use crate::compensate::{Calibration, Sample, Status, TempCache};
 use crate::float::Float;
 use crate::linalg::Vec3;
-use crate::vibration::window::{MomentWindow, Pushed};
-use crate::vibration::{MAX_LEVEL_G, VibrationConfig};
+use crate::vibration::window::{MomentWindow, Pushed, WindowMoments};
+use crate::vibration::{Axis, MAX_LEVEL_G, VibrationConfig};
 
 /// What the VE of a sample is computed for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -70,8 +72,10 @@ pub struct PipelineState<F, const W: usize> {
     /// Moments of the compensated samples, by blocks of `W`.
     pub window: MomentWindow<F, W>,
     /// The online VE [g] of the last complete block and whether it was clamped (`None`
-    /// before the first block).
+    /// before the first block's VE is complete).
     online_ve: Option<(Vec3<F>, bool)>,
+    /// The VE of the block that completed last, being computed one accelerometer per step.
+    next_ve: Option<NextVe<F>>,
     /// Temperature terms of the last reading.
     temps: TempCache<F>,
 }
@@ -85,8 +89,19 @@ impl<F: Float, const W: usize> Default for PipelineState<F, W> {
 impl<F: Float, const W: usize> PipelineState<F, W> {
     /// The state at power-on: empty window, nothing cached.
     pub const fn new() -> Self {
-        PipelineState { window: MomentWindow::new(), online_ve: None, temps: TempCache::new() }
+        PipelineState { window: MomentWindow::new(), online_ve: None, next_ve: None, temps: TempCache::new() }
     }
+}
+
+/// A completed block's VE in progress: its moments (referred to the acceleration and
+/// clamped) and the accelerometers done so far.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct NextVe<F> {
+    moments: WindowMoments<F>,
+    /// Accelerometers done (0..3, in the order x, y, z).
+    done: usize,
+    ve_g: Vec3<F>,
+    clamped: bool,
 }
 
 impl<F: Float> Pipeline<F> {
@@ -131,17 +146,33 @@ impl<F: Float> Pipeline<F> {
         if source != VibrationSource::Online {
             // The window serves the online source only: a block must not span a time when
             // it was not selected.
-            if !state.window.is_empty() || state.online_ve.is_some() {
+            if !state.window.is_empty() || state.online_ve.is_some() || state.next_ve.is_some() {
                 state.window.reset();
                 state.online_ve = None;
+                state.next_ve = None;
             }
-        } else if usable && state.window.push(&s.accel_g) == Pushed::BlockDone {
-            state.online_ve = state.window.moments().map(|mut m| {
-                m.unscale(&self.vib.output_gains(&m));
-                let sigma_clamped = m.clamp_sigma(F::of(MAX_LEVEL_G));
-                let (e, clamped) = self.vib.correction_from_moments_g(&m, &m.mean_g);
-                (e, sigma_clamped || clamped)
-            });
+        } else if usable {
+            // One piece of the online VE per step, so that no step carries a whole block's:
+            // the moments on the step that completes a block, then one accelerometer's VE on
+            // each of the next three.
+            if let Some(n) = &mut state.next_ve {
+                let axis = [Axis::X, Axis::Y, Axis::Z][n.done.min(2)];
+                let (e, c) = self.vib.correction_from_moments_on_g(&n.moments, &n.moments.mean_g, axis);
+                n.ve_g[n.done.min(2)] = e;
+                n.clamped |= c;
+                n.done += 1;
+                if n.done >= 3 {
+                    state.online_ve = Some((n.ve_g, n.clamped));
+                    state.next_ve = None;
+                }
+            }
+            if state.window.push(&s.accel_g) == Pushed::BlockDone {
+                state.next_ve = state.window.moments().map(|mut m| {
+                    m.unscale(&self.vib.output_gains(&m));
+                    let clamped = m.clamp_sigma(F::of(MAX_LEVEL_G));
+                    NextVe { moments: m, done: 0, ve_g: [F::ZERO; 3], clamped }
+                });
+            }
         }
         let mut ve = [F::ZERO; 3];
         if usable {

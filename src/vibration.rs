@@ -704,15 +704,26 @@ impl<F: Float> VibrationConfig<F> {
     pub fn correction_from_moments_g(&self, m: &window::WindowMoments<F>, y_g: &Vec3<F>) -> (Vec3<F>, bool) {
         let mut out = [F::ZERO; 3];
         let mut clamped = false;
-        for ((o, cf), axis) in out.iter_mut().zip(self.cf.iter()).zip(Axis::ALL) {
-            let (mom, abs_excess) = m.on_accel(axis);
-            let terms = exact_terms(cf, &mom, abs_excess);
-            let y = AccelAxes::from_unit(y_g, axis).ia;
-            let (ve, c) = solve_static_g(y, |_| terms);
+        for (o, axis) in out.iter_mut().zip(Axis::ALL) {
+            let (ve, c) = self.correction_from_moments_on_g(m, y_g, axis);
             *o = ve;
             clamped |= c;
         }
         (out, clamped)
+    }
+
+    /// [`correction_from_moments_g`](Self::correction_from_moments_g) for one accelerometer
+    /// (`axis`): its VE [g] and whether its solution was clamped.
+    pub fn correction_from_moments_on_g(&self, m: &window::WindowMoments<F>, y_g: &Vec3<F>, axis: Axis) -> (F, bool) {
+        let cf = match axis {
+            Axis::X => &self.cf[0],
+            Axis::Y => &self.cf[1],
+            Axis::Z => &self.cf[2],
+        };
+        let (mom, abs_excess) = m.on_accel(axis);
+        let terms = exact_terms(cf, &mom, abs_excess);
+        let y = AccelAxes::from_unit(y_g, axis).ia;
+        solve_static_g(y, |_| terms)
     }
 
     /// The exact VE [g] of each accelerometer from measured window moments

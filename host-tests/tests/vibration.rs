@@ -1047,21 +1047,24 @@ fn pipeline_online_removes_the_ve_from_fast_samples() {
     let mut sum64 = [0.0; 3];
     let mut sum32 = [0.0; 3];
     let mut raw = [0.0; 3];
-    for k in 0..2 * W {
+    // The first block completes at sample W − 1; its VE is computed over the next three
+    // steps (one accelerometer each) and subtracted from sample W + 2 on.
+    let ready = W + 2;
+    for k in 0..ready + W {
         let s = (std::f64::consts::TAU * f * k as f64 / fs).sin();
         let a: [f64; 3] = [0, 1, 2].map(|i| a_p[i] + amp[i] * s);
         let out = [0, 1, 2].map(|i| a[i] + nl(&a, i) - nl(&a_p, i));
         let u = signals(&out, t);
         let o64 = p64.step(&mut s64, u, t, VibrationSource::Online);
         let o32 = p32.step(&mut s32, u.map(|x| x as f32), t as f32, VibrationSource::Online);
-        if k + 1 < W {
+        if k < ready {
             assert_eq!(o64.status, Status::VIBRATION_ESTIMATE_NOT_READY);
             assert_eq!(o32.status, Status::VIBRATION_ESTIMATE_NOT_READY);
         } else {
             assert_eq!(o64.status, Status::OK);
             assert_eq!(o32.status, Status::OK);
         }
-        if k >= W {
+        if k >= ready {
             for i in 0..3 {
                 sum64[i] += o64.accel_g[i] / W as f64;
                 sum32[i] += o32.accel_g[i] as f64 / W as f64;
@@ -1106,7 +1109,8 @@ fn pipeline_status_policies() {
     for k in 0..16 {
         let x = if k % 2 == 0 { 12.0 } else { -12.0 };
         let s = p.step(&mut st, signals(&[x, 0.0, 0.0], 20.0).map(|x| x as f32), 20.0, VibrationSource::Online);
-        if k >= 7 {
+        // Block complete at sample 7, its VE ready three steps later.
+        if k >= 10 {
             assert!(s.status.contains(Status::VIBRATION_OUT_OF_RANGE), "sample {k}: {:?}", s.status);
             assert!(s.accel_g.iter().all(|a| a.is_finite()));
         }
