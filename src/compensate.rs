@@ -44,8 +44,8 @@ impl Status {
     pub const INVALID_CALIBRATION: Status = Status(1 << 2);
     /// K(T) was not invertible at this temperature; the T0 inverse was used.
     pub const SINGULAR_AT_TEMP: Status = Status(1 << 3);
-    /// No vibration-error estimate was available, so none was subtracted: the online window
-    /// is not yet full, or the selected vibration profile does not exist (see
+    /// No vibration-error estimate was available, so none was subtracted: the online
+    /// estimate has no complete block yet, or the selected vibration profile does not exist (see
     /// [`pipeline`](crate::pipeline)).
     pub const VIBRATION_ESTIMATE_NOT_READY: Status = Status(1 << 4);
     /// The vibration level (σ or amplitude above 10 g) or the static acceleration along an

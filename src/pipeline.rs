@@ -1,7 +1,8 @@
 //! The per-sample step with vibration-error subtraction: temperature compensation by
 //! [`Calibration::compensate`], then the predicted VE of each accelerometer (§7) subtracted
 //! from its axis. The configuration ([`Pipeline`]: calibration and VE model) is immutable;
-//! the running state ([`PipelineState`]: the online moment window) is separate and mutable.
+//! the running state ([`PipelineState`]: the online moment window, the temperature terms of
+//! the last reading) is separate and mutable.
 //!
 //! # Where the vibration comes from
 //!
@@ -22,13 +23,13 @@
 //!   so it is computed once per block, spread over four steps so that no step carries all of
 //!   it (the moments on the step that completes the block, one accelerometer's VE on each of
 //!   the next three), and subtracted from every sample from then until the next block's is
-//!   ready. The window is fed only while `Online` is
-//!   selected and emptied by any other source, so after switching to `Online` the first
-//!   estimate comes with the first complete block (flagged not ready until then).
+//!   ready. The window is fed only while `Online` is selected and emptied by any other
+//!   source, so after switching to `Online` the first estimate comes three steps after the
+//!   first complete block (flagged not ready until then).
 //!
 //! # Policies
 //!
-//! - No estimate (window not full, unknown profile): nothing subtracted, flagged
+//! - No estimate (no complete block's VE yet, unknown profile): nothing subtracted, flagged
 //!   [`Status::VIBRATION_ESTIMATE_NOT_READY`].
 //! - Static acceleration beyond ±[`MAX_STATIC_G`](crate::vibration::MAX_STATIC_G) on an
 //!   axis, or an online σ beyond [`MAX_LEVEL_G`]: clamped to the limit for the VE, flagged
@@ -38,8 +39,8 @@
 //!
 //! Allocation-free, panic-free and bounded time: one compensation (its temperature terms
 //! reused while the temperature reading does not change, [`TempCache`]), one window update
-//! (O(1)), and per step at most three VE solutions of five evaluations each (a profile; or an
-//! online block that just completed).
+//! (O(1)), and per step at most three VE solutions of five evaluations each (a profile), or
+//! one share of an online block's VE (its moments, or one accelerometer's solution).
 
 use crate::compensate::{Calibration, Sample, Status, TempCache};
 use crate::float::Float;
