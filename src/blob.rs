@@ -141,26 +141,26 @@ pub mod limits {
     pub const SCALE_FACTOR_MAX_V_PER_G: f64 = 1e3;
     /// Largest |K_ij| (i ≠ j) as a fraction of |K_ii| of the same row.
     pub const CROSS_RATIO_MAX: f64 = 0.5;
-    /// Largest |U0_i| [V].
+    /// Largest |U0_i| \[V\].
     pub const U0_MAX_V: f64 = 100.0;
     /// Lowest T0, range end or knot [°C].
     pub const TEMP_MIN_C: f64 = -100.0;
     /// Highest T0, range end or knot [°C].
     pub const TEMP_MAX_C: f64 = 200.0;
-    /// Largest change of U0 one temperature term may make [V] (see [`super::Field::limit`]).
+    /// Largest change of U0 one temperature term may make \[V\] (see [`super::Field::limit`]).
     pub const DU0_MAX_V: f64 = 100.0;
-    /// Largest relative change of a scale factor one temperature term may make [1].
+    /// Largest relative change of a scale factor one temperature term may make \[1\].
     pub const REL_SCALE_MAX: f64 = 1.0;
-    /// Largest |a0| of a conversion function [g].
+    /// Largest |a0| of a conversion function \[g\].
     pub const A0_MAX_G: f64 = 1.0;
-    /// Largest |δ_1A| (scale-factor asymmetry) [1].
+    /// Largest |δ_1A| (scale-factor asymmetry) \[1\].
     pub const DELTA_1A_MAX: f64 = 0.1;
     /// Largest |m1|, |m2| (additive cross-sensitivity) [g/g].
     pub const M_LINEAR_MAX: f64 = 0.5;
-    /// The nonlinear terms k2…k5, m31, m32 may contribute at most this much each [g] at the
+    /// The nonlinear terms k2…k5, m31, m32 may contribute at most this much each \[g\] at the
     /// full scale [`crate::vibration::MAX_STATIC_G`] (10 g): |k_n|·10ⁿ ≤ 1 g, |m3j|·10² ≤ 1 g.
     pub const NONLINEAR_TERM_MAX_G: f64 = 1.0;
-    /// Highest profile frequency or band edge [Hz].
+    /// Highest profile frequency or band edge \[Hz\].
     pub const FREQ_MAX_HZ: f64 = 1e5;
     /// Earliest calibration year.
     pub const YEAR_MIN: u16 = 1970;

@@ -108,7 +108,7 @@ pub enum Method {
 /// One compensated sample.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sample<F> {
-    /// Specific force along the unit's x, y, z axes [g].
+    /// Specific force along the unit's x, y, z axes \[g\].
     pub accel_g: Vec3<F>,
     /// What happened on the way.
     pub status: Status,
@@ -479,8 +479,8 @@ impl<F: Float> Calibration<F> {
         out
     }
 
-    /// The per-sample step: signals `u_v` [V] and the unit's temperature `temp_c` [°C] to
-    /// specific force [g] and status. Allocation-free, panic-free, bounded time; the output is
+    /// The per-sample step: signals `u_v` \[V\] and the unit's temperature `temp_c` [°C] to
+    /// specific force \[g\] and status. Allocation-free, panic-free, bounded time; the output is
     /// always finite (see the module's policies). Equal, bit for bit, to
     /// [`apply`](Self::apply) of [`at_temperature`](Self::at_temperature).
     #[inline]
@@ -528,7 +528,7 @@ impl<F: Float> Calibration<F> {
         AtTemperature { status, terms }
     }
 
-    /// The signal-dependent half of the step: signals `u_v` [V] to specific force [g] with
+    /// The signal-dependent half of the step: signals `u_v` \[V\] to specific force \[g\] with
     /// the temperature terms `at` of [`at_temperature`](Self::at_temperature) (T(1) with
     /// method 1 or 2 of §5).
     #[inline]
@@ -573,7 +573,7 @@ impl<F: Float> Calibration<F> {
 enum TempTerms<F> {
     /// No temperature correction.
     None,
-    /// Method 1: `U0(T)` [V] and M (`None` when K(T) is singular: the T0 inverse is used).
+    /// Method 1: `U0(T)` \[V\] and M (`None` when K(T) is singular: the T0 inverse is used).
     Method1 { u0_t: Vec3<F>, m: Option<Mat3<F>> },
     /// Method 2: the coefficient changes of T(3)/T(4) and the form of the correction.
     Method2 { d: CoefDelta<F>, form: Form },

@@ -47,7 +47,7 @@ pub trait Float:
     fn max(self, other: Self) -> Self;
     /// The smaller of two values; a NaN operand yields the other one.
     fn min(self, other: Self) -> Self;
-    /// Arc cosine [rad] (`libm`, software; identical on host and target).
+    /// Arc cosine \[rad\] (`libm`, software; identical on host and target).
     fn acos(self) -> Self;
     /// Exponential (`libm`, software; identical on host and target).
     fn exp(self) -> Self;

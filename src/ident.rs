@@ -8,7 +8,7 @@ use crate::linalg::{self, Vec3};
 use crate::model::Constants;
 use crate::temperature::{CoefDelta, MAX_KNOTS, MAX_POLY_ORDER, TempModel};
 
-/// Specific force [g] on the unit's axes in the tilter's test positions TP1…TP6 (§2).
+/// Specific force \[g\] on the unit's axes in the tilter's test positions TP1…TP6 (§2).
 pub const TILTER_POSITIONS_G: [Vec3<f64>; 6] =
     [[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
 
@@ -122,7 +122,7 @@ pub fn fit_constants<F: Float>(f_g: &[Vec3<F>], u_v: &[Vec3<F>]) -> Result<Const
     if c.is_finite() { Ok(c) } else { Err(FitError::NonFinite) }
 }
 
-/// The change of the constants from `c0` (at T0) to `c`: ΔU0 [V] and ΔK_ij/K_ij(T0) — the
+/// The change of the constants from `c0` (at T0) to `c`: ΔU0 \[V\] and ΔK_ij/K_ij(T0) — the
 /// right-hand sides of T(11)/T(12) (with the division by K_cal that T(3) implies).
 pub fn coef_delta<F: Float>(c0: &Constants<F>, c: &Constants<F>) -> Result<CoefDelta<F>, FitError> {
     let mut d = CoefDelta::zero();
@@ -290,7 +290,7 @@ pub fn poly_from_constants<F: Float>(
     Ok(TempModel::Poly { order: order as u8, coef })
 }
 
-/// Specific force [g] in the tilted check positions CP1…CP6 of §6 (T(13)), for a tilt `θ`.
+/// Specific force \[g\] in the tilted check positions CP1…CP6 of §6 (T(13)), for a tilt `θ`.
 ///
 /// The paper's Figure 3 (the positions' drawing) did not survive in its text, so the project
 /// defines them: CPm starts from TPm, whose axis `a` is vertical, and tilts both horizontal

@@ -12,7 +12,7 @@ use crate::linalg::{self, Mat3, Vec3};
 pub struct Constants<F> {
     /// K [V/g], row-major.
     pub k_v_per_g: Mat3<F>,
-    /// U0 [V].
+    /// U0 \[V\].
     pub u0_v: Vec3<F>,
 }
 

@@ -72,7 +72,7 @@ pub struct Pipeline<F> {
 pub struct PipelineState<F, const W: usize> {
     /// Moments of the compensated samples, by blocks of `W`.
     pub window: MomentWindow<F, W>,
-    /// The online VE [g] of the last complete block and whether it was clamped (`None`
+    /// The online VE \[g\] of the last complete block and whether it was clamped (`None`
     /// before the first block's VE is complete).
     online_ve: Option<(Vec3<F>, bool)>,
     /// The VE of the block that completed last, being computed one accelerometer per step.
@@ -121,8 +121,8 @@ impl<F: Float> Pipeline<F> {
         &self.vib
     }
 
-    /// The per-sample step: signals `u_v` [V] and temperature `temp_c` [°C] to specific
-    /// force [g] with the VE for `source` subtracted, and status.
+    /// The per-sample step: signals `u_v` \[V\] and temperature `temp_c` [°C] to specific
+    /// force \[g\] with the VE for `source` subtracted, and status.
     #[inline]
     pub fn step<const W: usize>(
         &self,
@@ -134,7 +134,7 @@ impl<F: Float> Pipeline<F> {
         self.step_with_ve(state, u_v, temp_c, source).0
     }
 
-    /// [`step`](Self::step), also returning the VE [g] that was subtracted from each axis.
+    /// [`step`](Self::step), also returning the VE \[g\] that was subtracted from each axis.
     pub fn step_with_ve<const W: usize>(
         &self,
         state: &mut PipelineState<F, W>,

@@ -9,9 +9,9 @@
 //!
 //! # Streams
 //!
-//! A recording is replayed as a stream of [`INPUT_BYTES`]-byte records (`u_v` f32×3 [V],
+//! A recording is replayed as a stream of [`INPUT_BYTES`]-byte records (`u_v` f32×3 \[V\],
 //! `temp_c` f32 [°C], little-endian), and the results come back as [`OUTPUT_BYTES`]-byte
-//! records (`accel_g` f32×3 [g], status u32, little-endian), one per input in input order.
+//! records (`accel_g` f32×3 \[g\], status u32, little-endian), one per input in input order.
 
 use crate::compensate::{Sample, Status};
 use crate::float::Float;
@@ -31,7 +31,7 @@ pub const SOURCE: VibrationSource = VibrationSource::Online;
 /// One sample's inputs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Input<F> {
-    /// x, y, z accelerometer signals [V].
+    /// x, y, z accelerometer signals \[V\].
     pub u_v: Vec3<F>,
     /// Temperature of the unit [°C].
     pub temp_c: F,

@@ -1,7 +1,7 @@
 //! Temperature models of the 12 constants, T(3) (polynomial) and T(4) (piecewise-linear).
 //!
 //! Both models answer the same question, "how far have the constants moved at ΔT = T − T0?",
-//! as a [`CoefDelta`]: absolute offsets ΔU0 [V] and relative scale changes ΔK_ij/K_ij [1]
+//! as a [`CoefDelta`]: absolute offsets ΔU0 \[V\] and relative scale changes ΔK_ij/K_ij \[1\]
 //! (β on the diagonal, γ off it). Both compensation methods of §5 consume only that, so any
 //! model works with any method.
 
@@ -16,9 +16,9 @@ pub const MAX_KNOTS: usize = 8;
 /// How far the constants have moved from their values at T0.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct CoefDelta<F> {
-    /// ΔU0_i [V] (α terms of T(3)/T(4)).
+    /// ΔU0_i \[V\] (α terms of T(3)/T(4)).
     pub du0_v: Vec3<F>,
-    /// ΔK_ij / K_ij(T0) [1]: β_ii on the diagonal, γ_ij off it.
+    /// ΔK_ij / K_ij(T0) \[1\]: β_ii on the diagonal, γ_ij off it.
     pub rel_k: Mat3<F>,
 }
 

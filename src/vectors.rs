@@ -124,7 +124,7 @@ pub fn vibration_config<F: Float>(variant: Variant) -> VibrationConfig<F> {
 pub struct Record {
     /// Variant index.
     pub variant: u32,
-    /// Signals [V].
+    /// Signals \[V\].
     pub u_v: Vec3<f32>,
     /// Temperature [°C].
     pub temp_c: f32,

@@ -26,7 +26,7 @@
 //!
 //! # Scale and frequency
 //!
-//! The conversion function is used in acceleration units, V(2): the output is `U/K1` [g], so
+//! The conversion function is used in acceleration units, V(2): the output is `U/K1` \[g\], so
 //! the scale factor `k1` is 1 and the frequency dependence `λ(ω)` is taken as 1 (the paper
 //! gives no data for it). A VE in volts is `K1` times the VE here.
 //!
@@ -45,11 +45,11 @@ pub mod window;
 use crate::float::Float;
 use crate::linalg::Vec3;
 
-/// Largest vibration level the model is used at: harmonic amplitude or random σ [g] on any
+/// Largest vibration level the model is used at: harmonic amplitude or random σ \[g\] on any
 /// axis. Profiles above it are rejected at load time; online estimates above it are clamped
 /// and flagged.
 pub const MAX_LEVEL_G: f64 = 10.0;
-/// Largest static acceleration along IA the VE is evaluated at [g]: the AL-15's measuring
+/// Largest static acceleration along IA the VE is evaluated at \[g\]: the AL-15's measuring
 /// range, V(17). Larger values are clamped and flagged.
 pub const MAX_STATIC_G: f64 = 10.0;
 /// Number of flight-phase vibration profiles a configuration can carry.
@@ -102,12 +102,12 @@ impl<F: Copy> AccelAxes<F> {
 /// (`k1 = 1`, `λ(ω) = 1`):
 ///
 /// `a_u = a0 + (1 + 0.5·δ_1A·sign a3)·a3 + k2 a3² + k3 a3³ + k4 a3⁴ + k5 a3⁵
-///        + m1 a1 + m2 a2 + m31 a3 a1 + m32 a3 a2` [g].
+///        + m1 a1 + m2 a2 + m31 a3 a1 + m32 a3 a2` \[g\].
 ///
 /// Only `δ_1A`, `k2…k5`, `m31`, `m32` rectify vibration; `a0`, `m1`, `m2` do not enter the VE.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ConversionFunction<F> {
-    /// Bias `a0` [g].
+    /// Bias `a0` \[g\].
     pub a0_g: F,
     /// Scale-factor asymmetry `δ_1A` (dimensionless; 15 ppm = 15e-6).
     pub delta_1a: F,
@@ -200,7 +200,7 @@ impl<F: Float> ConversionFunction<F> {
         (slope, curvature, third)
     }
 
-    /// V(2): the accelerometer's output [g] for the projections `a` [g] on its axes.
+    /// V(2): the accelerometer's output \[g\] for the projections `a` \[g\] on its axes.
     pub fn eval_g(&self, a: AccelAxes<F>) -> F {
         let a3 = a.ia;
         let half = F::of(0.5);
@@ -237,11 +237,11 @@ pub enum Variant {
 /// were computed at.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct VeTerms<F> {
-    /// Δ0(1): asymmetry and even nonlinearity [g].
+    /// Δ0(1): asymmetry and even nonlinearity \[g\].
     pub d0_1_g: F,
-    /// Δ0(2): multiplicative cross-sensitivity IA·OA [g].
+    /// Δ0(2): multiplicative cross-sensitivity IA·OA \[g\].
     pub d0_2_g: F,
-    /// Δ0(3): multiplicative cross-sensitivity IA·PA [g].
+    /// Δ0(3): multiplicative cross-sensitivity IA·PA \[g\].
     pub d0_3_g: F,
     /// δ(1) [g/g].
     pub delta1_g_per_g: F,
@@ -252,15 +252,15 @@ pub struct VeTerms<F> {
 }
 
 impl<F: Float> VeTerms<F> {
-    /// The additive component Δ0(1) + Δ0(2) + Δ0(3) [g].
+    /// The additive component Δ0(1) + Δ0(2) + Δ0(3) \[g\].
     pub fn additive_g(&self) -> F {
         self.d0_1_g + self.d0_2_g + self.d0_3_g
     }
-    /// The multiplicative component `δ(1)·a_p3 + δ(2)·a_p3² + δ(3)·a_p3³` [g].
+    /// The multiplicative component `δ(1)·a_p3 + δ(2)·a_p3² + δ(3)·a_p3³` \[g\].
     pub fn multiplicative_g(&self, a_p3_g: F) -> F {
         ((self.delta3_g_per_g3 * a_p3_g + self.delta2_g_per_g2) * a_p3_g + self.delta1_g_per_g) * a_p3_g
     }
-    /// The whole VE at `a_p3_g`, V(23) [g].
+    /// The whole VE at `a_p3_g`, V(23) \[g\].
     pub fn total_g(&self, a_p3_g: F) -> F {
         self.additive_g() + self.multiplicative_g(a_p3_g)
     }
@@ -279,31 +279,31 @@ pub enum Vibration<F> {
     /// negative amplitude is the antiphase component). The frequency does not enter the VE
     /// (`λ(ω) = 1`); it documents the profile.
     Harmonic {
-        /// Peak amplitude per axis x, y, z [g], signed.
+        /// Peak amplitude per axis x, y, z \[g\], signed.
         amp_g: Vec3<F>,
-        /// Frequency [Hz].
+        /// Frequency \[Hz\].
         freq_hz: F,
     },
     /// Broadband random vibration V(4)–V(6): zero-mean stationary Gaussian, flat spectral
     /// density over the band, components fully correlated (the recording format's
     /// convention), so `⟨ã_i ã_j⟩ = σ_i σ_j`.
     Random {
-        /// RMS per axis x, y, z [g], σ = √(S_B·Δf) V(6).
+        /// RMS per axis x, y, z \[g\], σ = √(S_B·Δf) V(6).
         sigma_g: Vec3<F>,
-        /// Band (f_low, f_up) [Hz].
+        /// Band (f_low, f_up) \[Hz\].
         band_hz: (F, F),
     },
 }
 
 impl<F: Float> Vibration<F> {
-    /// Random vibration from a flat spectral density per axis [g²/Hz] over a band [Hz]:
+    /// Random vibration from a flat spectral density per axis [g²/Hz] over a band \[Hz\]:
     /// `σ² = S_B·Δf`, V(6). A negative density or an inverted band gives σ = 0.
     pub fn random_from_psd(psd_g2_per_hz: Vec3<F>, band_hz: (F, F)) -> Self {
         let df = (band_hz.1 - band_hz.0).max(F::ZERO);
         Vibration::Random { sigma_g: psd_g2_per_hz.map(|s| (s.max(F::ZERO) * df).sqrt()), band_hz }
     }
 
-    /// The largest amplitude or σ over the axes [g] (0 for none).
+    /// The largest amplitude or σ over the axes \[g\] (0 for none).
     pub fn level_g(&self) -> F {
         match self {
             Vibration::None => F::ZERO,
@@ -362,9 +362,9 @@ impl<F: Float> Vibration<F> {
 pub enum AccelVibration<F> {
     /// No vibration.
     None,
-    /// Harmonic, in phase: peak amplitudes `a_B3` (IA), `a_B2` (PA), `a_B1` (OA) [g], V(3).
+    /// Harmonic, in phase: peak amplitudes `a_B3` (IA), `a_B2` (PA), `a_B1` (OA) \[g\], V(3).
     Harmonic(AccelAxes<F>),
-    /// Random Gaussian, fully correlated: σ per axis [g], V(4).
+    /// Random Gaussian, fully correlated: σ per axis \[g\], V(4).
     Random(AccelAxes<F>),
 }
 
@@ -373,15 +373,15 @@ pub enum AccelVibration<F> {
 /// PA. The fifth moment is taken as zero (symmetric vibration).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct VibMoments<F> {
-    /// `⟨ã3²⟩` [g²].
+    /// `⟨ã3²⟩` \[g²\].
     pub m2_g2: F,
-    /// `⟨ã3³⟩` [g³] (zero for harmonic and Gaussian vibration).
+    /// `⟨ã3³⟩` \[g³\] (zero for harmonic and Gaussian vibration).
     pub m3_g3: F,
-    /// `⟨ã3⁴⟩` [g⁴].
+    /// `⟨ã3⁴⟩` \[g⁴\].
     pub m4_g4: F,
-    /// `⟨ã3 ã1⟩` (IA·OA) [g²].
+    /// `⟨ã3 ã1⟩` (IA·OA) \[g²\].
     pub cov_oa_g2: F,
-    /// `⟨ã3 ã2⟩` (IA·PA) [g²].
+    /// `⟨ã3 ã2⟩` (IA·PA) \[g²\].
     pub cov_pa_g2: F,
 }
 
@@ -414,7 +414,7 @@ impl<F: Float> VibMoments<F> {
 }
 
 /// Exact mean rectification of `|a3|` under harmonic vibration:
-/// `⟨|a_p + a_B sin ωt|⟩ − |a_p|` [g].
+/// `⟨|a_p + a_B sin ωt|⟩ − |a_p|` \[g\].
 ///
 /// With `r = |a_p|/|a_B|`: `(2/π)·|a_B|·(√(1 − r²) − r·acos r)` for `r < 1`, zero for `r ≥ 1`
 /// (the signal no longer crosses zero). At `a_p = 0` it is `(2/π)·|a_B| = 0.637·|a_B|`.
@@ -431,7 +431,7 @@ pub fn harmonic_abs_excess_g<F: Float>(a_p_g: F, amp_g: F) -> F {
 }
 
 /// Exact mean rectification of `|a3|` under Gaussian vibration:
-/// `⟨|a_p + ã|⟩ − |a_p| = σ·√(2/π)·exp(−a_p²/2σ²) − |a_p|·erfc(|a_p|/(σ√2))` [g]
+/// `⟨|a_p + ã|⟩ − |a_p| = σ·√(2/π)·exp(−a_p²/2σ²) − |a_p|·erfc(|a_p|/(σ√2))` \[g\]
 /// (written without the cancellation of `E|X| − |a_p|`). At `a_p = 0` it is `σ·√(2/π)`.
 pub fn gaussian_abs_excess_g<F: Float>(a_p_g: F, sigma_g: F) -> F {
     let s = sigma_g.abs();
@@ -643,7 +643,7 @@ impl<F: Float> VibrationConfig<F> {
         if index < self.n_profiles as usize { self.profiles.get(index) } else { None }
     }
 
-    /// The VE [g] of each accelerometer (unit order x, y, z) under `vib` at the static
+    /// The VE \[g\] of each accelerometer (unit order x, y, z) under `vib` at the static
     /// acceleration `a_p_g` (only each accelerometer's IA component is used).
     pub fn predict_g(&self, vib: &Vibration<F>, a_p_g: &Vec3<F>) -> Vec3<F> {
         let mut out = [F::ZERO; 3];
@@ -654,7 +654,7 @@ impl<F: Float> VibrationConfig<F> {
         out
     }
 
-    /// The VE [g] to subtract from each axis of a compensated output `y_g` that was measured
+    /// The VE \[g\] to subtract from each axis of a compensated output `y_g` that was measured
     /// under `vib`: the output is `a_p + VE(a_p)` per axis, so `a_p` is found from `y` by
     /// [`solve_static_g`] and the VE is evaluated there (evaluating it at `y` instead would
     /// leave an error of `VE·dVE/da`, 0.14 g for Table V5's worst band at 10 g). Also returns
@@ -713,7 +713,7 @@ impl<F: Float> VibrationConfig<F> {
     }
 
     /// [`correction_from_moments_g`](Self::correction_from_moments_g) for one accelerometer
-    /// (`axis`): its VE [g] and whether its solution was clamped.
+    /// (`axis`): its VE \[g\] and whether its solution was clamped.
     pub fn correction_from_moments_on_g(&self, m: &window::WindowMoments<F>, y_g: &Vec3<F>, axis: Axis) -> (F, bool) {
         let cf = match axis {
             Axis::X => &self.cf[0],
@@ -726,7 +726,7 @@ impl<F: Float> VibrationConfig<F> {
         solve_static_g(y, |_| terms)
     }
 
-    /// The exact VE [g] of each accelerometer from measured window moments
+    /// The exact VE \[g\] of each accelerometer from measured window moments
     /// ([`window::WindowMoments`]): the moment form of [`exact_terms`] with the measured
     /// `⟨|a3|⟩ − |⟨a3⟩|` as the asymmetry input, at the static acceleration `a_p_g`.
     pub fn predict_from_moments_g(&self, m: &window::WindowMoments<F>, a_p_g: &Vec3<F>) -> Vec3<F> {
@@ -748,7 +748,7 @@ const NEWTON_STEPS: usize = 4;
 /// Solves `a + VE(a) = y` for the static IA acceleration `a` (clamped to ±[`MAX_STATIC_G`])
 /// by a fixed number of Newton steps with `dVE/da = δ(1) + 2δ(2)a + 3δ(3)a²` (the exact
 /// asymmetry's slope, below `δ_1A`, is left out); `terms(a)` gives the VE terms at `a`.
-/// Returns `VE(a)` [g] and whether the solution was clamped. Bounded time, no panic; a
+/// Returns `VE(a)` \[g\] and whether the solution was clamped. Bounded time, no panic; a
 /// non-finite `y` gives zero.
 pub fn solve_static_g<F: Float>(y_g: F, terms: impl Fn(F) -> VeTerms<F>) -> (F, bool) {
     if !y_g.is_finite() {

@@ -49,7 +49,7 @@ fn al15_csv() -> ([f64; 10], f64) {
     )
 }
 
-/// V(2) written out (k1 = 1, λ = 1): the output [g] for projections a3 (IA), a1 (OA), a2 (PA).
+/// V(2) written out (k1 = 1, λ = 1): the output \[g\] for projections a3 (IA), a1 (OA), a2 (PA).
 fn au(c: &[f64; 10], a3: f64, a1: f64, a2: f64) -> f64 {
     let [a0, d, k2, k3, k4, k5, m1, m2, m31, m32] = *c;
     a0 + a3
@@ -74,7 +74,7 @@ fn ia_oa_pa(v: &[f64; 3], i: usize) -> (f64, f64, f64) {
     }
 }
 
-/// Output of accelerometer i [g] for a unit-frame acceleration.
+/// Output of accelerometer i \[g\] for a unit-frame acceleration.
 fn au_unit(c: &[f64; 10], a: &[f64; 3], i: usize) -> f64 {
     let (a3, a1, a2) = ia_oa_pa(a, i);
     au(c, a3, a1, a2)
@@ -231,7 +231,7 @@ fn table_v4_is_reproduced_by_the_paper_variant_to_the_printed_digits() {
     println!("Exact variant at a_p3 = 0: Δ0(1) = {:.4} µg", ex0.d0_1_g * 1e6);
 }
 
-/// One row of Table V5: band [Hz] and the six columns as (low, high) printed strings.
+/// One row of Table V5: band \[Hz\] and the six columns as (low, high) printed strings.
 type V5Row = ((f64, f64), [(&'static str, &'static str); 6]);
 
 /// Table V5 as given in physics.md: (band, [Δ0(1) µg, Δ0(2) µg, δ(1)a mg, δ(2)a² mg,
@@ -542,7 +542,7 @@ fn plan(a: f64) -> Vec<(f64, [f64; 3])> {
     out
 }
 
-/// Shake-table ΔU [V] of accelerometer x in a position: K1 × the time-domain VE, the static
+/// Shake-table ΔU \[V\] of accelerometer x in a position: K1 × the time-domain VE, the static
 /// IA acceleration `a_p3`, no static transverse component, vibration (IA, OA, PA).
 fn simulated_du(c: &[f64; 10], k1: f64, a_p3: f64, amp: [f64; 3]) -> f64 {
     // Accelerometer x: IA = x, OA = z, PA = y.

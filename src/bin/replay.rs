@@ -40,9 +40,9 @@ use defmt_semihosting as _;
 const IN_PATH: &core::ffi::CStr = c"target/fw-replay/in.bin";
 /// Output stream: one result per input sample, in input order.
 const OUT_PATH: &core::ffi::CStr = c"target/fw-replay/out.bin";
-/// SysTick clock: the MPS2 AN386 core clock [Hz].
+/// SysTick clock: the MPS2 AN386 core clock \[Hz\].
 const CORE_CLOCK_HZ: u32 = 25_000_000;
-/// Sampling rate [Hz]: `REPLAY_TICK_HZ` at build time, else 1000.
+/// Sampling rate \[Hz\]: `REPLAY_TICK_HZ` at build time, else 1000.
 const TICK_HZ: u32 = parse_hz(option_env!("REPLAY_TICK_HZ"), 1000);
 /// Length of the input queue (it holds one sample less).
 const IN_QUEUE: usize = 64;

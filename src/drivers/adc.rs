@@ -94,7 +94,7 @@ pub mod reg {
 }
 
 /// The ID register of an ADS131M04 with its revision byte masked: bits 15:12 = 0010b,
-/// CHANCNT[11:8] = 4 (§8.6, ID register).
+/// CHANCNT\[11:8\] = 4 (§8.6, ID register).
 pub const ID_MASK: u16 = 0xFF00;
 /// Expected value of `ID & ID_MASK`.
 pub const ID_EXPECTED: u16 = 0x2400;
@@ -113,16 +113,16 @@ pub mod status {
     pub const CRC_TYPE: u16 = 1 << 11;
     /// A reset has occurred since MODE.RESET was last cleared.
     pub const RESET: u16 = 1 << 10;
-    /// Word length field WLENGTH[1:0].
+    /// Word length field WLENGTH\[1:0\].
     pub const WLENGTH_MASK: u16 = 0b11 << 8;
     /// WLENGTH = 01b: 24-bit words.
     pub const WLENGTH_24: u16 = 0b01 << 8;
     /// Reserved bits 7:4, zero on the 4-channel part.
     pub const RESERVED_MASK: u16 = 0xF0;
-    /// DRDY[3:0]: channel n has new data.
+    /// DRDY\[3:0\]: channel n has new data.
     pub const DRDY_MASK: u16 = 0x0F;
 
-    /// The bits [`Ads131m04`](super::Ads131m04) checks in every data frame: all but DRDY[3:0].
+    /// The bits [`Ads131m04`](super::Ads131m04) checks in every data frame: all but DRDY\[3:0\].
     pub const CHECK_MASK: u16 = !DRDY_MASK;
     /// Their value in a healthy frame after [`init`](super::Ads131m04::init): unlocked, no
     /// fault, CCITT CRC, no reset since init, 24-bit words.
@@ -143,7 +143,7 @@ pub mod mode {
     pub const WLENGTH_24: u16 = 0b01 << 8;
     /// SPI timeout enable.
     pub const TIMEOUT: u16 = 1 << 4;
-    /// DRDY_SEL[1:0] = 00b: DRDY follows the most lagging enabled channel.
+    /// DRDY_SEL\[1:0\] = 00b: DRDY follows the most lagging enabled channel.
     pub const DRDY_SEL_LAGGING: u16 = 0b00 << 2;
     /// DRDY_HiZ: 0 = DRDY driven high when inactive.
     pub const DRDY_HIZ: u16 = 1 << 1;
@@ -151,7 +151,7 @@ pub mod mode {
     pub const DRDY_FMT_PULSE: u16 = 1 << 0;
 }
 
-/// PGA gain of one channel: GAIN1.PGAGAINn[2:0], gain = 2^code (§8.6, GAIN1 register).
+/// PGA gain of one channel: GAIN1.PGAGAINn\[2:0\], gain = 2^code (§8.6, GAIN1 register).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Gain {
     /// ×1, full scale ±1.2 V.
@@ -188,7 +188,7 @@ impl Gain {
     }
 }
 
-/// Oversampling ratio: CLOCK.OSR[2:0] (§8.6, CLOCK register). The output data rate is
+/// Oversampling ratio: CLOCK.OSR\[2:0\] (§8.6, CLOCK register). The output data rate is
 /// f_MOD / OSR with f_MOD = CLKIN / 2 (4.096 MHz at the nominal 8.192 MHz CLKIN).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Osr {
@@ -211,7 +211,7 @@ pub enum Osr {
     R16256 = 7,
 }
 
-/// Power mode: CLOCK.PWR[1:0] (§8.6, CLOCK register).
+/// Power mode: CLOCK.PWR\[1:0\] (§8.6, CLOCK register).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum PowerMode {
     /// Very-low-power.

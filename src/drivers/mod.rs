@@ -190,7 +190,7 @@ impl Default for SourceConfig {
 /// One sample's inputs for the compensation, and what happened reading them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Reading {
-    /// x, y, z accelerometer signals [V]: fresh, held, or NaN (see [`signal_fault`](Self::signal_fault)).
+    /// x, y, z accelerometer signals \[V\]: fresh, held, or NaN (see [`signal_fault`](Self::signal_fault)).
     pub signals_v: [f32; 3],
     /// Temperature of the unit [°C], or NaN when stale.
     pub temp_c: f32,

@@ -41,17 +41,17 @@ pub mod config {
     pub const DATA_READY: u16 = 1 << 13;
     /// EEPROM_Busy.
     pub const EEPROM_BUSY: u16 = 1 << 12;
-    /// MOD[1:0] in bits 11:10; 00b = continuous conversion.
+    /// MOD\[1:0\] in bits 11:10; 00b = continuous conversion.
     pub const MOD_SHIFT: u16 = 10;
-    /// CONV[2:0] in bits 9:7: conversion cycle time.
+    /// CONV\[2:0\] in bits 9:7: conversion cycle time.
     pub const CONV_SHIFT: u16 = 7;
-    /// AVG[1:0] in bits 6:5: number of averaged conversions.
+    /// AVG\[1:0\] in bits 6:5: number of averaged conversions.
     pub const AVG_SHIFT: u16 = 5;
     /// Soft_Reset (self-clearing).
     pub const SOFT_RESET: u16 = 1 << 1;
 }
 
-/// Device ID register: DID[11:0] = 0x117, DID_REV in bits 15:12 (§7.6, device ID register).
+/// Device ID register: DID\[11:0\] = 0x117, DID_REV in bits 15:12 (§7.6, device ID register).
 pub const DEVICE_ID_MASK: u16 = 0x0FFF;
 /// Expected value of `Device_ID & DEVICE_ID_MASK`.
 pub const DEVICE_ID: u16 = 0x0117;
@@ -73,7 +73,7 @@ pub enum Address {
     Scl = 0x4B,
 }
 
-/// Conversions averaged per result: AVG[1:0] (§7.6, configuration register; §7.3.2
+/// Conversions averaged per result: AVG\[1:0\] (§7.6, configuration register; §7.3.2
 /// *Averaging*).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Averaging {
@@ -88,7 +88,7 @@ pub enum Averaging {
     X64 = 3,
 }
 
-/// Conversion cycle: CONV[2:0] (§7.6, configuration register; the cycle time also depends on
+/// Conversion cycle: CONV\[2:0\] (§7.6, configuration register; the cycle time also depends on
 /// the averaging, see the conversion-cycle table of §7.4.1 *Continuous Conversion Mode*).
 /// Named by the cycle time without averaging.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

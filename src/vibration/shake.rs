@@ -3,7 +3,7 @@
 //! level by least squares on V(21) (equal to V(22) on the paper's ten-position plan), and (b)
 //! from plans at several amplitudes, the rectifying coefficients δ_1A, k2…k5, m31, m32 of the
 //! conversion function by linear least squares on the exact moment expressions
-//! ([`exact_terms`](super::exact_terms)), which then predict the VE at any level.
+//! ([`exact_terms`]), which then predict the VE at any level.
 //!
 //! Least squares is solved by Givens rotations into a fixed-size triangular factor (no normal
 //! equations, no allocation), on columns scaled to unit maximum.
@@ -14,11 +14,11 @@ use crate::float::Float;
 /// One shake-table measurement of one accelerometer.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShakePosition<F> {
-    /// Static acceleration along IA in this position [g] (`g·cos φ_k` on the tilting table).
+    /// Static acceleration along IA in this position \[g\] (`g·cos φ_k` on the tilting table).
     pub a_p3_g: F,
-    /// Peak amplitude of the (harmonic) table vibration on the accelerometer's axes [g].
+    /// Peak amplitude of the (harmonic) table vibration on the accelerometer's axes \[g\].
     pub amp_g: AccelAxes<F>,
-    /// `ΔU = ⟨U^B⟩ − U`: mean output with vibration minus without [V], V(20).
+    /// `ΔU = ⟨U^B⟩ − U`: mean output with vibration minus without \[V\], V(20).
     pub du_v: F,
 }
 
@@ -60,7 +60,7 @@ impl core::fmt::Display for VibFitError {
 
 impl core::error::Error for VibFitError {}
 
-/// The static IA acceleration [g] (g = 1) and the vibration amplitudes on the accelerometer's
+/// The static IA acceleration \[g\] (g = 1) and the vibration amplitudes on the accelerometer's
 /// axes of the paper's ten test positions at table amplitude `a_b_g`, §8: TP1…TP8 tilt IA by
 /// φ_k = (k−1)·45° from the vertical with vibration `a_b` along IA; TP9 (TP10) vibrate along
 /// the IA–OA (IA–PA) diagonal with amplitude `√2·a_b`, IA horizontal, so both axes see `a_b`.
@@ -217,17 +217,17 @@ fn fit_columns<F: Float, const N: usize>(
 pub struct VeTermsFit<F> {
     /// Δ0(1..3), δ(1..3) at the tested level.
     pub terms: VeTerms<F>,
-    /// The IA amplitude of the plan [g] (mean over the positions).
+    /// The IA amplitude of the plan \[g\] (mean over the positions).
     pub amp_g: F,
     /// False when no position vibrates along OA (PA): Δ0(2) (Δ0(3)) is then not determined
     /// and reported as zero.
     pub cross_determined: [bool; 2],
-    /// Residual standard error of the fit [g] (zero without redundant positions).
+    /// Residual standard error of the fit \[g\] (zero without redundant positions).
     pub residual_sigma_g: F,
 }
 
 impl<F: Float> VeTermsFit<F> {
-    /// V(23): the VE [g] at static IA acceleration `a_g` for the tested level; the cross
+    /// V(23): the VE \[g\] at static IA acceleration `a_g` for the tested level; the cross
     /// terms scale with the transverse amplitudes `oa_g`, `pa_g` relative to the plan's (so
     /// the paper's TP9/TP10 level, `a_b` on the transverse axis, gives Δ0(2) + Δ0(3)).
     pub fn predict_g(&self, a_g: F, oa_g: F, pa_g: F) -> F {
@@ -292,7 +292,7 @@ pub struct CfFit<F> {
     /// Which of δ_1A, k2, k3, k4, k5, m31, m32 the positions determine (an undetermined one,
     /// e.g. m31 without OA vibration, is zero).
     pub determined: [bool; 7],
-    /// Residual standard error of the fit [g].
+    /// Residual standard error of the fit \[g\].
     pub residual_sigma_g: F,
 }
 

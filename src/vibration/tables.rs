@@ -30,9 +30,9 @@ pub struct HarmonicRow {
     pub longitudinal: bool,
     /// Angular frequency range ω [1/s].
     pub omega_per_s: (f64, f64),
-    /// Amplitude range [g].
+    /// Amplitude range \[g\].
     pub amp_g: (f64, f64),
-    /// Duration [s].
+    /// Duration \[s\].
     pub duration_s: f64,
 }
 
@@ -47,7 +47,7 @@ pub const TABLE_V2: [HarmonicRow; 4] = [
 /// One row of Table V3: broadband random vibration (duration 640 s).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RandomRow {
-    /// Band (f_low, f_up) [Hz].
+    /// Band (f_low, f_up) \[Hz\].
     pub band_hz: (f64, f64),
     /// Spectral density range S_B [g²/Hz].
     pub psd_g2_per_hz: (f64, f64),

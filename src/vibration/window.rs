@@ -65,17 +65,17 @@ impl<F: Float> Sums<F> {
 /// Moments of one block of `W` samples, per unit axis x, y, z.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct WindowMoments<F> {
-    /// Window mean [g]: the static acceleration `a_p`.
+    /// Window mean \[g\]: the static acceleration `a_p`.
     pub mean_g: Vec3<F>,
-    /// Variance `⟨ã²⟩` [g²].
+    /// Variance `⟨ã²⟩` \[g²\].
     pub var_g2: Vec3<F>,
-    /// Third central moment `⟨ã³⟩` [g³].
+    /// Third central moment `⟨ã³⟩` \[g³\].
     pub m3_g3: Vec3<F>,
-    /// Fourth central moment `⟨ã⁴⟩` [g⁴].
+    /// Fourth central moment `⟨ã⁴⟩` \[g⁴\].
     pub m4_g4: Vec3<F>,
-    /// Covariances `⟨ã_x ã_y⟩`, `⟨ã_y ã_z⟩`, `⟨ã_z ã_x⟩` [g²].
+    /// Covariances `⟨ã_x ã_y⟩`, `⟨ã_y ã_z⟩`, `⟨ã_z ã_x⟩` \[g²\].
     pub cov_g2: Vec3<F>,
-    /// `⟨|a|⟩ − |⟨a⟩|` [g]: the rectification of the absolute value that drives the
+    /// `⟨|a|⟩ − |⟨a⟩|` \[g\]: the rectification of the absolute value that drives the
     /// asymmetry term.
     pub abs_excess_g: Vec3<F>,
 }
@@ -217,7 +217,7 @@ impl<F: Float, const W: usize> MomentWindow<F, W> {
         self.blocks
     }
 
-    /// Adds one sample [g] (x, y, z) to the current block. A sample with a non-finite element
+    /// Adds one sample \[g\] (x, y, z) to the current block. A sample with a non-finite element
     /// is ignored. O(1), allocation- and panic-free.
     pub fn push(&mut self, x: &Vec3<F>) -> Pushed {
         if !(x[0].is_finite() && x[1].is_finite() && x[2].is_finite()) || W == 0 {

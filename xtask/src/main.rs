@@ -62,7 +62,9 @@ fn main() -> ExitCode {
             eprintln!(
                 "  bench  instructions per sample in QEMU, stack depth, flash/RAM of the firmware images, host samples per second"
             );
-            eprintln!("  test   fmt, clippy, host tests, thumb clippy, vectors, firmware build + link check, QEMU run");
+            eprintln!(
+                "  test   fmt, clippy, doc, host tests, thumb clippy, vectors, firmware build + link check, QEMU run"
+            );
             eprintln!(
                 "  demo   simulate, calibrate, replay in QEMU, verify: the paper's check end to end (target/demo)"
             );
@@ -106,6 +108,11 @@ impl Xtask {
             ("fmt", |x| x.run(x.host_cargo(["fmt", "--all", "--check"]))),
             ("clippy (host)", |x| {
                 x.run(x.host_cargo(["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"]))
+            }),
+            ("doc (no broken links)", |x| {
+                let mut c = x.host_cargo(["doc", "--workspace", "--no-deps"]);
+                c.env("RUSTDOCFLAGS", "-D warnings");
+                x.run(c)
             }),
             ("test (host)", |x| x.run(x.host_cargo(["test", "--workspace"]))),
             ("toolchain", Xtask::setup_toolchain),
@@ -663,7 +670,7 @@ fn demo_vectors(x: &mut Xtask) -> Result {
     x.run(x.host_cargo(["run", "--release", "-q", "-p", "host-tests", "--bin", "demo-report", "--", &inp, &out]))
 }
 
-/// max |Δg| [mg] per check temperature and method, from the two `verify.csv` files; the
+/// max |Δg| \[mg\] per check temperature and method, from the two `verify.csv` files; the
 /// poly:2 file also has the firmware's output (`replayed`), set under the host's number it
 /// reproduces, and the replay's bit-identity is checked once more.
 fn demo_summary(dir: &Path) -> Result {

@@ -40,7 +40,7 @@ pub struct CalibrationFile {
     /// K at T0 [V/g], row-major.
     #[serde(rename = "k_V_per_g")]
     pub k_v_per_g: [[f64; 3]; 3],
-    /// U0 at T0 [V].
+    /// U0 at T0 \[V\].
     #[serde(rename = "u0_V")]
     pub u0_v: [f64; 3],
     /// Compensation method.
@@ -88,9 +88,9 @@ pub enum VariantKind {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ConversionSpec {
-    /// a0 [g].
+    /// a0 \[g\].
     pub a0_g: f64,
-    /// δ_1A [1].
+    /// δ_1A \[1\].
     pub delta_1a: f64,
     /// k2 [g/g²].
     pub k2_g_per_g2: f64,
@@ -152,17 +152,17 @@ pub enum ProfileSpec {
     None,
     /// `kind = "sine"`: harmonic, in phase on all axes.
     Sine {
-        /// Peak amplitude per axis x, y, z [g], signed.
+        /// Peak amplitude per axis x, y, z \[g\], signed.
         amp_g: [f64; 3],
-        /// Frequency [Hz].
+        /// Frequency \[Hz\].
         #[serde(rename = "freq_Hz")]
         freq_hz: f64,
     },
     /// `kind = "random"`: flat band, fully correlated components.
     Random {
-        /// σ per axis x, y, z [g].
+        /// σ per axis x, y, z \[g\].
         sigma_g: [f64; 3],
-        /// Band [low, high] [Hz].
+        /// Band [low, high] \[Hz\].
         #[serde(rename = "band_Hz")]
         band_hz: [f64; 2],
     },
@@ -295,10 +295,10 @@ pub struct KnotSpec {
     /// Knot temperature [°C].
     #[serde(rename = "t_C")]
     pub t_c: f64,
-    /// ΔU0 at the knot [V].
+    /// ΔU0 at the knot \[V\].
     #[serde(rename = "du0_V")]
     pub du0_v: [f64; 3],
-    /// ΔK_ij/K_ij at the knot [1].
+    /// ΔK_ij/K_ij at the knot \[1\].
     pub rel_k: [[f64; 3]; 3],
 }
 

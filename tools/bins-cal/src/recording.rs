@@ -25,39 +25,39 @@ use std::path::{Path, PathBuf};
 
 /// Header names of the columns the format defines, in the order the writer puts them.
 pub mod col {
-    /// Time since the start of the recording [s].
+    /// Time since the start of the recording \[s\].
     pub const T_S: &str = "t_s";
-    /// Output signal of the x accelerometer [V].
+    /// Output signal of the x accelerometer \[V\].
     pub const UX_V: &str = "ux_V";
-    /// Output signal of the y accelerometer [V].
+    /// Output signal of the y accelerometer \[V\].
     pub const UY_V: &str = "uy_V";
-    /// Output signal of the z accelerometer [V].
+    /// Output signal of the z accelerometer \[V\].
     pub const UZ_V: &str = "uz_V";
     /// The unit's temperature sensor [°C].
     pub const TEMP_C: &str = "temp_C";
-    /// Static specific force along x [g].
+    /// Static specific force along x \[g\].
     pub const FX_G: &str = "fx_g";
-    /// Static specific force along y [g].
+    /// Static specific force along y \[g\].
     pub const FY_G: &str = "fy_g";
-    /// Static specific force along z [g].
+    /// Static specific force along z \[g\].
     pub const FZ_G: &str = "fz_g";
     /// `none`, `sine` or `random`.
     pub const VIB_KIND: &str = "vib_kind";
-    /// Vibration along x [g]: peak (sine) or RMS (random).
+    /// Vibration along x \[g\]: peak (sine) or RMS (random).
     pub const VIB_X_G: &str = "vib_x_g";
-    /// Vibration along y [g].
+    /// Vibration along y \[g\].
     pub const VIB_Y_G: &str = "vib_y_g";
-    /// Vibration along z [g].
+    /// Vibration along z \[g\].
     pub const VIB_Z_G: &str = "vib_z_g";
-    /// Sine frequency, or the centre of the random band [Hz].
+    /// Sine frequency, or the centre of the random band \[Hz\].
     pub const VIB_HZ: &str = "vib_hz";
-    /// Random bandwidth Δf [Hz].
+    /// Random bandwidth Δf \[Hz\].
     pub const VIB_BW_HZ: &str = "vib_bw_hz";
     /// Chamber air temperature or set point [°C].
     pub const CHAMBER_C: &str = "chamber_C";
     /// Rig position label.
     pub const POS: &str = "pos";
-    /// Time since power-on [s].
+    /// Time since power-on \[s\].
     pub const POWER_S: &str = "power_s";
 }
 
@@ -115,27 +115,27 @@ impl VibKind {
 pub struct Row {
     /// Line number in the file (1-based); 0 for a row not read from a file.
     pub line: u64,
-    /// `t_s` [s].
+    /// `t_s` \[s\].
     pub t_s: f64,
-    /// `ux_V`, `uy_V`, `uz_V` [V].
+    /// `ux_V`, `uy_V`, `uz_V` \[V\].
     pub u_v: [f64; 3],
     /// `temp_C` [°C].
     pub temp_c: f64,
-    /// `fx_g`, `fy_g`, `fz_g` [g].
+    /// `fx_g`, `fy_g`, `fz_g` \[g\].
     pub f_g: [Option<f64>; 3],
     /// `vib_kind`.
     pub vib_kind: Option<VibKind>,
-    /// `vib_x_g`, `vib_y_g`, `vib_z_g` [g].
+    /// `vib_x_g`, `vib_y_g`, `vib_z_g` \[g\].
     pub vib_g: [Option<f64>; 3],
-    /// `vib_hz` [Hz].
+    /// `vib_hz` \[Hz\].
     pub vib_hz: Option<f64>,
-    /// `vib_bw_hz` [Hz].
+    /// `vib_bw_hz` \[Hz\].
     pub vib_bw_hz: Option<f64>,
     /// `chamber_C` [°C].
     pub chamber_c: Option<f64>,
     /// `pos`.
     pub pos: Option<String>,
-    /// `power_s` [s].
+    /// `power_s` \[s\].
     pub power_s: Option<f64>,
     /// Cells of the columns the format does not define, in the order of
     /// [`Reader::extra_columns`] (empty cells as empty strings).
@@ -143,7 +143,7 @@ pub struct Row {
 }
 
 impl Row {
-    /// The static specific force [g] when all three components are known.
+    /// The static specific force \[g\] when all three components are known.
     pub fn reference_f_g(&self) -> Option<[f64; 3]> {
         match self.f_g {
             [Some(x), Some(y), Some(z)] => Some([x, y, z]),
@@ -232,9 +232,9 @@ pub enum ErrorKind {
     BadVibKind(String),
     /// `t_s` not greater than the previous row's.
     TimeNotIncreasing {
-        /// The previous row's time [s].
+        /// The previous row's time \[s\].
         previous: f64,
-        /// This row's time [s].
+        /// This row's time \[s\].
         this: f64,
     },
     /// A line that is not UTF-8.

@@ -28,7 +28,7 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// Max |Δg| [mg] per (temperature rounded to °C, method) from verify.csv.
+/// Max |Δg| \[mg\] per (temperature rounded to °C, method) from verify.csv.
 fn max_dg(csv: &Path, temp: f64, method: &str) -> f64 {
     let text = std::fs::read_to_string(csv).unwrap();
     text.lines()

@@ -36,15 +36,15 @@ fn campaign() -> &'static Path {
 
 // ---- the bound, from the simulated noise ------------------------------------------------------
 
-/// White noise of the scenario per sample [V], sample rate [Hz], hold length [s] and the
-/// calibrate command's settling margin (default 1 s, at most a quarter of the hold) [s].
+/// White noise of the scenario per sample \[V\], sample rate \[Hz\], hold length \[s\] and the
+/// calibrate command's settling margin (default 1 s, at most a quarter of the hold) \[s\].
 const WHITE_V: f64 = 2.0e-5;
 const RATE_HZ: f64 = 100.0;
 const HOLD_S: f64 = 2.0;
 const SETTLE_S: f64 = 0.5;
 const LEVELS_G: [f64; 3] = [1.0, 2.0, 4.0];
 
-/// Standard error of ΔU/K1 at one position [g]: the mean of n white samples in the quiet
+/// Standard error of ΔU/K1 at one position \[g\]: the mean of n white samples in the quiet
 /// hold and in the shaking hold (the sine is removed by a 3-parameter fit, which costs
 /// nothing measurable at n = 150), divided by |K1|.
 fn position_noise_g() -> f64 {

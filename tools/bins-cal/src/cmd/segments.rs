@@ -15,10 +15,10 @@ use std::path::{Path, PathBuf};
 /// How segments are found.
 #[derive(Clone, Copy, Debug, clap::Args)]
 pub struct Options {
-    /// Settling margin dropped at the start of each dwell [s] (at most a quarter of the dwell).
+    /// Settling margin dropped at the start of each dwell \[s\] (at most a quarter of the dwell).
     #[arg(long, default_value_t = 1.0)]
     pub settle_s: f64,
-    /// Largest standard deviation of a signal in a stationary dwell [V].
+    /// Largest standard deviation of a signal in a stationary dwell \[V\].
     #[arg(long, default_value_t = 0.01)]
     pub max_std_v: f64,
     /// Largest temperature rate in a settled dwell [°C/min].
@@ -36,15 +36,15 @@ pub struct Segment {
     pub file: PathBuf,
     /// Its `pos` label.
     pub pos: String,
-    /// Reference specific force [g].
+    /// Reference specific force \[g\].
     pub f_g: [f64; 3],
-    /// Time of the first and last row used [s].
+    /// Time of the first and last row used \[s\].
     pub t_s: (f64, f64),
-    /// Rows used (after the settling margin): signals [V] and temperature [°C].
+    /// Rows used (after the settling margin): signals \[V\] and temperature [°C].
     pub rows: Vec<([f64; 3], f64)>,
-    /// Mean signals [V].
+    /// Mean signals \[V\].
     pub mean_u_v: [f64; 3],
-    /// Standard deviation of the signals [V].
+    /// Standard deviation of the signals \[V\].
     pub std_u_v: [f64; 3],
     /// Mean temperature [°C].
     pub temp_c: f64,

@@ -34,7 +34,7 @@ use bins_comp::vibration::{
 use bins_comp::{Constants, Variant, Vibration, VibrationParams};
 use std::path::{Path, PathBuf};
 
-/// A shaking hold's IA amplitude below this [g] counts as "no IA vibration".
+/// A shaking hold's IA amplitude below this \[g\] counts as "no IA vibration".
 const MIN_IA_LEVEL_G: f64 = 1e-9;
 /// Sine levels within this fraction of each other form one level.
 const LEVEL_TOL: f64 = 0.01;
@@ -46,25 +46,25 @@ pub struct Hold {
     pub file: PathBuf,
     /// `pos` label.
     pub pos: String,
-    /// Static specific force [g].
+    /// Static specific force \[g\].
     pub f_g: [f64; 3],
     /// The vibration the rig applied.
     pub vib: Vibration<f64>,
-    /// First and last time used [s].
+    /// First and last time used \[s\].
     pub t_s: (f64, f64),
     /// Rows used.
     pub n: usize,
-    /// Mean signals [V] (sine removed for a sine hold).
+    /// Mean signals \[V\] (sine removed for a sine hold).
     pub mean_u_v: [f64; 3],
-    /// Standard error of the mean [V].
+    /// Standard error of the mean \[V\].
     pub se_u_v: [f64; 3],
-    /// Standard deviation of the signals about the mean (about the fitted sine) [V].
+    /// Standard deviation of the signals about the mean (about the fitted sine) \[V\].
     pub std_u_v: [f64; 3],
     /// Mean temperature [°C].
     pub temp_c: f64,
     /// Why it is not used.
     pub rejected: Option<String>,
-    /// For a shaking hold paired with its quiet hold: `ΔU` [V].
+    /// For a shaking hold paired with its quiet hold: `ΔU` \[V\].
     pub du_v: Option<[f64; 3]>,
 }
 
@@ -310,7 +310,7 @@ fn print_holds(holds: &[Hold]) {
 struct Position<'a> {
     pair: &'a Pair<'a>,
     pos: ShakePosition<f64>,
-    /// Standard error of ΔU/K1 [g].
+    /// Standard error of ΔU/K1 \[g\].
     se_g: f64,
 }
 
@@ -614,7 +614,7 @@ pub fn calibrate(
     Ok(ShakerResult { params: VibrationParams::new(cf, variant), notes })
 }
 
-/// RMS of measured ΔU/K1 minus `model` [g].
+/// RMS of measured ΔU/K1 minus `model` \[g\].
 fn residual_rms(ps: &[ShakePosition<f64>], model: impl Fn(&ShakePosition<f64>) -> f64) -> f64 {
     let n = ps.len().max(1) as f64;
     (ps.iter().map(|p| (p.du_v - model(p)).powi(2)).sum::<f64>() / n).sqrt()

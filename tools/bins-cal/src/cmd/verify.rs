@@ -52,7 +52,7 @@ pub const METHODS: [(&str, Method); 5] = [
     ("method 2 linearized", Method::OutputCorrection(Form::Linearized)),
 ];
 
-/// Δg [g] of one dwell with one calibration: mean of the per-sample compensated accelerations.
+/// Δg \[g\] of one dwell with one calibration: mean of the per-sample compensated accelerations.
 pub fn dg(cal: &Calibration<f64>, s: &Segment) -> f64 {
     let mut sum = [0.0; 3];
     for (u, t) in &s.rows {
@@ -69,11 +69,11 @@ pub fn dg(cal: &Calibration<f64>, s: &Segment) -> f64 {
 /// The label of the `--replayed` column.
 pub const REPLAYED: &str = "replayed";
 
-/// One panel: check temperature, then (position, Δg [mg] per method, in the order of the
+/// One panel: check temperature, then (position, Δg \[mg\] per method, in the order of the
 /// method labels).
 pub type Panel = (f64, Vec<(String, Vec<f64>)>);
 
-/// A replayed output CSV: rows `(t_s, accel [g], status bits)` in file order.
+/// A replayed output CSV: rows `(t_s, accel \[g\], status bits)` in file order.
 pub struct Replayed {
     path: PathBuf,
     rows: Vec<(f64, [f64; 3], u32)>,
@@ -106,7 +106,7 @@ impl Replayed {
         Ok(Replayed { path: path.to_path_buf(), rows })
     }
 
-    /// Δg [g] of one dwell from the replayed output: the mean of its rows in the dwell's time
+    /// Δg \[g\] of one dwell from the replayed output: the mean of its rows in the dwell's time
     /// span, which must be as many as the recording's (else it is not this recording's
     /// replay) and calibrated.
     pub fn dg(&self, s: &Segment) -> anyhow::Result<f64> {
@@ -191,7 +191,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The CSV (`temp_C,pos,method,dg_mg`) and the printed table (Δg [mg] per dwell and method,
+/// The CSV (`temp_C,pos,method,dg_mg`) and the printed table (Δg \[mg\] per dwell and method,
 /// then max |Δg| per temperature); `names` labels the methods of each row's values.
 pub fn tables(panels: &[Panel], params: &CalibrationParams, names: &[&str]) -> (String, String) {
     let mut csv = String::from("temp_C,pos,method,dg_mg\n");

@@ -28,7 +28,7 @@ pub struct Args {
 #[derive(Deserialize, Debug)]
 #[serde(deny_unknown_fields)]
 pub struct Env {
-    /// Static acceleration along IA at which the multiplicative parts are evaluated [g]
+    /// Static acceleration along IA at which the multiplicative parts are evaluated \[g\]
     /// (the paper: the range limit, 10 g).
     pub a_p3_g: f64,
     /// Harmonic entries.
@@ -45,11 +45,11 @@ pub struct Env {
 pub struct HarmonicEntry {
     /// Row label.
     pub label: String,
-    /// Amplitude along IA (low, high) [g].
+    /// Amplitude along IA (low, high) \[g\].
     pub ia_amp_g: [f64; 2],
-    /// Amplitude along OA (low, high) [g].
+    /// Amplitude along OA (low, high) \[g\].
     pub oa_amp_g: [f64; 2],
-    /// Amplitude along PA (low, high) [g].
+    /// Amplitude along PA (low, high) \[g\].
     pub pa_amp_g: [f64; 2],
 }
 
@@ -60,7 +60,7 @@ pub struct HarmonicEntry {
 pub struct RandomEntry {
     /// Row label.
     pub label: String,
-    /// Band (f_low, f_up) [Hz].
+    /// Band (f_low, f_up) \[Hz\].
     #[serde(rename = "band_Hz")]
     pub band_hz: [f64; 2],
     /// Spectral density range (low, high) [g²/Hz].

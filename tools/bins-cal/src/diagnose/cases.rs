@@ -20,9 +20,9 @@ use rand_distr::{Distribution, Normal};
 /// One position of the rig program.
 #[derive(Clone, Debug)]
 pub struct Hold {
-    /// Duration [s].
+    /// Duration \[s\].
     pub dur_s: f64,
-    /// Static specific force [g].
+    /// Static specific force \[g\].
     pub f_g: [f64; 3],
     /// Vibration.
     pub vib: Vibration<f64>,
@@ -33,7 +33,7 @@ pub struct Hold {
 /// The test: rig program (repeated), chamber profile, power-on times.
 #[derive(Clone, Debug)]
 pub struct Plan {
-    /// Sample period [s].
+    /// Sample period \[s\].
     pub dt_s: f64,
     /// Rows.
     pub rows: usize,
@@ -41,18 +41,18 @@ pub struct Plan {
     pub holds: Vec<Hold>,
     /// Chamber (= unit case) temperature knots `(t_s, °C)`, linear between, held outside.
     pub chamber: Vec<(f64, f64)>,
-    /// Times the unit is powered on [s]; the first should be ≤ 0.
+    /// Times the unit is powered on \[s\]; the first should be ≤ 0.
     pub power_on_s: Vec<f64>,
 }
 
 /// REAL's noise.
 #[derive(Clone, Copy, Debug)]
 pub struct Noise {
-    /// White noise per sample [g].
+    /// White noise per sample \[g\].
     pub white_g: f64,
     /// Random walk [g/√s].
     pub rw_g_per_sqrt_s: f64,
-    /// Gauss–Markov bias instability: σ [g] and correlation time [s].
+    /// Gauss–Markov bias instability: σ \[g\] and correlation time \[s\].
     pub gm: Option<(f64, f64)>,
     /// Thermistor noise [°C].
     pub temp_c: f64,
@@ -67,13 +67,13 @@ impl Default for Noise {
 /// A concealed effect in REAL (coefficients in g units; axis = accelerometer index).
 #[derive(Clone, Copy, Debug)]
 pub enum Effect {
-    /// The constants follow the temperature lagged by τ [s].
+    /// The constants follow the temperature lagged by τ \[s\].
     ThermalLag(f64),
     /// The constants follow the temperature through a play of width [°C].
     Hysteresis(f64),
     /// The die runs `rise` °C above the case after power-on, time constant τ: (rise, τ).
     SelfHeating(f64, f64),
-    /// Bias transient `amp·e^(−P/τ)` on one axis: (axis, amp [g], τ [s]).
+    /// Bias transient `amp·e^(−P/τ)` on one axis: (axis, amp \[g\], τ \[s\]).
     Warmup(usize, f64, f64),
     /// Extra bias `b1 ΔT + b2 ΔT² + b3 ΔT³` [g/°Cⁿ].
     BiasTemp(usize, [f64; 3]),
@@ -692,7 +692,7 @@ pub struct Score {
     pub worst_param_error: f64,
     /// Each parameter: name, truth, estimate.
     pub params: Vec<(String, f64, f64)>,
-    /// Per accelerometer: held-out RMS before, after, noise floor [mg].
+    /// Per accelerometer: held-out RMS before, after, noise floor \[mg\].
     pub rms: [(f64, f64, f64); 3],
     /// Held-out RMS down to the floor (within 25 %) or ≥ 3× smaller on every accelerometer
     /// with an expected effect.

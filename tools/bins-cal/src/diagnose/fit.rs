@@ -222,7 +222,7 @@ pub struct StepInfo {
 pub struct Term {
     /// The mechanism.
     pub mech: Mech,
-    /// Its θ (time constant [s] or width [°C]).
+    /// Its θ (time constant \[s\] or width [°C]).
     pub theta: Option<f64>,
     /// 95 % profile-likelihood interval of θ.
     pub theta_ci: Option<(f64, f64)>,
@@ -234,7 +234,7 @@ pub struct Term {
     pub lr_drop: f64,
     /// Its p-value.
     pub p_drop: f64,
-    /// The term's contribution at every row [g].
+    /// The term's contribution at every row \[g\].
     pub contribution: Vec<f64>,
     /// Its columns at every row (raw, per unit coefficient).
     pub columns: Vec<Vec<f64>>,
@@ -256,11 +256,11 @@ pub struct AxisFit {
     pub ambiguous: Vec<(Mech, Vec<(Mech, f64)>)>,
     /// The forward search.
     pub trace: Vec<StepInfo>,
-    /// The drift nuisance of the final model at every row [g].
+    /// The drift nuisance of the final model at every row \[g\].
     pub drift: Vec<f64>,
-    /// Model prediction at every row [g].
+    /// Model prediction at every row \[g\].
     pub prediction: Vec<f64>,
-    /// RMS [g] of residual − drift, before and after the model, all rows.
+    /// RMS \[g\] of residual − drift, before and after the model, all rows.
     pub rms: (f64, f64),
     /// The same on held-out blocks (β fitted without them).
     pub heldout_rms: (f64, f64),

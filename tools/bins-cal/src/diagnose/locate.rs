@@ -20,11 +20,11 @@ pub struct Stratum {
     pub value: String,
     /// Rows in it.
     pub rows: usize,
-    /// Time spent in it [s].
+    /// Time spent in it \[s\].
     pub duration_s: f64,
-    /// Mean residual (relative to the whole record's median) [mg].
+    /// Mean residual (relative to the whole record's median) \[mg\].
     pub mean_mg: f64,
-    /// Standard error of the mean [mg].
+    /// Standard error of the mean \[mg\].
     pub se_mg: f64,
     /// `mean / se`.
     pub z: f64,

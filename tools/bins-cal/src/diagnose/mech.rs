@@ -157,7 +157,7 @@ pub fn separating_test(a: Mech, b: Mech) -> String {
 }
 
 /// SIM's temperature sensitivity of one accelerometer:
-/// `S(T, f) = Σ_{p=1..3} ΔTᵖ·(c_p0 + Σ_j c_pj f_j)` [g], or `ΔT` itself (free form).
+/// `S(T, f) = Σ_{p=1..3} ΔTᵖ·(c_p0 + Σ_j c_pj f_j)` \[g\], or `ΔT` itself (free form).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sensitivity {
     /// True when fitted to SIM; false: the free form `S = ΔT` [°C].

@@ -35,7 +35,7 @@ pub struct Filter {
 }
 
 impl Filter {
-    /// Builds the filter for times `t` [s], white variances `r` and random-walk intensity `q`;
+    /// Builds the filter for times `t` \[s\], white variances `r` and random-walk intensity `q`;
     /// rows with `observed(i) == false` are skipped (the level only diffuses over them).
     pub fn new(t: &[f64], r: &[f64], q: f64, observed: impl Fn(usize) -> bool) -> Self {
         let n = t.len();

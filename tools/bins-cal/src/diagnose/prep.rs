@@ -17,11 +17,11 @@ pub struct Prepared {
     pub skipped: usize,
     /// REAL's line number of each used row.
     pub line: Vec<u64>,
-    /// `t_s` [s].
+    /// `t_s` \[s\].
     pub t: Vec<f64>,
     /// REAL's `temp_C` [°C].
     pub temp: Vec<f64>,
-    /// Reference static specific force [g].
+    /// Reference static specific force \[g\].
     pub f: Vec<[f64; 3]>,
     /// Reference vibration.
     pub vib: Vec<Vibration<f64>>,
@@ -33,20 +33,20 @@ pub struct Prepared {
     pub pos: Vec<Option<usize>>,
     /// Position labels.
     pub pos_names: Vec<String>,
-    /// `power_s` [s] when every used row has it.
+    /// `power_s` \[s\] when every used row has it.
     pub power: Option<Vec<f64>>,
     /// Constant-reference segment of each row.
     pub seg: Vec<usize>,
-    /// Residual REAL − SIM per accelerometer [g].
+    /// Residual REAL − SIM per accelerometer \[g\].
     pub r: [Vec<f64>; 3],
-    /// SIM's departure from its own linear fit `K·f + U0` per accelerometer [g]: what the
+    /// SIM's departure from its own linear fit `K·f + U0` per accelerometer \[g\]: what the
     /// simulation makes of temperature and nonlinearity.
     pub sim_g: [Vec<f64>; 3],
     /// Scale factors `K_ii` used [V/g].
     pub k_diag: [f64; 3],
     /// Whether each scale factor came from SIM (false: nominal 1 V/g).
     pub k_determined: [bool; 3],
-    /// Median sample period [s].
+    /// Median sample period \[s\].
     pub dt: f64,
     /// `temp_C` smoothed by a centred moving average over ±10 s (at least ±1 row): the
     /// thermal terms are built from it, so the thermistor's own noise does not enter the
@@ -54,7 +54,7 @@ pub struct Prepared {
     pub temp_s: Vec<f64>,
     /// Temperature rate (centred difference over about a minute) [°C/s].
     pub dtemp: Vec<f64>,
-    /// White-noise variance of the residual at each row [g²], per accelerometer.
+    /// White-noise variance of the residual at each row \[g²\], per accelerometer.
     pub r_white: [Vec<f64>; 3],
     /// Notes for the report.
     pub notes: Vec<String>,

@@ -48,9 +48,9 @@ pub struct Ambiguous {
 /// One point of the Allan deviation.
 #[derive(Clone, Debug, Serialize)]
 pub struct AllanPoint {
-    /// Averaging time [s].
+    /// Averaging time \[s\].
     pub tau_s: f64,
-    /// Allan deviation per accelerometer [mg] (absent where no segment is long enough).
+    /// Allan deviation per accelerometer \[mg\] (absent where no segment is long enough).
     pub adev_mg: PerAxis<f64>,
 }
 
@@ -94,7 +94,7 @@ pub struct AugmentedModel {
     /// Reference temperature of the polynomial terms [°C].
     pub t0_c: f64,
     /// SIM's temperature sensitivity used by the thermal terms, per accelerometer:
-    /// `S = Σ_p ΔTᵖ (c_p0 + c_px f_x + c_py f_y + c_pz f_z)` [g]; absent: free form `S = ΔT`.
+    /// `S = Σ_p ΔTᵖ (c_p0 + c_px f_x + c_py f_y + c_pz f_z)` \[g\]; absent: free form `S = ΔT`.
     pub sensitivity: PerAxis<Vec<[f64; 4]>>,
     /// The terms.
     pub term: Vec<ModelTerm>,
@@ -116,7 +116,7 @@ pub struct Report {
     /// Notes (fallbacks, skipped rows).
     pub notes: Vec<String>,
     /// Per-sample white noise of the residual in the static segments (Allan deviation at the
-    /// sample period) [mg].
+    /// sample period) \[mg\].
     pub noise_floor_mg: PerAxis<f64>,
     /// Allan deviation of the residual in the static segments.
     pub allan: Vec<AllanPoint>,
@@ -128,13 +128,13 @@ pub struct Report {
     pub effects: Vec<Effect>,
     /// Groups the data cannot separate.
     pub ambiguous: Vec<Ambiguous>,
-    /// RMS of residual − drift before the model [mg].
+    /// RMS of residual − drift before the model \[mg\].
     pub rms_before_mg: PerAxis<f64>,
-    /// After [mg].
+    /// After \[mg\].
     pub rms_after_mg: PerAxis<f64>,
-    /// Held-out (β fitted without the block) before [mg].
+    /// Held-out (β fitted without the block) before \[mg\].
     pub heldout_rms_before_mg: PerAxis<f64>,
-    /// Held-out after [mg].
+    /// Held-out after \[mg\].
     pub heldout_rms_after_mg: PerAxis<f64>,
     /// The forward search per accelerometer.
     pub search: PerAxis<Vec<SearchStep>>,
@@ -142,7 +142,7 @@ pub struct Report {
     pub model: AugmentedModel,
 }
 
-/// Noise floor per accelerometer [g] and the Allan curve, from the static segments without
+/// Noise floor per accelerometer \[g\] and the Allan curve, from the static segments without
 /// vibration (all segments when there are none).
 pub fn noise_floor(p: &Prepared) -> ([f64; 3], Vec<AllanPoint>) {
     let n = p.t.len();
@@ -209,7 +209,7 @@ pub fn term_params(
     (params, ci)
 }
 
-/// Coefficient names of a mechanism (see [`super::mech::Context::coef_names`]).
+/// Coefficient names of a mechanism on `axis`, with the scale each is reported in.
 pub fn coef_names(m: Mech, s: &Sensitivity, axis: usize) -> Vec<(String, f64)> {
     // Built without data: the names depend only on the mechanism, the axis and the form of S.
     let ax = ["x", "y", "z"];

@@ -2,7 +2,7 @@
 //!
 //! | module | owns |
 //! |---|---|
-//! | [`unit`] | the truth model: T(1) constants with their temperature model (the core's), V(2) nonlinearity, warm-up, noise |
+//! | [`unit`](mod@unit) | the truth model: T(1) constants with their temperature model (the core's), V(2) nonlinearity, warm-up, noise |
 //! | [`thermal`] | chamber → case → die lags, self-heating, thermistor placement and lag, hysteresis |
 //! | [`rectify`] | rectified means of V(2) over sine and Gaussian vibration by quadrature |
 //! | [`rig`] | the timeline: tilter TP1–TP6, check positions CP1–CP6, shake-table plan, flight ramps |
@@ -42,9 +42,9 @@ pub struct Simulation {
     pub noise: NoiseParams,
     /// The rig program.
     pub segments: Vec<Segment>,
-    /// Logger rate [Hz].
+    /// Logger rate \[Hz\].
     pub rate_hz: f64,
-    /// Time since power-on at the first row [s].
+    /// Time since power-on at the first row \[s\].
     pub power_on_s: f64,
     /// Whether `chamber_C` is written.
     pub log_chamber: bool,
@@ -53,7 +53,7 @@ pub struct Simulation {
 }
 
 impl Simulation {
-    /// Total duration [s].
+    /// Total duration \[s\].
     pub fn duration_s(&self) -> f64 {
         self.segments.iter().map(|s| s.duration_s).sum()
     }

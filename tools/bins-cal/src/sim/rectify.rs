@@ -73,7 +73,7 @@ fn integrate(a: f64, b: f64, breaks: &[f64], max_panel: f64, mut f: impl FnMut(f
     sum
 }
 
-/// V(2) without its linear part: `a_u − (a0 + a3 + m1 a1 + m2 a2)` [g], through the core's
+/// V(2) without its linear part: `a_u − (a0 + a3 + m1 a1 + m2 a2)` \[g\], through the core's
 /// [`ConversionFunction::eval_g`].
 pub fn nonlinear_g(cf: &ConversionFunction<f64>, a: AccelAxes<f64>) -> f64 {
     cf.eval_g(a) - (cf.a0_g + a.ia + cf.m1_g_per_g * a.oa + cf.m2_g_per_g * a.pa)
@@ -83,7 +83,7 @@ fn add(p: AccelAxes<f64>, v: AccelAxes<f64>, s: f64) -> AccelAxes<f64> {
     AccelAxes { ia: p.ia + s * v.ia, pa: p.pa + s * v.pa, oa: p.oa + s * v.oa }
 }
 
-/// `⟨N(a_p + a_B sin θ)⟩` over one period [g] (harmonic, in phase).
+/// `⟨N(a_p + a_B sin θ)⟩` over one period \[g\] (harmonic, in phase).
 pub fn harmonic_mean_g(cf: &ConversionFunction<f64>, a_p: AccelAxes<f64>, amp: AccelAxes<f64>) -> f64 {
     use std::f64::consts::{PI, TAU};
     let mut breaks = Vec::new();
@@ -95,7 +95,7 @@ pub fn harmonic_mean_g(cf: &ConversionFunction<f64>, a_p: AccelAxes<f64>, amp: A
     integrate(0.0, TAU, &breaks, TAU / 8.0, |t| nonlinear_g(cf, add(a_p, amp, t.sin()))) / TAU
 }
 
-/// `E[N(a_p + σ ξ)]` over a standard normal ξ [g] (Gaussian, fully correlated axes).
+/// `E[N(a_p + σ ξ)]` over a standard normal ξ \[g\] (Gaussian, fully correlated axes).
 pub fn gaussian_mean_g(cf: &ConversionFunction<f64>, a_p: AccelAxes<f64>, sigma: AccelAxes<f64>) -> f64 {
     const L: f64 = 12.0;
     let norm = 1.0 / (2.0 * std::f64::consts::PI).sqrt();
@@ -106,7 +106,7 @@ pub fn gaussian_mean_g(cf: &ConversionFunction<f64>, a_p: AccelAxes<f64>, sigma:
     integrate(-L, L, &breaks, 1.0, |x| norm * (-0.5 * x * x).exp() * nonlinear_g(cf, add(a_p, sigma, x)))
 }
 
-/// The rectified mean `⟨N_i⟩` [g] of each accelerometer (unit order x, y, z) at the static
+/// The rectified mean `⟨N_i⟩` \[g\] of each accelerometer (unit order x, y, z) at the static
 /// specific force `f_g` under `vib`. Without vibration it is `N_i(f)`.
 pub fn rectified_g(cfs: &[ConversionFunction<f64>; 3], f_g: &[f64; 3], vib: &Vibration<f64>) -> [f64; 3] {
     let mut out = [0.0; 3];
@@ -122,7 +122,7 @@ pub fn rectified_g(cfs: &[ConversionFunction<f64>; 3], f_g: &[f64; 3], vib: &Vib
 }
 
 /// Variance of the logger's sample mean of a unit-variance flat-spectrum process over the band
-/// `(f1, f2)` [Hz] for a sample period `dt` [s]: `(1/Δf)·∫ sinc²(π f dt) df` (the boxcar
+/// `(f1, f2)` \[Hz\] for a sample period `dt` \[s\]: `(1/Δf)·∫ sinc²(π f dt) df` (the boxcar
 /// average's power response). Used for the sampling fluctuation of random vibration.
 pub fn boxcar_variance(band_hz: (f64, f64), dt: f64) -> f64 {
     let (f1, f2) = band_hz;

@@ -15,16 +15,16 @@ pub enum Motion {
     /// The rig turns the unit from one position to the next: the reference is not known
     /// (empty cells), the force rotates from `from` to `to`.
     Move {
-        /// Start [g].
+        /// Start \[g\].
         from: [f64; 3],
-        /// End [g].
+        /// End \[g\].
         to: [f64; 3],
     },
     /// A commanded change of acceleration (flight): known, linear from `from` to `to`.
     Ramp {
-        /// Start [g].
+        /// Start \[g\].
         from: [f64; 3],
-        /// End [g].
+        /// End \[g\].
         to: [f64; 3],
     },
 }
@@ -32,7 +32,7 @@ pub enum Motion {
 /// One piece of the timeline.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Segment {
-    /// Duration [s].
+    /// Duration \[s\].
     pub duration_s: f64,
     /// A new chamber set point from the start of this segment [°C].
     pub chamber_c: Option<f64>,
@@ -45,7 +45,7 @@ pub struct Segment {
 }
 
 impl Segment {
-    /// The static specific force [g] at fraction `s` ∈ [0, 1] of the segment.
+    /// The static specific force \[g\] at fraction `s` ∈ [0, 1] of the segment.
     pub fn f_at(&self, s: f64) -> [f64; 3] {
         match self.motion {
             Motion::Hold(f) => f,
@@ -117,12 +117,12 @@ impl Timeline {
         Timeline { segments: Vec::new(), current_f: start_f_g, pending_chamber: None }
     }
 
-    /// The static specific force at the end so far [g].
+    /// The static specific force at the end so far \[g\].
     pub fn current_f(&self) -> [f64; 3] {
         self.current_f
     }
 
-    /// Total duration [s].
+    /// Total duration \[s\].
     pub fn duration_s(&self) -> f64 {
         self.segments.iter().map(|s| s.duration_s).sum()
     }

@@ -43,16 +43,16 @@ pub struct ScenarioFile {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RecordingSpec {
-    /// Logger rate [Hz].
+    /// Logger rate \[Hz\].
     #[serde(rename = "rate_Hz")]
     pub rate_hz: f64,
-    /// Time since power-on at the first row [s].
+    /// Time since power-on at the first row \[s\].
     #[serde(default)]
     pub power_on_s: f64,
     /// Whether `chamber_C` is written (default true).
     #[serde(default = "yes")]
     pub log_chamber: bool,
-    /// The unit's static specific force before the first step [g] (default TP1, `[0, 0, 1]`).
+    /// The unit's static specific force before the first step \[g\] (default TP1, `[0, 0, 1]`).
     #[serde(default)]
     pub start_f_g: Option<[f64; 3]>,
     /// Further comment lines.
@@ -78,7 +78,7 @@ pub struct UnitSpec {
     /// K at T0 [V/g].
     #[serde(default, rename = "k_V_per_g")]
     pub k_v_per_g: Option<[[f64; 3]; 3]>,
-    /// U0 at T0 [V].
+    /// U0 at T0 \[V\].
     #[serde(default, rename = "u0_V")]
     pub u0_v: Option<[f64; 3]>,
     /// Constants measured at further temperatures.
@@ -97,10 +97,10 @@ pub struct UnitSpec {
     /// The nonlinear conversion function V(2).
     #[serde(default)]
     pub conversion: Option<ConversionSpec>,
-    /// Warm-up transient at power-on [V] per axis.
+    /// Warm-up transient at power-on \[V\] per axis.
     #[serde(default, rename = "warmup_V")]
     pub warmup_v: [f64; 3],
-    /// Warm-up time constant [s].
+    /// Warm-up time constant \[s\].
     #[serde(default)]
     pub warmup_tau_s: f64,
 }
@@ -135,7 +135,7 @@ pub struct AtSpec {
     /// K [V/g].
     #[serde(rename = "k_V_per_g")]
     pub k_v_per_g: [[f64; 3]; 3],
-    /// U0 [V].
+    /// U0 \[V\].
     #[serde(rename = "u0_V")]
     pub u0_v: [f64; 3],
 }
@@ -171,7 +171,7 @@ pub enum ConversionPreset {
 #[derive(Clone, Copy, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CfSpec {
-    /// δ_1A [1].
+    /// δ_1A \[1\].
     #[serde(default)]
     pub delta_1a: f64,
     /// k2 [g/g²].
@@ -204,10 +204,10 @@ pub struct ThermalSpec {
     /// Chamber ramp rate [°C/min] (default 1; `inf` jumps).
     #[serde(default = "one", rename = "rate_C_per_min")]
     pub rate_c_per_min: f64,
-    /// Air → case time constant [s].
+    /// Air → case time constant \[s\].
     #[serde(default)]
     pub case_tau_s: f64,
-    /// Case → die time constant [s].
+    /// Case → die time constant \[s\].
     #[serde(default)]
     pub die_tau_s: f64,
     /// Die above case once powered [°C].
@@ -216,7 +216,7 @@ pub struct ThermalSpec {
     /// Thermistor position: 0 = case, 1 = die.
     #[serde(default)]
     pub thermistor_at: f64,
-    /// Thermistor time constant [s].
+    /// Thermistor time constant \[s\].
     #[serde(default)]
     pub thermistor_tau_s: f64,
     /// Hysteresis (play) width [°C].
@@ -281,10 +281,10 @@ pub struct NoiseSpec {
     /// Bias instability [V RMS].
     #[serde(default, rename = "bias_instability_V")]
     pub bias_instability: PerAxis,
-    /// Bias instability correlation time [s].
+    /// Bias instability correlation time \[s\].
     #[serde(default)]
     pub bias_tau_s: f64,
-    /// ADC step [V].
+    /// ADC step \[V\].
     #[serde(default, rename = "adc_lsb_V")]
     pub adc_lsb_v: f64,
     /// Thermistor noise [°C RMS].
@@ -310,7 +310,7 @@ pub enum StepSpec {
         /// Set point [°C].
         #[serde(rename = "chamber_C")]
         chamber_c: f64,
-        /// Hold [s].
+        /// Hold \[s\].
         dwell_s: f64,
     },
     /// Tilter test positions TP1…TP6.
@@ -318,9 +318,9 @@ pub enum StepSpec {
         /// Which (1-based, default all six, in order).
         #[serde(default)]
         positions: Option<Vec<usize>>,
-        /// Hold per position [s].
+        /// Hold per position \[s\].
         dwell_s: f64,
-        /// Turn between positions [s].
+        /// Turn between positions \[s\].
         #[serde(default)]
         move_s: f64,
     },
@@ -332,9 +332,9 @@ pub enum StepSpec {
         /// Which (1-based, default all six).
         #[serde(default)]
         positions: Option<Vec<usize>>,
-        /// Hold per position [s].
+        /// Hold per position \[s\].
         dwell_s: f64,
-        /// Turn between positions [s].
+        /// Turn between positions \[s\].
         #[serde(default)]
         move_s: f64,
     },
@@ -344,25 +344,25 @@ pub enum StepSpec {
         accelerometer: AxisName,
         /// `sine` (peak amplitude) or `random` (σ).
         vibration: ShakeKind,
-        /// Table levels [g]: peak (sine) or σ (random).
+        /// Table levels \[g\]: peak (sine) or σ (random).
         levels_g: Vec<f64>,
-        /// Sine frequency [Hz].
+        /// Sine frequency \[Hz\].
         #[serde(default, rename = "freq_Hz")]
         freq_hz: Option<f64>,
-        /// Random band [Hz].
+        /// Random band \[Hz\].
         #[serde(default, rename = "band_Hz")]
         band_hz: Option<[f64; 2]>,
-        /// Quiet hold per position [s].
+        /// Quiet hold per position \[s\].
         quiet_s: f64,
-        /// Vibration hold per position [s].
+        /// Vibration hold per position \[s\].
         shake_s: f64,
-        /// Turn between positions [s].
+        /// Turn between positions \[s\].
         #[serde(default)]
         move_s: f64,
     },
     /// Hold a given force (or a named position) with optional vibration.
     Hold {
-        /// Static specific force [g].
+        /// Static specific force \[g\].
         #[serde(default)]
         f_g: Option<[f64; 3]>,
         /// Or a position label: TP1…TP6, CP1…CP6 (with `theta_deg`).
@@ -371,9 +371,9 @@ pub enum StepSpec {
         /// Tilt for CP positions [°].
         #[serde(default = "theta_default")]
         theta_deg: f64,
-        /// Hold [s].
+        /// Hold \[s\].
         dwell_s: f64,
-        /// Turn to it first [s].
+        /// Turn to it first \[s\].
         #[serde(default)]
         move_s: f64,
         /// Vibration.
@@ -385,12 +385,12 @@ pub enum StepSpec {
     },
     /// A flight segment: ramp to an acceleration, hold it under vibration.
     Flight {
-        /// Static specific force [g].
+        /// Static specific force \[g\].
         accel_g: [f64; 3],
-        /// Ramp from the previous acceleration [s] (reference known).
+        /// Ramp from the previous acceleration \[s\] (reference known).
         #[serde(default)]
         ramp_s: f64,
-        /// Hold [s].
+        /// Hold \[s\].
         duration_s: f64,
         /// Vibration (ramp and hold).
         #[serde(default)]
@@ -435,21 +435,21 @@ pub enum VibSpec {
     None,
     /// Harmonic, in phase on all axes.
     Sine {
-        /// Peak amplitude per axis [g].
+        /// Peak amplitude per axis \[g\].
         amp_g: [f64; 3],
-        /// Frequency [Hz].
+        /// Frequency \[Hz\].
         #[serde(rename = "freq_Hz")]
         freq_hz: f64,
     },
     /// Random, flat over the band, fully correlated.
     Random {
-        /// σ per axis [g] (or `psd_g2_per_Hz`).
+        /// σ per axis \[g\] (or `psd_g2_per_Hz`).
         #[serde(default)]
         sigma_g: Option<[f64; 3]>,
         /// Spectral density per axis [g²/Hz] (σ² = S·Δf).
         #[serde(default, rename = "psd_g2_per_Hz")]
         psd: Option<[f64; 3]>,
-        /// Band [Hz].
+        /// Band \[Hz\].
         #[serde(rename = "band_Hz")]
         band_hz: [f64; 2],
     },

@@ -13,15 +13,15 @@ pub struct ThermalParams {
     pub start_c: f64,
     /// Chamber ramp rate [°C/s] (infinite: jumps to the set point).
     pub rate_c_per_s: f64,
-    /// Time constant air → case [s].
+    /// Time constant air → case \[s\].
     pub case_tau_s: f64,
-    /// Time constant case → die [s].
+    /// Time constant case → die \[s\].
     pub die_tau_s: f64,
     /// Die temperature above the case in steady state once powered [°C].
     pub self_heating_c: f64,
     /// Where the thermistor sits: 0 = on the case, 1 = at the die.
     pub thermistor_at: f64,
-    /// The thermistor's own time constant [s].
+    /// The thermistor's own time constant \[s\].
     pub thermistor_tau_s: f64,
     /// Width of the backlash (play) hysteresis between die temperature and the temperature
     /// the constants follow [°C]; 0 = none.

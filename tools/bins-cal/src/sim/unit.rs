@@ -19,15 +19,15 @@ use rand_distr::StandardNormal;
 /// Noise and quantisation of the signals and the thermistor. All zero = noise off.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct NoiseParams {
-    /// White noise per sample, RMS [V], per axis.
+    /// White noise per sample, RMS \[V\], per axis.
     pub white_v: [f64; 3],
     /// Bias random walk [V/√s], per axis.
     pub random_walk_v_per_sqrt_s: [f64; 3],
-    /// Bias instability: stationary RMS of a first-order Gauss–Markov bias [V], per axis.
+    /// Bias instability: stationary RMS of a first-order Gauss–Markov bias \[V\], per axis.
     pub bias_instability_v: [f64; 3],
-    /// Its correlation time [s].
+    /// Its correlation time \[s\].
     pub bias_tau_s: f64,
-    /// ADC step [V]; 0 = no quantisation.
+    /// ADC step \[V\]; 0 = no quantisation.
     pub adc_lsb_v: f64,
     /// Thermistor white noise per sample, RMS [°C].
     pub temp_noise_c: f64,
@@ -49,9 +49,9 @@ pub struct UnitModel {
     /// V(2) of the x, y, z accelerometers, in g units (its linear part is T(1)'s and is not
     /// added again).
     pub cf: [ConversionFunction<f64>; 3],
-    /// Warm-up transient amplitude at power-on [V], per axis.
+    /// Warm-up transient amplitude at power-on \[V\], per axis.
     pub warmup_v: [f64; 3],
-    /// Warm-up time constant [s].
+    /// Warm-up time constant \[s\].
     pub warmup_tau_s: f64,
 }
 
@@ -165,9 +165,9 @@ impl NoiseState {
 }
 
 impl UnitModel {
-    /// The noise-free signals [V] at the constants' temperature `temp_c` for the static
+    /// The noise-free signals \[V\] at the constants' temperature `temp_c` for the static
     /// specific force `f_g` plus the sample's mean vibration `vib_mean_g` (zero unless the
-    /// sampling fluctuation is on), with the rectified means `rect_g` [g] and `power_s` since
+    /// sampling fluctuation is on), with the rectified means `rect_g` \[g\] and `power_s` since
     /// power-on.
     #[inline]
     pub fn signals_v(
