@@ -157,10 +157,11 @@ impl<F: Float> Pipeline<F> {
             // the moments on the step that completes a block, then one accelerometer's VE on
             // each of the next three.
             if let Some(n) = &mut state.next_ve {
-                let axis = [Axis::X, Axis::Y, Axis::Z][n.done.min(2)];
-                let (e, c) = self.vib.correction_from_moments_on_g(&n.moments, &n.moments.mean_g, axis);
-                n.ve_g[n.done.min(2)] = e;
-                n.clamped |= c;
+                if let (Some(&axis), Some(slot)) = (Axis::ALL.get(n.done), n.ve_g.get_mut(n.done)) {
+                    let (e, c) = self.vib.correction_from_moments_on_g(&n.moments, &n.moments.mean_g, axis);
+                    *slot = e;
+                    n.clamped |= c;
+                }
                 n.done += 1;
                 if n.done >= 3 {
                     state.online_ve = Some((n.ve_g, n.clamped));

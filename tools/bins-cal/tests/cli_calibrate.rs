@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 mod common;
-use common::{err, ok, repo};
+use common::{err, ok, repo, without_column};
 
 /// The simulated campaign, made once (the directory lives for the test process).
 fn campaign() -> &'static Path {
@@ -120,19 +120,13 @@ fn bad_inputs_give_one_line_errors_and_no_output() {
     let full = std::fs::read_to_string(campaign().join("t3.csv")).unwrap();
     let out = dir.path().join("cal.toml");
     // No `pos` column.
-    let header = full.lines().find(|l| l.starts_with("t_s")).unwrap();
-    let pos_col = header.split(',').position(|c| c == "pos").unwrap();
-    let strip = |l: &str| {
-        if l.starts_with('#') {
-            return l.to_string();
-        }
-        l.split(',').enumerate().filter(|(i, _)| *i != pos_col).map(|(_, c)| c).collect::<Vec<_>>().join(",")
-    };
     let nopos = dir.path().join("nopos.csv");
-    std::fs::write(&nopos, full.lines().map(strip).collect::<Vec<_>>().join("\n") + "\n").unwrap();
+    std::fs::write(&nopos, without_column(&full, "pos")).unwrap();
     let e = err(&["calibrate", "--tilter", s(&nopos), "-o", s(&out)]);
     assert!(e.contains("nopos.csv") && e.contains("missing column `pos`"), "{e}");
     // Only TP1..TP3 labelled: fewer than 4 positions.
+    let header = full.lines().find(|l| l.starts_with("t_s")).unwrap();
+    let pos_col = header.split(',').position(|c| c == "pos").unwrap();
     let few = dir.path().join("few.csv");
     let keep = |l: &str| {
         if ["TP4", "TP5", "TP6"].iter().any(|p| l.contains(&format!(",{p},"))) {

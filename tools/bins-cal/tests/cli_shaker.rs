@@ -15,7 +15,7 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 mod common;
-use common::{err, ok, repo};
+use common::{err, ok, repo, without_column};
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -197,16 +197,8 @@ fn bad_shaker_inputs_give_one_line_errors_and_no_output() {
     assert!(e.contains("tilter.csv") && e.contains("no shaking segment"), "{e}");
     // No vib_kind column.
     let full = std::fs::read_to_string(dir.join("shaker.csv")).unwrap();
-    let header: Vec<&str> = full.lines().find(|l| l.starts_with("t_s")).unwrap().split(',').collect();
-    let k = header.iter().position(|c| *c == "vib_kind").unwrap();
-    let strip = |l: &str| {
-        if l.starts_with('#') {
-            return l.to_string();
-        }
-        l.split(',').enumerate().filter(|(i, _)| *i != k).map(|(_, c)| c).collect::<Vec<_>>().join(",")
-    };
     let nokind = out_dir.path().join("nokind.csv");
-    std::fs::write(&nokind, full.lines().map(strip).collect::<Vec<_>>().join("\n") + "\n").unwrap();
+    std::fs::write(&nokind, without_column(&full, "vib_kind")).unwrap();
     let e = calibrate(&nokind);
     assert!(e.contains("nokind.csv") && e.contains("missing column `vib_kind`"), "{e}");
     // Sine at one level only (the 2 and 4 g holds removed): too few amplitudes.

@@ -57,7 +57,30 @@ pub struct Segment {
 struct Run {
     pos: String,
     f_g: [f64; 3],
-    rows: Vec<(f64, [f64; 3], f64)>,
+    rows: Vec<RunRow>,
+}
+
+/// One row of a run: `t_s`, `u_v`, `temp_c`.
+pub(super) type RunRow = (f64, [f64; 3], f64);
+
+/// The rows of a run after the settling margin (`settle_s`, at most a quarter of the run).
+pub(super) fn after_settling(rows: &[RunRow], opt: &Options) -> Vec<RunRow> {
+    let (Some(first), Some(last)) = (rows.first(), rows.last()) else { return Vec::new() };
+    let margin = opt.settle_s.min(0.25 * (last.0 - first.0));
+    rows.iter().filter(|r| r.0 >= first.0 + margin).copied().collect()
+}
+
+/// The temperature's least-squares rate over `rows` [°C/min], about their mean time and the
+/// mean temperature `temp_c`; 0 when the rows span no time.
+pub(super) fn temp_rate_c_per_min(rows: &[RunRow], temp_c: f64) -> f64 {
+    let n = rows.len() as f64;
+    let t_mean: f64 = rows.iter().map(|r| r.0 / n).sum();
+    let (mut stt, mut sty) = (0.0, 0.0);
+    for (t, _, tc) in rows {
+        stt += (t - t_mean).powi(2);
+        sty += (t - t_mean) * (tc - temp_c);
+    }
+    if stt > 0.0 { sty / stt * 60.0 } else { 0.0 }
 }
 
 /// All dwells of a recording (kept and rejected). Errors name the file: unreadable, no `pos`
@@ -101,30 +124,24 @@ pub fn find(path: &Path, opt: &Options) -> anyhow::Result<Vec<Segment>> {
 
 fn segment(path: &Path, run: Run, opt: &Options) -> Segment {
     let (t_first, t_last) = (run.rows[0].0, run.rows[run.rows.len() - 1].0);
-    let margin = opt.settle_s.min(0.25 * (t_last - t_first));
-    let rows: Vec<_> = run.rows.iter().filter(|r| r.0 >= t_first + margin).copied().collect();
+    let rows = after_settling(&run.rows, opt);
     let n = rows.len() as f64;
     let mut mean = [0.0; 3];
     let mut temp = 0.0;
-    let mut t_mean = 0.0;
-    for (t, u, tc) in &rows {
+    for (_, u, tc) in &rows {
         for i in 0..3 {
             mean[i] += u[i] / n;
         }
         temp += tc / n;
-        t_mean += t / n;
     }
     let mut var = [0.0; 3];
-    let (mut stt, mut sty) = (0.0, 0.0);
-    for (t, u, tc) in &rows {
+    for (_, u, _) in &rows {
         for i in 0..3 {
             var[i] += (u[i] - mean[i]).powi(2) / n;
         }
-        stt += (t - t_mean).powi(2);
-        sty += (t - t_mean) * (tc - temp);
     }
     let std = var.map(f64::sqrt);
-    let rate = if stt > 0.0 { sty / stt * 60.0 } else { 0.0 };
+    let rate = temp_rate_c_per_min(&rows, temp);
     let rejected = if rows.len() < 3 {
         Some(format!("only {} rows after the settling margin", rows.len()))
     } else if std.iter().any(|s| !(*s <= opt.max_std_v)) {

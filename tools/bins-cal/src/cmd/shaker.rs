@@ -25,6 +25,7 @@
 //! `ΔU` is divided by the accelerometer's scale factor `K_ii` at the hold's temperature from
 //! the tilter calibration.
 
+use super::segments::{RunRow, after_settling, temp_rate_c_per_min};
 use anyhow::{anyhow, bail};
 use bins_cal::recording::{Reader, Row, col};
 use bins_comp::vibration::shake::{ShakePosition, VibFitError, fit_conversion_function, fit_ve_terms};
@@ -78,7 +79,7 @@ struct Run {
     pos: String,
     f_g: [f64; 3],
     vib: Vibration<f64>,
-    rows: Vec<(f64, [f64; 3], f64)>,
+    rows: Vec<RunRow>,
 }
 
 /// Every hold of a recording. Errors name the file and the missing column; a file without
@@ -171,8 +172,7 @@ fn mean_without_sine(t: &[f64], u: &[f64], freq_hz: f64) -> (f64, f64) {
 
 fn hold(path: &Path, run: Run, opt: &super::segments::Options) -> Hold {
     let (t_first, t_last) = (run.rows[0].0, run.rows[run.rows.len() - 1].0);
-    let margin = opt.settle_s.min(0.25 * (t_last - t_first));
-    let rows: Vec<_> = run.rows.iter().filter(|r| r.0 >= t_first + margin).copied().collect();
+    let rows = after_settling(&run.rows, opt);
     let n = rows.len();
     let t: Vec<f64> = rows.iter().map(|r| r.0).collect();
     let mut mean = [0.0; 3];
@@ -191,13 +191,7 @@ fn hold(path: &Path, run: Run, opt: &super::segments::Options) -> Hold {
         std[i] = s;
     }
     let temp = rows.iter().map(|r| r.2).sum::<f64>() / n.max(1) as f64;
-    let t_mean = t.iter().sum::<f64>() / n.max(1) as f64;
-    let (mut stt, mut sty) = (0.0, 0.0);
-    for r in &rows {
-        stt += (r.0 - t_mean).powi(2);
-        sty += (r.0 - t_mean) * (r.2 - temp);
-    }
-    let rate = if stt > 0.0 { sty / stt * 60.0 } else { 0.0 };
+    let rate = temp_rate_c_per_min(&rows, temp);
     let worst = std.iter().fold(0.0f64, |a, b| a.max(*b));
     let rejected = if n < 4 {
         Some(format!("only {n} rows after the settling margin"))

@@ -30,3 +30,16 @@ pub fn err(args: &[&str]) -> String {
     assert!(e.starts_with("bins-cal: error: "), "{e}");
     e
 }
+
+/// The text of a recording without its column `name` (comment lines kept as they are).
+pub fn without_column(csv: &str, name: &str) -> String {
+    let header = csv.lines().find(|l| l.starts_with("t_s")).expect("a header line");
+    let k = header.split(',').position(|c| c == name).expect("the column exists");
+    let strip = |l: &str| {
+        if l.starts_with('#') {
+            return l.to_string();
+        }
+        l.split(',').enumerate().filter(|(i, _)| *i != k).map(|(_, c)| c).collect::<Vec<_>>().join(",")
+    };
+    csv.lines().map(strip).collect::<Vec<_>>().join("\n") + "\n"
+}
