@@ -1,15 +1,40 @@
-//! Puts `memory.x` on the linker's search path for the Cortex-M4F binaries (bare-metal
-//! targets only; host builds of the library do nothing here).
+//! Puts `memory.x` on the linker's search path for the Cortex-M4F binaries, and decides
+//! whether the load-time code is optimised for size (bare-metal targets only; host builds of
+//! the library do nothing here).
+//!
+//! `cfg(boot_optsize)`: set for a bare-metal build whose compiler accepts unstable features
+//! (a nightly, or `RUSTC_BOOTSTRAP=1` as `cargo xtask` sets with `-Zbuild-std`). The code that
+//! runs once at boot (blob parsing, calibration validation, the precomputation) is then
+//! compiled with `#[optimize(size)]`, the per-sample path keeps `opt-level = 3`. On a stable
+//! compiler the same code builds at `opt-level = 3` throughout, only larger.
 
-use std::{env, fs, path::PathBuf};
+use std::{env, fs, path::PathBuf, process::Command};
 
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
+    println!("cargo:rerun-if-env-changed=RUSTC_BOOTSTRAP");
+    println!("cargo:rustc-check-cfg=cfg(boot_optsize)");
     if env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("none") {
         return;
+    }
+    if unstable_features_accepted() {
+        println!("cargo:rustc-cfg=boot_optsize");
     }
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     fs::copy("memory.x", out.join("memory.x")).expect("copy memory.x to OUT_DIR");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed=memory.x");
+}
+
+/// True when the compiler building this crate accepts `#![feature(..)]`.
+fn unstable_features_accepted() -> bool {
+    if env::var("RUSTC_BOOTSTRAP").is_ok_and(|v| !v.is_empty() && v != "0") {
+        return true;
+    }
+    let rustc = env::var_os("RUSTC").unwrap_or_else(|| "rustc".into());
+    Command::new(rustc).arg("-vV").output().is_ok_and(|o| {
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .any(|l| l.starts_with("release:") && (l.contains("-nightly") || l.contains("-dev")))
+    })
 }

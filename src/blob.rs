@@ -757,6 +757,8 @@ impl<'a> Blob<'a> {
     /// Checks the container: length, magic, version, declared length, CRC, reserved header
     /// word and section table (bounds, overlaps, duplicates, unknown required sections).
     /// `bytes` must be exactly the blob (see [`parse_region`] for a flash region).
+    #[inline(never)]
+    #[cfg_attr(boot_optsize, optimize(size))]
     pub fn new(bytes: &'a [u8]) -> Result<Self, BlobError> {
         let got = bytes.len();
         if got < HEADER_BYTES {
@@ -1041,6 +1043,8 @@ fn read_coef_set(
 /// Checks a blob completely and returns its calibration: the container ([`Blob::new`]), every
 /// section of format version 1, each value against its physical range ([`limits`]), and
 /// finally [`Calibration::new`]'s checks. `bytes` must be exactly the blob.
+#[inline(never)]
+#[cfg_attr(boot_optsize, optimize(size))]
 pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
     let blob = Blob::new(bytes)?;
     for id in section::MANDATORY {
@@ -1186,9 +1190,9 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
 
     let params =
         CalibrationParams { constants: Constants { k_v_per_g: k, u0_v }, t0_c, model, method, temp_range_c: (lo, hi) };
-    Calibration::<f64>::new(&params)?;
+    params.validate()?;
     if let Some(v) = &vibration {
-        VibrationConfig::<f64>::new(v).map_err(BlobError::Vibration)?;
+        v.validate().map_err(BlobError::Vibration)?;
     }
     Ok(ParsedCalibration { params, vibration, meta, blob })
 }
@@ -1196,6 +1200,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
 /// The vibration section and the flight-phase profiles, if present (see
 /// `docs/calibration-blob.md`). Profiles without a vibration section are refused: they mean
 /// nothing without the coefficients.
+#[cfg_attr(boot_optsize, optimize(size))]
 fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError> {
     let Some(p) = Payload::get(blob, section::VIBRATION) else {
         return match Payload::get(blob, section::FLIGHT_PHASES) {

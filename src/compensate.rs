@@ -183,8 +183,64 @@ impl CalibrationParams {
         self
     }
 
+    /// Every check a calibration must pass before it is used: finite, invertible constants
+    /// with nonzero scale factors, a well-formed temperature model, a finite range that holds
+    /// T0, and a K(T) that stays invertible (with each scale factor within [1/2, 2]× its T0
+    /// value) at the range's ends, its knots and a grid of 64 steps, so
+    /// the run-time fallback is never expected to trigger.
+    ///
+    /// One `f64` implementation for every working precision, run once at load time (by
+    /// [`Calibration::new`] and the blob parser). Kept out of line: the boot code of the
+    /// firmware calls it from several places and needs one copy of it, not one per caller.
+    #[inline(never)]
+    #[cfg_attr(boot_optsize, optimize(size))]
+    pub fn validate(&self) -> Result<(), CalibrationError> {
+        let p = self;
+        let constants = p.constants;
+        if !constants.is_finite() {
+            return Err(CalibrationError::NonFiniteConstants);
+        }
+        if constants.inverse().is_none() {
+            return Err(CalibrationError::SingularK);
+        }
+        let k = &constants.k_v_per_g;
+        if k[0][0] == 0.0 || k[1][1] == 0.0 || k[2][2] == 0.0 {
+            return Err(CalibrationError::ZeroScaleFactor);
+        }
+        p.model.check().map_err(CalibrationError::TempModel)?;
+        let (lo, hi) = p.temp_range_c;
+        if !(lo.is_finite() && hi.is_finite() && p.t0_c.is_finite() && lo < hi && lo <= p.t0_c && p.t0_c <= hi) {
+            return Err(CalibrationError::BadRange);
+        }
+        for i in 0..=RANGE_CHECK_POINTS {
+            p.check_at(lo + (hi - lo) * (i as f64 / RANGE_CHECK_POINTS as f64))?;
+        }
+        if let TempModel::Pwl { n_knots, knots_c, .. } = &p.model {
+            for &kn in knots_c.iter().take(*n_knots as usize) {
+                if kn > lo && kn < hi {
+                    p.check_at(kn)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// K(T) at `temp_c` is invertible and each scale factor within [1/2, 2]× its T0 value
+    /// ([`MAX_SCALE_RATIO`]).
+    #[cfg_attr(boot_optsize, optimize(size))]
+    fn check_at(&self, temp_c: f64) -> Result<(), CalibrationError> {
+        let k = &self.constants.k_v_per_g;
+        let kt = self.constants_at(temp_c);
+        let plausible = (0..3).all(|i| {
+            let r = kt.k_v_per_g[i][i] / k[i][i];
+            (1.0 / MAX_SCALE_RATIO..=MAX_SCALE_RATIO).contains(&r)
+        });
+        if kt.inverse().is_none() || !plausible { Err(CalibrationError::SingularInRange) } else { Ok(()) }
+    }
+
     /// The constants at `temp_c` by T(3)/T(4), in `f64`:
     /// `K_ij(T) = K_ij·(1 + ΔK_ij/K_ij)`, `U0(T) = U0 + ΔU0`.
+    #[cfg_attr(boot_optsize, optimize(size))]
     pub fn constants_at(&self, temp_c: f64) -> Constants<f64> {
         apply_delta(&self.constants, &self.model.delta(temp_c, self.t0_c))
     }
@@ -236,6 +292,8 @@ pub struct Calibration<F> {
 /// A 64-bit hash of everything that defines a calibration (FNV-1a-style over the bits of
 /// each number). Equal parameters give equal hashes; two different calibrations collide
 /// with probability about 2⁻⁶⁴.
+#[inline(never)]
+#[cfg_attr(boot_optsize, optimize(size))]
 fn fingerprint(p: &CalibrationParams) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     let mut mix = |w: u64| h = (h ^ w).wrapping_mul(0x0000_0100_0000_01b3);
@@ -269,44 +327,18 @@ fn fingerprint(p: &CalibrationParams) -> u64 {
 }
 
 impl<F: Float> Calibration<F> {
-    /// Validates `p` and precomputes. Fails on non-finite or singular constants, a malformed
-    /// temperature model, a bad range, or a K(T) that becomes singular (or a scale factor
-    /// that leaves [1/2, 2]× its T0 value) inside the range.
+    /// Validates `p` ([`CalibrationParams::validate`]) and precomputes. Fails on non-finite
+    /// or singular constants, a malformed temperature model, a bad range, or a K(T) that
+    /// becomes singular (or a scale factor that leaves [1/2, 2]× its T0 value) inside the
+    /// range.
+    #[inline(never)]
+    #[cfg_attr(boot_optsize, optimize(size))]
     pub fn new(p: &CalibrationParams) -> Result<Self, CalibrationError> {
+        p.validate()?;
         let constants = p.constants;
-        if !constants.is_finite() {
-            return Err(CalibrationError::NonFiniteConstants);
-        }
         let n = constants.inverse().ok_or(CalibrationError::SingularK)?;
         let k = &constants.k_v_per_g;
-        if k[0][0] == 0.0 || k[1][1] == 0.0 || k[2][2] == 0.0 {
-            return Err(CalibrationError::ZeroScaleFactor);
-        }
-        p.model.check().map_err(CalibrationError::TempModel)?;
         let (lo, hi) = p.temp_range_c;
-        if !(lo.is_finite() && hi.is_finite() && p.t0_c.is_finite() && lo < hi && lo <= p.t0_c && p.t0_c <= hi) {
-            return Err(CalibrationError::BadRange);
-        }
-        // K(T) must stay invertible and plausible over the whole range: check the ends, the
-        // knots and a grid, so the run-time fallback is never expected to trigger.
-        let check = |t: f64| -> Result<(), CalibrationError> {
-            let kt = p.constants_at(t);
-            let plausible = (0..3).all(|i| {
-                let r = kt.k_v_per_g[i][i] / k[i][i];
-                (1.0 / MAX_SCALE_RATIO..=MAX_SCALE_RATIO).contains(&r)
-            });
-            if kt.inverse().is_none() || !plausible { Err(CalibrationError::SingularInRange) } else { Ok(()) }
-        };
-        for i in 0..=RANGE_CHECK_POINTS {
-            check(lo + (hi - lo) * (i as f64 / RANGE_CHECK_POINTS as f64))?;
-        }
-        if let TempModel::Pwl { n_knots, knots_c, .. } = &p.model {
-            for &kn in knots_c.iter().take(*n_knots as usize) {
-                if kn > lo && kn < hi {
-                    check(kn)?;
-                }
-            }
-        }
         let n_f: Mat3<F> = linalg::cast_mat(&n);
         let lo_at = |i: usize| F::of(n[i][i] - n_f[i][i].to_f64());
         let n_diag_lo = [lo_at(0), lo_at(1), lo_at(2)];

@@ -28,6 +28,7 @@
 //! | [`replay`] | the sampling interrupt's step and the replay stream formats shared by the firmware and `bins-cal replay` |
 //! | [`drivers`] | sensor drivers (ADS131M04 ADC, TMP117 temperature) over embedded-hal, and the sample source's fault policy |
 #![no_std]
+#![cfg_attr(boot_optsize, feature(optimize_attribute))]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 

@@ -574,6 +574,30 @@ impl VibrationParams {
         VibrationParams { cf, variant, n_profiles: 0, profiles: [Vibration::None; MAX_PROFILES] }
     }
 
+    /// Every check a VE configuration must pass before it is used: finite coefficients, at
+    /// most [`MAX_PROFILES`] profiles, each valid ([`Vibration::is_valid`]). One `f64`
+    /// implementation for every working precision, kept out of line (see
+    /// [`CalibrationParams::validate`](crate::CalibrationParams::validate)).
+    #[inline(never)]
+    #[cfg_attr(boot_optsize, optimize(size))]
+    pub fn validate(&self) -> Result<(), VibrationConfigError> {
+        for (i, cf) in self.cf.iter().enumerate() {
+            if !cf.is_finite() {
+                return Err(VibrationConfigError::NonFiniteCoefficients(i));
+            }
+        }
+        let n = self.n_profiles as usize;
+        if n > MAX_PROFILES {
+            return Err(VibrationConfigError::TooManyProfiles);
+        }
+        for (i, v) in self.profiles.iter().enumerate().take(n) {
+            if !v.is_valid() {
+                return Err(VibrationConfigError::BadProfile(i));
+            }
+        }
+        Ok(())
+    }
+
     /// Appends a profile; returns its index, or `TooManyProfiles` when the table is full.
     pub fn push_profile(&mut self, v: Vibration<f64>) -> Result<u8, VibrationConfigError> {
         let i = self.n_profiles as usize;
@@ -594,23 +618,13 @@ pub struct VibrationConfig<F> {
 }
 
 impl<F: Float> VibrationConfig<F> {
-    /// Validates `p`: finite coefficients, at most [`MAX_PROFILES`] profiles, each valid
-    /// ([`Vibration::is_valid`]).
+    /// Validates `p` ([`VibrationParams::validate`]) and casts it to the working precision.
+    #[inline(never)]
+    #[cfg_attr(boot_optsize, optimize(size))]
     pub fn new(p: &VibrationParams) -> Result<Self, VibrationConfigError> {
-        for (i, cf) in p.cf.iter().enumerate() {
-            if !cf.is_finite() {
-                return Err(VibrationConfigError::NonFiniteCoefficients(i));
-            }
-        }
-        let n = p.n_profiles as usize;
-        if n > MAX_PROFILES {
-            return Err(VibrationConfigError::TooManyProfiles);
-        }
+        p.validate()?;
         let mut profiles = [Vibration::None; MAX_PROFILES];
-        for (i, (src, dst)) in p.profiles.iter().zip(profiles.iter_mut()).enumerate().take(n) {
-            if !src.is_valid() {
-                return Err(VibrationConfigError::BadProfile(i));
-            }
+        for (src, dst) in p.profiles.iter().zip(profiles.iter_mut()).take(p.n_profiles as usize) {
             *dst = src.cast();
         }
         Ok(VibrationConfig { cf: p.cf.map(|c| c.cast()), variant: p.variant, n_profiles: p.n_profiles, profiles })
