@@ -66,6 +66,8 @@ static ISR: Mutex<RefCell<Slot>> = Mutex::new(RefCell::new(Slot::Empty));
 /// The interrupt's state or none yet. Like an `Option`, but its empty value is all zero bytes
 /// (an explicit `u32` tag 0), so [`ISR`] is zero-initialised (`.bss`) instead of taking flash
 /// for its initial value (`.data`), as `None` of the niche-optimised `Option` would.
+// One static instance, no heap: the empty variant's unused bytes are the point.
+#[allow(clippy::large_enum_variant)]
 #[repr(u32)]
 enum Slot {
     Empty = 0,
