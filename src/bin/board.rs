@@ -126,7 +126,9 @@ const SSP_POLLS: u32 = 1_000;
 /// it when the transmit FIFO runs empty. A transaction is therefore streamed with up to
 /// [`SSP_FIFO`] bytes in flight (write DR while the transmit FIFO has room, read DR whenever
 /// the receive FIFO has a byte), so the FIFO does not run dry between its bytes and /CS frames
-/// exactly one transaction. A delay operation inside a transaction cannot keep /CS low on
+/// exactly one transaction, as long as the loop is not held up for longer than the bytes in
+/// flight take to shift out (10 µs at [`SPI_CLOCK_HZ`]): it runs in the sampling interrupt,
+/// which nothing preempts, or at boot before interrupts start. A delay operation inside a transaction cannot keep /CS low on
 /// this controller and is refused ([`SpiErrorKind::Other`]), before any byte is sent.
 pub struct Pl022(());
 
@@ -293,9 +295,11 @@ const SB_CONTROLC: Reg = Reg(SBCON_BASE + 0x04);
 const SB_SCL: u32 = 1 << 0;
 /// SDA bit of the SBCon registers.
 const SB_SDA: u32 = 1 << 1;
-/// Core cycles per quarter of an SCL period: 16 cycles = 0.64 µs at 25 MHz, an SCL of at
-/// most ≈ 390 kHz (fast mode, 400 kHz; the register writes add to it).
-const I2C_QUARTER_CYCLES: u32 = 16;
+/// Core cycles of the pause after each line change: 20 cycles = 0.8 µs at 25 MHz. A bit
+/// holds SCL low for two pauses (1.6 µs ≥ fast mode's t_LOW of 1.3 µs) and high for one
+/// (0.8 µs ≥ t_HIGH 0.6 µs): with the register accesses, SCL runs at about 330 kHz, and one
+/// TMP117 register read (45 bits) takes about 0.14 ms.
+const I2C_PAUSE_CYCLES: u32 = 20;
 /// Polls of a released SCL before a device stretching the clock is given up on.
 const I2C_STRETCH_POLLS: u32 = 1_000;
 
@@ -318,7 +322,7 @@ impl SbCon {
     }
 
     fn pause() {
-        cortex_m::asm::delay(I2C_QUARTER_CYCLES);
+        cortex_m::asm::delay(I2C_PAUSE_CYCLES);
     }
 
     fn sda(high: bool) {

@@ -78,7 +78,7 @@ enum Slot {
 /// the next SysTick; if the next one is already pending when it finishes, the deadline was
 /// missed and the next result is flagged `OVERRUN`. Its bus accesses are bounded
 /// ([`board`]): one ADC frame (23 µs on the SPI) every tick, one or two TMP117 register reads
-/// (about 0.1 ms each on the I²C) every 32nd.
+/// (about 0.14 ms each on the I²C) every 32nd.
 #[exception]
 fn SysTick() {
     // Acknowledge first: reading SYST_CSR clears COUNTFLAG (the pending bit itself is cleared
