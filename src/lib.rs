@@ -27,6 +27,7 @@
 //! | [`blob`] | the calibration blob: byte format, parser, encoder, CRC-32, physical limits |
 //! | [`replay`] | the sampling interrupt's step and the replay stream formats shared by the firmware and `bins-cal replay` |
 //! | [`drivers`] | sensor drivers (ADS131M04 ADC, TMP117 temperature) over embedded-hal, and the sample source's fault policy |
+//! | [`frame`] | the flight image's serial output frames: layout, fixed-point accelerations, encoder and decoder |
 #![no_std]
 #![cfg_attr(boot_optsize, feature(optimize_attribute))]
 #![forbid(unsafe_code)]
@@ -36,6 +37,7 @@ pub mod blob;
 pub mod compensate;
 pub mod drivers;
 pub mod float;
+pub mod frame;
 pub mod ident;
 pub mod linalg;
 pub mod model;

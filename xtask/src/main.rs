@@ -34,6 +34,16 @@ const REPLAY_SCENARIO: &str = "scenarios/replay-short.toml";
 /// Working directory of the replay test (the replay firmware's paths `target/fw-replay/…` are
 /// relative to QEMU's working directory).
 const REPLAY_DIR: &str = "target/replay-test";
+/// Where the flight image's UART output is captured in QEMU, relative to the repository root.
+const FLIGHT_CAPTURE: &str = "target/fw-flight/uart.bin";
+/// How long the flight image runs in QEMU (wall time; it never exits by itself).
+const FLIGHT_RUN: Duration = Duration::from_millis(2500);
+/// Frames the capture must hold at least: 3 s of sampling at 1 kHz (3 health frames). A
+/// 2.5 s run gave about 19 000 frames on a 2-core machine (`-icount shift=0,sleep=off` runs
+/// the mostly idle image faster than real time).
+const FLIGHT_MIN_FRAMES: usize = 3000;
+/// Bytes of one flight output frame (`bins_comp::frame::FRAME_BYTES`).
+const FLIGHT_FRAME_BYTES: f64 = 24.0;
 /// QEMU runner (also cargo's `runner` for the thumb target).
 const RUNNER: &str = "tools/qemu-run.sh";
 /// Debian packages of the fallback toolchain and of the QEMU run.
@@ -63,7 +73,7 @@ fn main() -> ExitCode {
                 "  bench  instructions per sample in QEMU, stack depth, flash/RAM of the firmware images, host samples per second"
             );
             eprintln!(
-                "  test   fmt, clippy, doc, host tests, thumb clippy, vectors, firmware build + link check, QEMU run"
+                "  test   fmt, clippy, doc, host tests, thumb clippy, vectors, firmware build + link check, flight image and firmware in QEMU"
             );
             eprintln!(
                 "  demo   simulate, calibrate, replay in QEMU, verify: the paper's check end to end (target/demo)"
@@ -126,6 +136,7 @@ impl Xtask {
                 x.build_firmware()?;
                 x.build_linkcheck()
             }),
+            ("flight image in QEMU: boots, samples at 1 kHz, flags the missing sensors", Xtask::flight_test),
             ("qemu", |x| x.run_qemu_with_blob(&x.elf("firmware"), &x.root, &x.root.join(BLOB), &x.root.join(BLOB_HEX))),
             ("qemu (corrupted calibration blob)", |x| {
                 let (elf, hex) = (x.elf("firmware"), x.root.join(BLOB_HEX));
@@ -365,8 +376,8 @@ impl Xtask {
 
     /// `cargo xtask bench`: instructions per sample of each method/model case, the worst
     /// single step and the step's stack high-water mark (the `bench` firmware in QEMU,
-    /// `-icount shift=0`), flash and static RAM of the replay firmware and of the link-check
-    /// image (`llvm-size`), and the host's samples per second (criterion).
+    /// `-icount shift=0`), flash and static RAM of the replay firmware, the link-check image
+    /// and the flight image (`llvm-size`), and the host's samples per second (criterion).
     fn bench(&mut self) -> bool {
         let started = Instant::now();
         let ok = self.step(1, "toolchain", Xtask::setup_toolchain)
@@ -376,10 +387,13 @@ impl Xtask {
                 x.run(x.thumb_cargo("build", args)?)
             })
             && self.step(3, "instructions per sample (QEMU)", |x| x.run_qemu_in(&x.elf("bench"), &x.root))
-            && self.step(4, "size of the replay firmware and the link-check image", |x| {
-                x.run(x.thumb_cargo("build", ["--release", "--features", "firmware", "--bin", "linkcheck"])?)?;
+            && self.step(4, "size of the replay firmware, the link-check image and the flight image", |x| {
+                x.build_linkcheck()?;
                 let mut c = x.command("llvm-size");
-                c.arg(x.elf("replay")).arg(x.elf("linkcheck"));
+                c.arg(x.elf("replay")).arg(x.elf("linkcheck")).arg(x.elf("flight"));
+                x.run(c)?;
+                let mut c = x.command("llvm-size");
+                c.arg("-A").arg(x.elf("flight"));
                 x.run(c)
             })
             && self.step(5, "host samples per second (criterion)", |x| {
@@ -461,27 +475,65 @@ impl Xtask {
         Ok(())
     }
 
-    /// The release link of `linkcheck` fails iff a panic is reachable from its code.
+    /// The release links of `linkcheck` and of the flight image fail iff a panic is reachable
+    /// from their code.
     fn build_linkcheck(&mut self) -> Result {
-        let c = self.thumb_cargo("build", ["--release", "--features", "firmware", "--bin", "linkcheck"])?;
+        let args = ["--release", "--features", "firmware", "--bin", "linkcheck", "--bin", "flight"];
+        let c = self.thumb_cargo("build", args)?;
         self.run(c).map_err(|e| {
             format!(
-                "{e}\n       (`undefined symbol: a_panic_is_reachable` above means a panic is reachable in the core)"
+                "{e}\n       (`undefined symbol: a_panic_is_reachable` above means a panic is reachable in the core \
+                 or the flight image)"
             )
         })
+    }
+
+    /// The flight image in QEMU for [`FLIGHT_RUN`] with the paper blob in CALIB and UART0
+    /// captured to [`FLIGHT_CAPTURE`], then stopped (it runs forever); `flight-check` decodes
+    /// the capture with the library's frame decoder. No sensor is attached in QEMU, so the
+    /// image must boot with the blob accepted, send at least [`FLIGHT_MIN_FRAMES`] frames with
+    /// consecutive sequence numbers, flag every sample `SENSOR_FAULT` and count the faults.
+    fn flight_test(&mut self) -> Result {
+        let capture = self.root.join(FLIGHT_CAPTURE);
+        if let Some(dir) = capture.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        }
+        if capture.exists() {
+            std::fs::remove_file(&capture).map_err(|e| format!("{}: {e}", capture.display()))?;
+        }
+        let mut c = self.command(self.root.join(RUNNER));
+        c.env("QEMU_EXTRA", self.loader_arg(&self.root.join(BLOB), &self.root.join(BLOB_HEX))?);
+        c.env("QEMU_SERIAL", format!("file:{}", capture.display()));
+        c.arg(self.elf("flight")).stdin(Stdio::null());
+        run_for(c, FLIGHT_RUN)?;
+        let bytes = std::fs::metadata(&capture).map_err(|e| format!("{}: {e}", capture.display()))?.len();
+        println!(
+            "flight image: {bytes} bytes on UART0 in {:.1} s wall ({:.0} frames/s)",
+            FLIGHT_RUN.as_secs_f64(),
+            bytes as f64 / FLIGHT_FRAME_BYTES / FLIGHT_RUN.as_secs_f64()
+        );
+        let mut c = self.host_cargo(["run", "--release", "-q", "-p", "host-tests", "--bin", "flight-check", "--"]);
+        c.arg(&capture).args(["--min-frames", &FLIGHT_MIN_FRAMES.to_string()]);
+        self.run(c)
     }
 
     /// Runs an ELF in QEMU with `cwd` as its working directory and `blob` in the CALIB
     /// region, placed by QEMU's generic loader at the address of the CALIB origin (taken from
     /// the Intel HEX file `hex`, which `bins-cal` writes at the ORIGIN of CALIB in `memory.x`).
     fn run_qemu_with_blob(&self, elf: &Path, cwd: &Path, blob: &Path, hex: &Path) -> Result {
-        let text = std::fs::read_to_string(hex).map_err(|e| format!("{}: {e}", hex.display()))?;
-        let addr = ihex_start(&text).ok_or(format!("{}: no extended-address and data record", hex.display()))?;
         let limit = env::var("XTASK_QEMU_TIMEOUT").ok().and_then(|s| s.parse().ok()).unwrap_or(QEMU_TIMEOUT_S);
         let mut c = self.command(self.root.join(RUNNER));
-        c.env("QEMU_EXTRA", format!("-device loader,file={},addr=0x{addr:08x}", blob.display()));
+        c.env("QEMU_EXTRA", self.loader_arg(blob, hex)?);
         c.arg(elf).current_dir(cwd).stdin(Stdio::null());
         run_with_timeout(c, Duration::from_secs(limit))
+    }
+
+    /// QEMU's option that places `blob` at the CALIB origin: the address of the Intel HEX file
+    /// `hex`, which `bins-cal` writes at the ORIGIN of CALIB in `memory.x`.
+    fn loader_arg(&self, blob: &Path, hex: &Path) -> Result<String> {
+        let text = std::fs::read_to_string(hex).map_err(|e| format!("{}: {e}", hex.display()))?;
+        let addr = ihex_start(&text).ok_or(format!("{}: no extended-address and data record", hex.display()))?;
+        Ok(format!("-device loader,file={},addr=0x{addr:08x}", blob.display()))
     }
 
     /// Runs an ELF in QEMU with `cwd` as its working directory: the firmware's semihosting
@@ -866,6 +918,26 @@ fn run_with_timeout(mut c: Command, limit: Duration) -> Result {
             None => std::thread::sleep(Duration::from_millis(20)),
         }
     }
+}
+
+/// Runs a program that does not exit by itself (the flight image in QEMU) for `duration`, in
+/// its own process group, then kills the group; an error if it exited before.
+fn run_for(mut c: Command, duration: Duration) -> Result {
+    use std::os::unix::process::CommandExt;
+    println!("$ {}", show(&c));
+    c.process_group(0);
+    let mut child = c.spawn().map_err(|e| format!("cannot start `{}`: {e}", show(&c)))?;
+    let deadline = Instant::now() + duration;
+    while Instant::now() < deadline {
+        if let Some(status) = child.try_wait().map_err(|e| e.to_string())? {
+            return Err(format!("`{}` exited with {status} before {} s", show(&c), duration.as_secs_f64()));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let group = format!("-{}", child.id());
+    let _ = Command::new("kill").args(["-KILL", "--", &group]).status();
+    let _ = child.wait();
+    Ok(())
 }
 
 /// A shell-like rendering of a command with the variables it sets.
