@@ -189,20 +189,27 @@ impl CalibrationParams {
     /// value) at the range's ends, its knots and a grid of 64 steps, so
     /// the run-time fallback is never expected to trigger.
     ///
-    /// One `f64` implementation for every working precision, run once at load time (by
-    /// [`Calibration::new`] and the blob parser). Kept out of line: the boot code of the
-    /// firmware calls it from several places and needs one copy of it, not one per caller.
+    /// One implementation for every working precision, run once at load time (by
+    /// [`Calibration::new`] and the blob parser). The constants are checked in `f64`; K(T)
+    /// over the range in `f32`, the precision the firmware runs in, with the same T(3)/T(4)
+    /// code as the per-sample step: host and target give a blob the same verdict, and the
+    /// target needs no `f64` copy of the temperature model.
+    pub fn validate(&self) -> Result<(), CalibrationError> {
+        self.checked_inverse().map(|_| ())
+    }
+
+    /// [`validate`](Self::validate), returning N = K⁻¹ at T0 (`f64`), which the check
+    /// computes anyway and [`Calibration::new`] needs. Kept out of line: the boot code of the
+    /// firmware calls it from two places and needs one copy of it, not one per caller.
     #[inline(never)]
     #[cfg_attr(boot_optsize, optimize(size))]
-    pub fn validate(&self) -> Result<(), CalibrationError> {
+    fn checked_inverse(&self) -> Result<Mat3<f64>, CalibrationError> {
         let p = self;
         let constants = p.constants;
         if !constants.is_finite() {
             return Err(CalibrationError::NonFiniteConstants);
         }
-        if constants.inverse().is_none() {
-            return Err(CalibrationError::SingularK);
-        }
+        let n = constants.inverse().ok_or(CalibrationError::SingularK)?;
         let k = &constants.k_v_per_g;
         if k[0][0] == 0.0 || k[1][1] == 0.0 || k[2][2] == 0.0 {
             return Err(CalibrationError::ZeroScaleFactor);
@@ -212,30 +219,19 @@ impl CalibrationParams {
         if !(lo.is_finite() && hi.is_finite() && p.t0_c.is_finite() && lo < hi && lo <= p.t0_c && p.t0_c <= hi) {
             return Err(CalibrationError::BadRange);
         }
+        let (c, model, t0_c) = (constants.cast::<f32>(), p.model.cast::<f32>(), f32::of(p.t0_c));
         for i in 0..=RANGE_CHECK_POINTS {
-            p.check_at(lo + (hi - lo) * (i as f64 / RANGE_CHECK_POINTS as f64))?;
+            let t = lo + (hi - lo) * (i as f64 / RANGE_CHECK_POINTS as f64);
+            check_k_at(&c, &model, t0_c, f32::of(t))?;
         }
         if let TempModel::Pwl { n_knots, knots_c, .. } = &p.model {
             for &kn in knots_c.iter().take(*n_knots as usize) {
                 if kn > lo && kn < hi {
-                    p.check_at(kn)?;
+                    check_k_at(&c, &model, t0_c, f32::of(kn))?;
                 }
             }
         }
-        Ok(())
-    }
-
-    /// K(T) at `temp_c` is invertible and each scale factor within [1/2, 2]× its T0 value
-    /// ([`MAX_SCALE_RATIO`]).
-    #[cfg_attr(boot_optsize, optimize(size))]
-    fn check_at(&self, temp_c: f64) -> Result<(), CalibrationError> {
-        let k = &self.constants.k_v_per_g;
-        let kt = self.constants_at(temp_c);
-        let plausible = (0..3).all(|i| {
-            let r = kt.k_v_per_g[i][i] / k[i][i];
-            (1.0 / MAX_SCALE_RATIO..=MAX_SCALE_RATIO).contains(&r)
-        });
-        if kt.inverse().is_none() || !plausible { Err(CalibrationError::SingularInRange) } else { Ok(()) }
+        Ok(n)
     }
 
     /// The constants at `temp_c` by T(3)/T(4), in `f64`:
@@ -244,6 +240,17 @@ impl CalibrationParams {
     pub fn constants_at(&self, temp_c: f64) -> Constants<f64> {
         apply_delta(&self.constants, &self.model.delta(temp_c, self.t0_c))
     }
+}
+
+/// K(T) at `temp_c` (T(3)/T(4) from the constants `c` at T0) is invertible and each scale
+/// factor within [1/2, 2]× its T0 value ([`MAX_SCALE_RATIO`]).
+#[cfg_attr(boot_optsize, optimize(size))]
+fn check_k_at<F: Float>(c: &Constants<F>, model: &TempModel<F>, t0_c: F, temp_c: F) -> Result<(), CalibrationError> {
+    let kt = apply_delta(c, &model.delta(temp_c, t0_c));
+    let k = &c.k_v_per_g;
+    let ratio = F::of(MAX_SCALE_RATIO);
+    let plausible = (0..3).all(|i| (F::ONE / ratio..=ratio).contains(&(kt.k_v_per_g[i][i] / k[i][i])));
+    if kt.inverse().is_none() || !plausible { Err(CalibrationError::SingularInRange) } else { Ok(()) }
 }
 
 /// The constants moved by `d`.
@@ -334,9 +341,8 @@ impl<F: Float> Calibration<F> {
     #[inline(never)]
     #[cfg_attr(boot_optsize, optimize(size))]
     pub fn new(p: &CalibrationParams) -> Result<Self, CalibrationError> {
-        p.validate()?;
+        let n = p.checked_inverse()?;
         let constants = p.constants;
-        let n = constants.inverse().ok_or(CalibrationError::SingularK)?;
         let k = &constants.k_v_per_g;
         let (lo, hi) = p.temp_range_c;
         let n_f: Mat3<F> = linalg::cast_mat(&n);

@@ -180,6 +180,7 @@ impl<F: Float> ConversionFunction<F> {
     }
 
     /// Converts between float types.
+    #[cfg_attr(boot_optsize, optimize(size))]
     pub fn cast<G: Float>(&self) -> ConversionFunction<G> {
         ConversionFunction::from_array(&self.to_array().map(|x| G::of(x.to_f64())))
     }
@@ -323,6 +324,7 @@ impl<F: Float> Vibration<F> {
     }
 
     /// Converts between float types.
+    #[cfg_attr(boot_optsize, optimize(size))]
     pub fn cast<G: Float>(&self) -> Vibration<G> {
         let c = |v: &Vec3<F>| v.map(|x| G::of(x.to_f64()));
         match self {

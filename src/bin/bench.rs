@@ -138,8 +138,10 @@ fn main() -> ! {
     let m2s = Method::OutputCorrection(Form::Simplified);
     let online = VibrationSource::Online;
     let none = VibrationSource::None;
-    let cases: [(&str, Calibration<f32>, VibrationSource, u32); 8] = [
+    let profile = VibrationSource::Profile(0);
+    let cases: [(&str, Calibration<f32>, VibrationSource, u32); 9] = [
         ("poly3 method 1 + online VE", cal(poly3, m1), online, TEMP_EVERY),
+        ("poly3 method 1 + flight-profile VE", cal(poly3, m1), profile, TEMP_EVERY),
         ("poly3 method 1", cal(poly3, m1), none, TEMP_EVERY),
         ("poly3 method 1, new temperature every sample", cal(poly3, m1), none, 1),
         ("pwl method 1", cal(pwl, m1), none, TEMP_EVERY),
@@ -152,7 +154,7 @@ fn main() -> ! {
         if !c.is_valid() {
             defmt::error!("case {=str}: calibration did not build", name);
         }
-        let p = if *source == online { Pipeline::new(*c, vib) } else { Pipeline::new(*c, VibrationConfig::none()) };
+        let p = if *source != none { Pipeline::new(*c, vib) } else { Pipeline::new(*c, VibrationConfig::none()) };
         let mut t = Tick::<f32, WINDOW>::new(p);
         // Complete a block so the VE cases take their full path.
         for k in 0..WINDOW as u32 {
