@@ -22,6 +22,10 @@ fn main() {
     }
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     fs::copy("memory.x", out.join("memory.x")).expect("copy memory.x to OUT_DIR");
+    // cortex-m-rt's `device` feature includes `device.x` (weak aliases of named interrupt
+    // handlers); the images name none, their table is `src/bin/interrupts.rs`.
+    fs::write(out.join("device.x"), "/* No named interrupt handlers: see src/bin/interrupts.rs. */\n")
+        .expect("write device.x to OUT_DIR");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed=memory.x");
 }

@@ -302,33 +302,57 @@ pub struct Calibration<F> {
 #[inline(never)]
 #[cfg_attr(boot_optsize, optimize(size))]
 fn fingerprint(p: &CalibrationParams) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut mix = |w: u64| h = (h ^ w).wrapping_mul(0x0000_0100_0000_01b3);
     let c = &p.constants;
-    for i in 0..3 {
-        c.k_v_per_g[i].iter().for_each(|x| mix(x.to_bits()));
-        mix(c.u0_v[i].to_bits());
-    }
-    for x in [p.t0_c, p.temp_range_c.0, p.temp_range_c.1] {
-        mix(x.to_bits());
-    }
-    mix(match p.method {
+    let method = match p.method {
         Method::Uncorrected => 1,
         Method::CoefficientCorrection => 2,
         Method::OutputCorrection(Form::Full) => 3,
         Method::OutputCorrection(Form::Simplified) => 4,
         Method::OutputCorrection(Form::Linearized) => 5,
-    });
+    };
+    let mut h = mix(FNV_OFFSET, &[method]);
+    for i in 0..3 {
+        h = mix_f64(h, &c.k_v_per_g[i]);
+    }
+    h = mix_f64(h, &c.u0_v);
+    h = mix_f64(h, &[p.t0_c, p.temp_range_c.0, p.temp_range_c.1]);
     match &p.model {
         TempModel::Poly { order, coef } => {
-            mix(0x100 + *order as u64);
-            coef.iter().for_each(|d| d.to_array().iter().for_each(|x| mix(x.to_bits())));
+            h = mix(h, &[0x100 + *order as u64]);
+            for d in coef {
+                h = mix_f64(h, &d.to_array());
+            }
         }
         TempModel::Pwl { n_knots, knots_c, at_knot } => {
-            mix(0x200 + *n_knots as u64);
-            knots_c.iter().for_each(|x| mix(x.to_bits()));
-            at_knot.iter().for_each(|d| d.to_array().iter().for_each(|x| mix(x.to_bits())));
+            h = mix(h, &[0x200 + *n_knots as u64]);
+            h = mix_f64(h, knots_c);
+            for d in at_knot {
+                h = mix_f64(h, &d.to_array());
+            }
         }
+    }
+    h
+}
+
+/// FNV-1a's offset basis.
+const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+
+/// `h` with the words `w` mixed in (FNV-1a-style, a word at a time).
+#[inline(never)]
+#[cfg_attr(boot_optsize, optimize(size))]
+fn mix(mut h: u64, w: &[u64]) -> u64 {
+    for &x in w {
+        h = (h ^ x).wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// `h` with the bits of the numbers `xs` mixed in.
+#[inline(never)]
+#[cfg_attr(boot_optsize, optimize(size))]
+fn mix_f64(mut h: u64, xs: &[f64]) -> u64 {
+    for x in xs {
+        h = mix(h, &[x.to_bits()]);
     }
     h
 }

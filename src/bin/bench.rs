@@ -13,6 +13,8 @@
 #![no_std]
 #![no_main]
 
+mod interrupts;
+
 use bins_comp::pipeline::VibrationSource;
 use bins_comp::replay::{Input, SOURCE, Tick, WINDOW};
 use bins_comp::{Calibration, Form, Method, Pipeline, Status, TempModel, VibrationConfig, paper};

@@ -15,6 +15,7 @@
 use core::sync::atomic::{AtomicBool, Ordering};
 
 mod calib;
+mod interrupts;
 
 use bins_comp::Calibration;
 use bins_comp::blob::BlobError;

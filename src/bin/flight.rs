@@ -32,6 +32,7 @@ mod calib;
 // never misses a slot or ends, so two of its `Take` variants are not built here.
 #[allow(dead_code)]
 mod isr;
+mod interrupts;
 
 use bins_comp::drivers::{Ads131m04, FaultCounts, SampleSource, SourceConfig, Tmp117, adc, temp};
 use bins_comp::frame::{BootFrame, FORMAT_VERSION, Frame, HealthFrame, SampleFrame};
@@ -210,6 +211,7 @@ impl Link {
 /// boot; on any error, the uncalibrated stand-in with no VE model (every sample flagged
 /// `INVALID_CALIBRATION`).
 #[cfg_attr(boot_optsize, optimize(size))]
+#[inline(never)]
 fn flashed_pipeline() -> (Pipeline<f32>, Boot) {
     let region = calib::read_region();
     match calib::calibration(&region) {

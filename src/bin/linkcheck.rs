@@ -28,6 +28,7 @@
 
 mod calib;
 mod isr;
+mod interrupts;
 
 use bins_comp::vectors::{self, VARIANTS};
 use cortex_m_rt::entry;

@@ -21,6 +21,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 
 mod calib;
 mod isr;
+mod interrupts;
 
 use bins_comp::replay::{self, INPUT_BYTES, Input, OUTPUT_BYTES};
 use bins_comp::{Calibration, Pipeline, Sample, VibrationConfig};
