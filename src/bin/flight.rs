@@ -28,11 +28,11 @@ use core::cell::RefCell;
 
 mod board;
 mod calib;
+mod interrupts;
 // The interrupt body shared with the replay firmware and the link check; this image's source
 // never misses a slot or ends, so two of its `Take` variants are not built here.
 #[allow(dead_code)]
 mod isr;
-mod interrupts;
 
 use bins_comp::drivers::{Ads131m04, FaultCounts, SampleSource, SourceConfig, Tmp117, adc, temp};
 use bins_comp::frame::{BootFrame, FORMAT_VERSION, Frame, HealthFrame, SampleFrame};

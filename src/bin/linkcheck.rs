@@ -27,8 +27,8 @@
 #![no_main]
 
 mod calib;
-mod isr;
 mod interrupts;
+mod isr;
 
 use bins_comp::vectors::{self, VARIANTS};
 use cortex_m_rt::entry;

@@ -20,8 +20,8 @@ use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, Ordering};
 
 mod calib;
-mod isr;
 mod interrupts;
+mod isr;
 
 use bins_comp::replay::{self, INPUT_BYTES, Input, OUTPUT_BYTES};
 use bins_comp::{Calibration, Pipeline, Sample, VibrationConfig};
