@@ -1,24 +1,28 @@
-//! Puts `memory.x` on the linker's search path for the Cortex-M4F binaries, and decides
-//! whether the load-time code is optimised for size (bare-metal targets only; host builds of
-//! the library do nothing here).
+//! Puts `memory.x` (and an empty `device.x`) on the linker's search path for the Cortex-M4F
+//! binaries, and decides whether they may use two unstable compiler features (bare-metal
+//! targets only; host builds of the library do nothing here).
 //!
-//! `cfg(boot_optsize)`: set for a bare-metal build whose compiler accepts unstable features
-//! (a nightly, or `RUSTC_BOOTSTRAP=1` as `cargo xtask` sets with `-Zbuild-std`). The code that
-//! runs once at boot (blob parsing, calibration validation, the precomputation) is then
-//! compiled with `#[optimize(size)]`, the per-sample path keeps `opt-level = 3`. On a stable
-//! compiler the same code builds at `opt-level = 3` throughout, only larger.
+//! `cfg(unstable_target)`: set for a bare-metal build whose compiler accepts unstable features
+//! (a nightly, or `RUSTC_BOOTSTRAP=1` as `cargo xtask` sets with `-Zbuild-std`). Then
+//! - the code that runs once at boot (blob parsing, calibration validation, the
+//!   precomputation) is compiled with `#[optimize(size)]`; the per-sample path keeps
+//!   `opt-level = 3`;
+//! - `f32` square roots are the FPU's `vsqrt.f32` (`core::f32::math::sqrt`) instead of libm's
+//!   integer algorithm; both are correctly rounded, so the results are the same bits.
+//!
+//! On a stable compiler the same code builds without them: larger and a little slower.
 
 use std::{env, fs, path::PathBuf, process::Command};
 
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-env-changed=RUSTC_BOOTSTRAP");
-    println!("cargo:rustc-check-cfg=cfg(boot_optsize)");
+    println!("cargo:rustc-check-cfg=cfg(unstable_target)");
     if env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("none") {
         return;
     }
     if unstable_features_accepted() {
-        println!("cargo:rustc-cfg=boot_optsize");
+        println!("cargo:rustc-cfg=unstable_target");
     }
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     fs::copy("memory.x", out.join("memory.x")).expect("copy memory.x to OUT_DIR");

@@ -684,7 +684,7 @@ impl core::error::Error for BlobError {}
 /// Bit by bit, without a table: it runs once per blob at boot (at most [`MAX_BLOB_BYTES`]:
 /// about 130 000 instructions, under 1 ms on a Cortex-M4), so the 1 KiB of flash a table
 /// would take is not worth it.
-#[cfg_attr(boot_optsize, optimize(size))]
+#[cfg_attr(unstable_target, optimize(size))]
 pub fn crc32(bytes: &[u8]) -> u32 {
     let mut c = !0u32;
     for &b in bytes {
@@ -751,7 +751,7 @@ impl<'a> Blob<'a> {
     /// word and section table (bounds, overlaps, duplicates, unknown required sections).
     /// `bytes` must be exactly the blob (see [`parse_region`] for a flash region).
     #[inline(never)]
-    #[cfg_attr(boot_optsize, optimize(size))]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn new(bytes: &'a [u8]) -> Result<Self, BlobError> {
         let got = bytes.len();
         if got < HEADER_BYTES {
@@ -1037,7 +1037,7 @@ fn read_coef_set(
 /// section of format version 1, each value against its physical range ([`limits`]), and
 /// finally [`Calibration::new`]'s checks. `bytes` must be exactly the blob.
 #[inline(never)]
-#[cfg_attr(boot_optsize, optimize(size))]
+#[cfg_attr(unstable_target, optimize(size))]
 pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
     let blob = Blob::new(bytes)?;
     for id in section::MANDATORY {
@@ -1193,7 +1193,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
 /// The vibration section and the flight-phase profiles, if present (see
 /// `docs/calibration-blob.md`). Profiles without a vibration section are refused: they mean
 /// nothing without the coefficients.
-#[cfg_attr(boot_optsize, optimize(size))]
+#[cfg_attr(unstable_target, optimize(size))]
 fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError> {
     let Some(p) = Payload::get(blob, section::VIBRATION) else {
         return match Payload::get(blob, section::FLIGHT_PHASES) {

@@ -202,7 +202,7 @@ impl CalibrationParams {
     /// computes anyway and [`Calibration::new`] needs. Kept out of line: the boot code of the
     /// firmware calls it from two places and needs one copy of it, not one per caller.
     #[inline(never)]
-    #[cfg_attr(boot_optsize, optimize(size))]
+    #[cfg_attr(unstable_target, optimize(size))]
     fn checked_inverse(&self) -> Result<Mat3<f64>, CalibrationError> {
         let p = self;
         let constants = p.constants;
@@ -236,7 +236,7 @@ impl CalibrationParams {
 
     /// The constants at `temp_c` by T(3)/T(4), in `f64`:
     /// `K_ij(T) = K_ij·(1 + ΔK_ij/K_ij)`, `U0(T) = U0 + ΔU0`.
-    #[cfg_attr(boot_optsize, optimize(size))]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn constants_at(&self, temp_c: f64) -> Constants<f64> {
         apply_delta(&self.constants, &self.model.delta(temp_c, self.t0_c))
     }
@@ -244,7 +244,7 @@ impl CalibrationParams {
 
 /// K(T) at `temp_c` (T(3)/T(4) from the constants `c` at T0) is invertible and each scale
 /// factor within [1/2, 2]× its T0 value ([`MAX_SCALE_RATIO`]).
-#[cfg_attr(boot_optsize, optimize(size))]
+#[cfg_attr(unstable_target, optimize(size))]
 fn check_k_at<F: Float>(c: &Constants<F>, model: &TempModel<F>, t0_c: F, temp_c: F) -> Result<(), CalibrationError> {
     let kt = apply_delta(c, &model.delta(temp_c, t0_c));
     let k = &c.k_v_per_g;
@@ -300,7 +300,7 @@ pub struct Calibration<F> {
 /// each number). Equal parameters give equal hashes; two different calibrations collide
 /// with probability about 2⁻⁶⁴.
 #[inline(never)]
-#[cfg_attr(boot_optsize, optimize(size))]
+#[cfg_attr(unstable_target, optimize(size))]
 fn fingerprint(p: &CalibrationParams) -> u64 {
     let c = &p.constants;
     let method = match p.method {
@@ -339,7 +339,7 @@ const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
 /// `h` with the words `w` mixed in (FNV-1a-style, a word at a time).
 #[inline(never)]
-#[cfg_attr(boot_optsize, optimize(size))]
+#[cfg_attr(unstable_target, optimize(size))]
 fn mix(mut h: u64, w: &[u64]) -> u64 {
     for &x in w {
         h = (h ^ x).wrapping_mul(0x0000_0100_0000_01b3);
@@ -349,7 +349,7 @@ fn mix(mut h: u64, w: &[u64]) -> u64 {
 
 /// `h` with the bits of the numbers `xs` mixed in.
 #[inline(never)]
-#[cfg_attr(boot_optsize, optimize(size))]
+#[cfg_attr(unstable_target, optimize(size))]
 fn mix_f64(mut h: u64, xs: &[f64]) -> u64 {
     for x in xs {
         h = mix(h, &[x.to_bits()]);
@@ -363,7 +363,7 @@ impl<F: Float> Calibration<F> {
     /// becomes singular (or a scale factor that leaves [1/2, 2]× its T0 value) inside the
     /// range.
     #[inline(never)]
-    #[cfg_attr(boot_optsize, optimize(size))]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn new(p: &CalibrationParams) -> Result<Self, CalibrationError> {
         let n = p.checked_inverse()?;
         let constants = p.constants;

@@ -75,7 +75,12 @@ impl Float for f32 {
     }
     #[inline(always)]
     fn sqrt(self) -> Self {
-        libm::sqrtf(self)
+        // The FPU's square root where the compiler offers it (see `build.rs`); libm's is
+        // correctly rounded too, so both give the same bits.
+        #[cfg(unstable_target)]
+        return core::f32::math::sqrt(self);
+        #[cfg(not(unstable_target))]
+        return libm::sqrtf(self);
     }
     #[inline(always)]
     fn is_finite(self) -> bool {

@@ -99,7 +99,7 @@ pub fn inverse_checked<F: Float>(m: &Mat3<F>, min_ratio: F) -> Option<Mat3<F>> {
 }
 
 /// Converts every element between float types (through `f64`).
-#[cfg_attr(boot_optsize, optimize(size))]
+#[cfg_attr(unstable_target, optimize(size))]
 pub fn cast_mat<A: Float, B: Float>(m: &Mat3<A>) -> Mat3<B> {
     let mut out = [[B::ZERO; 3]; 3];
     for i in 0..3 {
@@ -111,7 +111,7 @@ pub fn cast_mat<A: Float, B: Float>(m: &Mat3<A>) -> Mat3<B> {
 }
 
 /// Converts every element between float types (through `f64`).
-#[cfg_attr(boot_optsize, optimize(size))]
+#[cfg_attr(unstable_target, optimize(size))]
 pub fn cast_vec<A: Float, B: Float>(v: &Vec3<A>) -> Vec3<B> {
     [B::of(v[0].to_f64()), B::of(v[1].to_f64()), B::of(v[2].to_f64())]
 }

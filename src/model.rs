@@ -35,7 +35,7 @@ impl<F: Float> Constants<F> {
     }
 
     /// Converts between float types.
-    #[cfg_attr(boot_optsize, optimize(size))]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn cast<G: Float>(&self) -> Constants<G> {
         Constants { k_v_per_g: linalg::cast_mat(&self.k_v_per_g), u0_v: linalg::cast_vec(&self.u0_v) }
     }

@@ -70,7 +70,7 @@ impl<F: Float> CoefDelta<F> {
     }
 
     /// Converts between float types.
-    #[cfg_attr(boot_optsize, optimize(size))]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn cast<G: Float>(&self) -> CoefDelta<G> {
         let a = self.to_array();
         let mut b = [G::ZERO; 12];
@@ -186,7 +186,7 @@ impl<F: Float> TempModel<F> {
     }
 
     /// Converts between float types.
-    #[cfg_attr(boot_optsize, optimize(size))]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn cast<G: Float>(&self) -> TempModel<G> {
         match self {
             TempModel::Poly { order, coef } => TempModel::Poly {

@@ -180,7 +180,7 @@ impl<F: Float> ConversionFunction<F> {
     }
 
     /// Converts between float types.
-    #[cfg_attr(boot_optsize, optimize(size))]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn cast<G: Float>(&self) -> ConversionFunction<G> {
         ConversionFunction::from_array(&self.to_array().map(|x| G::of(x.to_f64())))
     }
@@ -324,7 +324,7 @@ impl<F: Float> Vibration<F> {
     }
 
     /// Converts between float types.
-    #[cfg_attr(boot_optsize, optimize(size))]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn cast<G: Float>(&self) -> Vibration<G> {
         let c = |v: &Vec3<F>| v.map(|x| G::of(x.to_f64()));
         match self {
@@ -581,7 +581,7 @@ impl VibrationParams {
     /// implementation for every working precision, kept out of line (see
     /// [`CalibrationParams::validate`](crate::CalibrationParams::validate)).
     #[inline(never)]
-    #[cfg_attr(boot_optsize, optimize(size))]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn validate(&self) -> Result<(), VibrationConfigError> {
         for (i, cf) in self.cf.iter().enumerate() {
             if !cf.is_finite() {
@@ -622,7 +622,7 @@ pub struct VibrationConfig<F> {
 impl<F: Float> VibrationConfig<F> {
     /// Validates `p` ([`VibrationParams::validate`]) and casts it to the working precision.
     #[inline(never)]
-    #[cfg_attr(boot_optsize, optimize(size))]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn new(p: &VibrationParams) -> Result<Self, VibrationConfigError> {
         p.validate()?;
         let mut profiles = [Vibration::None; MAX_PROFILES];

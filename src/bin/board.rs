@@ -128,8 +128,9 @@ const SSP_POLLS: u32 = 1_000;
 /// the receive FIFO has a byte), so the FIFO does not run dry between its bytes and /CS frames
 /// exactly one transaction, as long as the loop is not held up for longer than the bytes in
 /// flight take to shift out (10 µs at [`SPI_CLOCK_HZ`]): it runs in the sampling interrupt,
-/// which nothing preempts, or at boot before interrupts start. A delay operation inside a transaction cannot keep /CS low on
-/// this controller and is refused ([`SpiErrorKind::Other`]), before any byte is sent.
+/// which nothing preempts, or at boot before interrupts start. A delay operation inside a
+/// transaction cannot keep /CS low on this controller and is refused
+/// ([`SpiErrorKind::Other`]), before any byte is sent.
 pub struct Pl022(());
 
 impl Pl022 {

@@ -22,7 +22,7 @@
 //! processor: the next boot frame on the link shows it.
 #![no_std]
 #![no_main]
-#![cfg_attr(boot_optsize, feature(optimize_attribute))]
+#![cfg_attr(unstable_target, feature(optimize_attribute))]
 
 use core::cell::RefCell;
 
@@ -113,7 +113,7 @@ fn main() -> ! {
 /// Boot, then the consumer loop (see the module docs). Out of line and optimised for size:
 /// none of it is on the per-sample path.
 #[inline(never)]
-#[cfg_attr(boot_optsize, optimize(size))]
+#[cfg_attr(unstable_target, optimize(size))]
 fn run() -> ! {
     let (Some(board), Some(mut cp)) = (Board::take(), cortex_m::Peripherals::take()) else { SCB::sys_reset() };
     let uart = board.uart;
@@ -193,7 +193,7 @@ struct Link {
 impl Link {
     /// Numbers the frame and sends it; a frame the UART does not take is counted, not retried
     /// (the host's decoder skips its remains).
-    #[cfg_attr(boot_optsize, optimize(size))]
+    #[cfg_attr(unstable_target, optimize(size))]
     fn send(&mut self, mut frame: Frame) {
         match &mut frame {
             Frame::Sample(f) => f.seq = self.seq,
@@ -210,7 +210,7 @@ impl Link {
 /// The calibration and vibration-error model in the CALIB region, read and checked once, at
 /// boot; on any error, the uncalibrated stand-in with no VE model (every sample flagged
 /// `INVALID_CALIBRATION`).
-#[cfg_attr(boot_optsize, optimize(size))]
+#[cfg_attr(unstable_target, optimize(size))]
 #[inline(never)]
 fn flashed_pipeline() -> (Pipeline<f32>, Boot) {
     let region = calib::read_region();
