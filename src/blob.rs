@@ -1003,28 +1003,52 @@ fn scale_ok(k_ii: f64) -> bool {
     (limits::SCALE_FACTOR_MIN_V_PER_G..=limits::SCALE_FACTOR_MAX_V_PER_G).contains(&k_ii.abs())
 }
 
+/// Which coefficient set [`read_coef_set`] reads: a polynomial term (power − 1) or a knot.
+#[derive(Clone, Copy)]
+enum CoefSet {
+    Term(u8),
+    Knot(u8),
+}
+
+impl CoefSet {
+    /// The field of ΔU0 on `axis`.
+    fn du0(self, axis: u8) -> Field {
+        match self {
+            CoefSet::Term(term) => Field::TermAlpha { term, axis },
+            CoefSet::Knot(knot) => Field::KnotDu0 { knot, axis },
+        }
+    }
+
+    /// The field of ΔK_ij/K_ij.
+    fn rel_k(self, row: u8, col: u8) -> Field {
+        match self {
+            CoefSet::Term(term) => Field::TermRelK { term, row, col },
+            CoefSet::Knot(knot) => Field::KnotRelK { knot, row, col },
+        }
+    }
+}
+
 /// A change of the constants (one knot, or one polynomial term at its largest |ΔT|, `scale`
-/// = ΔT_max^n) is plausible: see [`Field::limit`].
+/// = ΔT_max^n) is plausible: see [`Field::limit`]. One copy for terms and knots (`set`).
 fn read_coef_set(
     p: &Payload<'_>,
     at: usize,
     k: &[[f64; 3]; 3],
     scale: f64,
-    field_du0: impl Fn(u8) -> Field,
-    field_rel: impl Fn(u8, u8) -> Field,
+    set: CoefSet,
 ) -> Result<CoefDelta<f64>, BlobError> {
     let mut a = [0.0; 12];
     for (n, slot) in a.iter_mut().enumerate() {
         let off = at + 8 * n;
         *slot = if n < 3 {
-            p.value(off, field_du0(n as u8), |x| x.abs() * scale <= limits::DU0_MAX_V)?
+            p.value(off, set.du0(n as u8), |x| x.abs() * scale <= limits::DU0_MAX_V)?
         } else {
             let (i, j) = ((n - 3) / 3, (n - 3) % 3);
             let (k_ij, k_ii) = (k[i][j], k[i][i]);
             if i == j {
-                p.value(off, field_rel(i as u8, j as u8), |x| x.abs() * scale <= limits::REL_SCALE_MAX)?
+                p.value(off, set.rel_k(i as u8, j as u8), |x| x.abs() * scale <= limits::REL_SCALE_MAX)?
             } else {
-                p.value(off, field_rel(i as u8, j as u8), |x| {
+                p.value(off, set.rel_k(i as u8, j as u8), |x| {
                     (k_ij * x).abs() * scale <= limits::CROSS_RATIO_MAX * k_ii.abs()
                 })?
             }
@@ -1097,14 +1121,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
             for (n, c) in coef.iter_mut().enumerate().take(order) {
                 scale *= span;
                 let t = n as u8;
-                *c = read_coef_set(
-                    &p,
-                    MODEL_HEADER_BYTES + COEF_SET_BYTES * n,
-                    &k,
-                    scale,
-                    |axis| Field::TermAlpha { term: t, axis },
-                    |row, col| Field::TermRelK { term: t, row, col },
-                )?;
+                *c = read_coef_set(&p, MODEL_HEADER_BYTES + COEF_SET_BYTES * n, &k, scale, CoefSet::Term(t))?;
             }
             TempModel::Poly { order: count, coef }
         }
@@ -1133,14 +1150,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
             let sets = MODEL_HEADER_BYTES + 8 * n;
             for (i, c) in at_knot.iter_mut().enumerate().take(n) {
                 let kn = i as u8;
-                *c = read_coef_set(
-                    &p,
-                    sets + COEF_SET_BYTES * i,
-                    &k,
-                    1.0,
-                    |axis| Field::KnotDu0 { knot: kn, axis },
-                    |row, col| Field::KnotRelK { knot: kn, row, col },
-                )?;
+                *c = read_coef_set(&p, sets + COEF_SET_BYTES * i, &k, 1.0, CoefSet::Knot(kn))?;
             }
             TempModel::Pwl { n_knots: count, knots_c, at_knot }
         }

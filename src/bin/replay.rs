@@ -147,7 +147,13 @@ fn run() -> Result<(), RunError> {
     let mut read = 0u32;
     refill(&mut input, &mut in_p, &mut read)?;
     let isr = Isr::new(pipeline, Replay { input: in_c }, out_p);
-    critical_section::with(|cs| ISR.borrow(cs).replace(Some(isr)));
+    // `try_borrow_mut`, not `replace`: nothing holds the cell before SysTick starts, and no
+    // borrow panic is left in the image (as in the flight image).
+    critical_section::with(|cs| {
+        if let Ok(mut slot) = ISR.borrow(cs).try_borrow_mut() {
+            *slot = Some(isr);
+        }
+    });
 
     let mut cp = cortex_m::Peripherals::take().ok_or(RunError::NoPeripherals)?;
     cp.SYST.set_clock_source(SystClkSource::Core);
@@ -183,7 +189,9 @@ fn run() -> Result<(), RunError> {
     }
     cp.SYST.disable_interrupt();
     output.write_all(outbuf.get(..out_len).unwrap_or(&[])).map_err(|_| RunError::Write)?;
-    let overruns = critical_section::with(|cs| ISR.borrow(cs).borrow().as_ref().map_or(0, |i| i.tick.overruns()));
+    let overruns = critical_section::with(|cs| {
+        ISR.borrow(cs).try_borrow().ok().and_then(|slot| slot.as_ref().map(|i| i.tick.overruns())).unwrap_or(0)
+    });
     defmt::info!("samples: {}, results: {}, overruns: {}", read, written, overruns);
     if read == written && overruns == 0 && read > 0 {
         defmt::info!("PASS");
