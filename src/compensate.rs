@@ -190,10 +190,11 @@ impl CalibrationParams {
     /// the run-time fallback is never expected to trigger.
     ///
     /// One implementation for every working precision, run once at load time (by
-    /// [`Calibration::new`] and the blob parser). The constants are checked in `f64`; K(T)
-    /// over the range in `f32`, the precision the firmware runs in, with the same T(3)/T(4)
-    /// code as the per-sample step: host and target give a blob the same verdict, and the
-    /// target needs no `f64` copy of the temperature model.
+    /// [`Calibration::new`] and the blob parser). Finiteness is checked in `f64`; the
+    /// conditioning of K and K(T) over the range in `f32`, the precision the firmware runs
+    /// in, with the same T(3)/T(4) code as the per-sample step: host and target give a blob
+    /// the same verdict, and the target needs no `f64` copy of the temperature model or of
+    /// the conditioning test.
     pub fn validate(&self) -> Result<(), CalibrationError> {
         self.checked_inverse().map(|_| ())
     }
@@ -209,7 +210,13 @@ impl CalibrationParams {
         if !constants.is_finite() {
             return Err(CalibrationError::NonFiniteConstants);
         }
-        let n = constants.inverse().ok_or(CalibrationError::SingularK)?;
+        // Invertibility is decided in `f32`, like K(T) over the range below; N itself is
+        // computed in `f64`, where the precomputation needs it.
+        let c = constants.cast::<f32>();
+        if c.inverse().is_none() {
+            return Err(CalibrationError::SingularK);
+        }
+        let n = linalg::inverse_unchecked(&constants.k_v_per_g).ok_or(CalibrationError::SingularK)?;
         let k = &constants.k_v_per_g;
         if k[0][0] == 0.0 || k[1][1] == 0.0 || k[2][2] == 0.0 {
             return Err(CalibrationError::ZeroScaleFactor);
@@ -219,7 +226,7 @@ impl CalibrationParams {
         if !(lo.is_finite() && hi.is_finite() && p.t0_c.is_finite() && lo < hi && lo <= p.t0_c && p.t0_c <= hi) {
             return Err(CalibrationError::BadRange);
         }
-        let (c, model, t0_c) = (constants.cast::<f32>(), p.model.cast::<f32>(), f32::of(p.t0_c));
+        let (model, t0_c) = (p.model.cast::<f32>(), f32::of(p.t0_c));
         for i in 0..=RANGE_CHECK_POINTS {
             let t = lo + (hi - lo) * (i as f64 / RANGE_CHECK_POINTS as f64);
             check_k_at(&c, &model, t0_c, f32::of(t))?;

@@ -81,21 +81,46 @@ pub fn hadamard_ratio<F: Float>(m: &Mat3<F>) -> F {
 /// below `min_ratio` (so no division by a vanishing determinant can happen).
 #[inline(always)]
 pub fn inverse_checked<F: Float>(m: &Mat3<F>, min_ratio: F) -> Option<Mat3<F>> {
-    let c00 = m[1][1] * m[2][2] - m[1][2] * m[2][1];
-    let c01 = m[1][2] * m[2][0] - m[1][0] * m[2][2];
-    let c02 = m[1][0] * m[2][1] - m[1][1] * m[2][0];
-    let d = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02;
+    let (c0, d) = first_row_cofactors(m);
     let p = norm(&m[0]) * norm(&m[1]) * norm(&m[2]);
     // `!(x >= y)` is also true for NaN, so a non-finite matrix is rejected here too.
     if !(d.abs() >= min_ratio * p) || !(p > F::ZERO) || !d.is_finite() || !p.is_finite() {
         return None;
     }
+    Some(adjugate_over(m, c0, d))
+}
+
+/// Inverse by the adjugate, or `None` when the determinant is zero or not finite. No
+/// conditioning check: for a matrix whose conditioning is checked elsewhere (the load-time
+/// `f64` inverse, whose `f32` image [`inverse_checked`] has accepted).
+#[inline(always)]
+pub fn inverse_unchecked<F: Float>(m: &Mat3<F>) -> Option<Mat3<F>> {
+    let (c0, d) = first_row_cofactors(m);
+    if !(d.abs() > F::ZERO) || !d.is_finite() {
+        return None;
+    }
+    Some(adjugate_over(m, c0, d))
+}
+
+/// The cofactors of the first row and the determinant expanded along it.
+#[inline(always)]
+fn first_row_cofactors<F: Float>(m: &Mat3<F>) -> ([F; 3], F) {
+    let c00 = m[1][1] * m[2][2] - m[1][2] * m[2][1];
+    let c01 = m[1][2] * m[2][0] - m[1][0] * m[2][2];
+    let c02 = m[1][0] * m[2][1] - m[1][1] * m[2][0];
+    ([c00, c01, c02], m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02)
+}
+
+/// The adjugate of `m` divided by its determinant `d` (`c0`: the first row's cofactors).
+#[inline(always)]
+fn adjugate_over<F: Float>(m: &Mat3<F>, c0: [F; 3], d: F) -> Mat3<F> {
+    let [c00, c01, c02] = c0;
     let r = F::ONE / d;
-    Some([
+    [
         [c00 * r, (m[0][2] * m[2][1] - m[0][1] * m[2][2]) * r, (m[0][1] * m[1][2] - m[0][2] * m[1][1]) * r],
         [c01 * r, (m[0][0] * m[2][2] - m[0][2] * m[2][0]) * r, (m[0][2] * m[1][0] - m[0][0] * m[1][2]) * r],
         [c02 * r, (m[0][1] * m[2][0] - m[0][0] * m[2][1]) * r, (m[0][0] * m[1][1] - m[0][1] * m[1][0]) * r],
-    ])
+    ]
 }
 
 /// Converts every element between float types (through `f64`).

@@ -392,6 +392,7 @@ impl SbCon {
 
     /// Sends one byte MSB first and reads the acknowledge bit; `Err(NoAcknowledge(source))`
     /// if the device left SDA high.
+    #[cfg_attr(unstable_target, optimize(size))]
     fn write_byte(byte: u8, source: NoAcknowledgeSource) -> Result<(), I2cErrorKind> {
         for i in (0..8).rev() {
             let bit = byte & (1 << i) != 0;
@@ -403,6 +404,7 @@ impl SbCon {
     }
 
     /// Reads one byte MSB first, then acknowledges it (`ack`: SDA low) or not.
+    #[cfg_attr(unstable_target, optimize(size))]
     fn read_byte(ack: bool) -> Result<u8, I2cErrorKind> {
         let mut v = 0u8;
         for _ in 0..8 {
@@ -413,6 +415,7 @@ impl SbCon {
     }
 
     /// The operations between the first start and the stop.
+    #[cfg_attr(unstable_target, optimize(size))]
     fn run(address: u8, ops: &mut [I2cOperation<'_>]) -> Result<(), I2cErrorKind> {
         let mut reading = None;
         for k in 0..ops.len() {
@@ -454,6 +457,7 @@ impl i2c::ErrorType for SbCon {
 }
 
 impl I2c for SbCon {
+    #[cfg_attr(unstable_target, optimize(size))]
     fn transaction(&mut self, address: u8, ops: &mut [I2cOperation<'_>]) -> Result<(), I2cErrorKind> {
         if address > 0x7F {
             return Err(I2cErrorKind::Other);
