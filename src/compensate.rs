@@ -243,7 +243,6 @@ impl CalibrationParams {
 
     /// The constants at `temp_c` by T(3)/T(4), in `f64`:
     /// `K_ij(T) = K_ij·(1 + ΔK_ij/K_ij)`, `U0(T) = U0 + ΔU0`.
-    #[cfg_attr(unstable_target, optimize(size))]
     pub fn constants_at(&self, temp_c: f64) -> Constants<f64> {
         apply_delta(&self.constants, &self.model.delta(temp_c, self.t0_c))
     }
