@@ -111,6 +111,13 @@ impl<F: Float> Pipeline<F> {
         Pipeline { cal, vib }
     }
 
+    /// The stand-in when no valid calibration exists (a missing or rejected blob):
+    /// [`Calibration::uncalibrated`] with no VE model. Every sample it produces is flagged
+    /// `INVALID_CALIBRATION`.
+    pub fn uncalibrated() -> Self {
+        Pipeline::new(Calibration::uncalibrated(), VibrationConfig::none())
+    }
+
     /// The calibration.
     pub fn calibration(&self) -> &Calibration<F> {
         &self.cal

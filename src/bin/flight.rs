@@ -36,7 +36,7 @@ mod isr;
 
 use bins_comp::drivers::{Ads131m04, FaultCounts, SampleSource, SourceConfig, Tmp117, adc, temp};
 use bins_comp::frame::{BootFrame, FORMAT_VERSION, Frame, HealthFrame, SampleFrame};
-use bins_comp::{Calibration, Pipeline, Sample, VibrationConfig};
+use bins_comp::{Pipeline, Sample};
 use board::{Board, DrdyPin, Pl022, SbCon, Uart};
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::{SCB, SYST};
@@ -220,10 +220,7 @@ fn flashed_pipeline() -> (Pipeline<f32>, Boot) {
             let boot = Boot { blob_accepted: true, vibration_profiles: vib.n_profiles() as u32, blob_crc32: crc };
             (Pipeline::new(cal, vib), boot)
         }
-        Err(_) => (
-            Pipeline::new(Calibration::uncalibrated(), VibrationConfig::none()),
-            Boot { blob_accepted: false, vibration_profiles: 0, blob_crc32: 0 },
-        ),
+        Err(_) => (Pipeline::uncalibrated(), Boot { blob_accepted: false, vibration_profiles: 0, blob_crc32: 0 }),
     }
 }
 

@@ -175,8 +175,7 @@ mod bus {
 #[entry]
 fn main() -> ! {
     let mut cals = vectors::calibrations();
-    let mut flashed =
-        bins_comp::Pipeline::new(bins_comp::Calibration::uncalibrated(), bins_comp::VibrationConfig::none());
+    let mut flashed = bins_comp::Pipeline::uncalibrated();
     if let Ok((cal, vib, _)) = calib::calibration(&calib::read_region()) {
         cals[vectors::FLASHED_VARIANT] = cal;
         flashed = bins_comp::Pipeline::new(cal, vib);

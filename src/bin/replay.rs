@@ -24,7 +24,7 @@ mod interrupts;
 mod isr;
 
 use bins_comp::replay::{self, INPUT_BYTES, Input, OUTPUT_BYTES};
-use bins_comp::{Calibration, Pipeline, Sample, VibrationConfig};
+use bins_comp::{Pipeline, Sample};
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::{SCB, SYST};
 use cortex_m_rt::{ExceptionFrame, entry, exception};
@@ -255,7 +255,7 @@ fn flashed_pipeline() -> Pipeline<f32> {
         }
         Err(e) => {
             defmt::error!("CALIB: {}: running uncalibrated", defmt::Display2Format(&e));
-            Pipeline::new(Calibration::uncalibrated(), VibrationConfig::none())
+            Pipeline::uncalibrated()
         }
     }
 }
