@@ -609,24 +609,20 @@ impl<F: Float> Calibration<F> {
                 status.insert(Status::NONFINITE_INPUT);
             }
         }
-        let mut a = match &at.terms {
-            TempTerms::None => self.apply_n(&u, &self.constants.u0_v),
-            TempTerms::Method1 { u0_t, m } => {
-                let a0 = self.apply_n(&u, u0_t);
-                match m {
-                    Some(m) => {
-                        let c = linalg::mat_vec(m, &a0);
-                        [a0[0] + c[0], a0[1] + c[1], a0[2] + c[2]]
-                    }
-                    None => a0,
-                }
-            }
-            TempTerms::Method2 { d, form } => {
-                let a0 = self.apply_n(&u, &self.constants.u0_v);
-                let v = linalg::vec_sub(&u, &self.constants.u0_v);
-                let c = self.output_correction(&v, d, *form);
-                [a0[0] + c[0], a0[1] + c[1], a0[2] + c[2]]
-            }
+        // One N·(U − U0) for every method (method 1 with U0(T)), then the method's correction.
+        let u0 = match &at.terms {
+            TempTerms::Method1 { u0_t, .. } => u0_t,
+            TempTerms::None | TempTerms::Method2 { .. } => &self.constants.u0_v,
+        };
+        let a0 = self.apply_n(&u, u0);
+        let correction = match &at.terms {
+            TempTerms::None | TempTerms::Method1 { m: None, .. } => None,
+            TempTerms::Method1 { m: Some(m), .. } => Some(linalg::mat_vec(m, &a0)),
+            TempTerms::Method2 { d, form } => Some(self.output_correction(&linalg::vec_sub(&u, u0), d, *form)),
+        };
+        let mut a = match correction {
+            Some(c) => [a0[0] + c[0], a0[1] + c[1], a0[2] + c[2]],
+            None => a0,
         };
         if !(a[0].is_finite() && a[1].is_finite() && a[2].is_finite()) {
             a = [F::ZERO; 3];

@@ -141,6 +141,33 @@ impl<F: Float> Pipeline<F> {
         self.step_with_ve(state, u_v, temp_c, source).0
     }
 
+    /// The online VE's share of the step that completes a block: the block's moments,
+    /// referred to the acceleration and clamped. Once per block, so it is kept out of the
+    /// per-sample code and optimised for size.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
+    fn block_ve_start<const W: usize>(&self, window: &MomentWindow<F, W>) -> Option<NextVe<F>> {
+        window.moments().map(|mut m| {
+            m.unscale(&self.vib.output_gains(&m));
+            let clamped = m.clamp_sigma(F::of(MAX_LEVEL_G));
+            NextVe { moments: m, done: 0, ve_g: [F::ZERO; 3], clamped }
+        })
+    }
+
+    /// The online VE's share of each of the three steps after a block: the next
+    /// accelerometer's VE. Three steps per block, so it is kept out of the per-sample code and
+    /// optimised for size.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
+    fn next_axis_ve(&self, n: &mut NextVe<F>) {
+        if let (Some(&axis), Some(slot)) = (Axis::ALL.get(n.done), n.ve_g.get_mut(n.done)) {
+            let (e, c) = self.vib.correction_from_moments_on_g(&n.moments, &n.moments.mean_g, axis);
+            *slot = e;
+            n.clamped |= c;
+        }
+        n.done += 1;
+    }
+
     /// [`step`](Self::step), also returning the VE \[g\] that was subtracted from each axis.
     pub fn step_with_ve<const W: usize>(
         &self,
@@ -164,23 +191,14 @@ impl<F: Float> Pipeline<F> {
             // the moments on the step that completes a block, then one accelerometer's VE on
             // each of the next three.
             if let Some(n) = &mut state.next_ve {
-                if let (Some(&axis), Some(slot)) = (Axis::ALL.get(n.done), n.ve_g.get_mut(n.done)) {
-                    let (e, c) = self.vib.correction_from_moments_on_g(&n.moments, &n.moments.mean_g, axis);
-                    *slot = e;
-                    n.clamped |= c;
-                }
-                n.done += 1;
+                self.next_axis_ve(n);
                 if n.done >= 3 {
                     state.online_ve = Some((n.ve_g, n.clamped));
                     state.next_ve = None;
                 }
             }
             if state.window.push(&s.accel_g) == Pushed::BlockDone {
-                state.next_ve = state.window.moments().map(|mut m| {
-                    m.unscale(&self.vib.output_gains(&m));
-                    let clamped = m.clamp_sigma(F::of(MAX_LEVEL_G));
-                    NextVe { moments: m, done: 0, ve_g: [F::ZERO; 3], clamped }
-                });
+                state.next_ve = self.block_ve_start(&state.window);
             }
         }
         let mut ve = [F::ZERO; 3];

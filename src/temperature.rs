@@ -66,7 +66,7 @@ impl<F: Float> CoefDelta<F> {
 
     /// True when every element is finite.
     pub fn is_finite(&self) -> bool {
-        self.to_array().iter().all(|x| x.is_finite())
+        self.du0_v.iter().chain(self.rel_k.iter().flatten()).all(|x| x.is_finite())
     }
 
     /// Converts between float types.
@@ -159,28 +159,28 @@ impl<F: Float> TempModel<F> {
 
     /// Validates the model's shape and values.
     pub fn check(&self) -> Result<(), TempModelError> {
-        match self {
+        // The coefficient sets and knots in use: one finiteness test for both kinds.
+        let (sets, knots): (&[CoefDelta<F>], &[F]) = match self {
             TempModel::Poly { order, coef } => {
                 let n = *order as usize;
                 if n == 0 || n > MAX_POLY_ORDER {
                     return Err(TempModelError::UnsupportedOrder(*order));
                 }
-                if !coef.iter().take(n).all(|c| c.is_finite()) {
-                    return Err(TempModelError::NonFinite);
-                }
+                (coef.get(..n).unwrap_or(&[]), &[])
             }
             TempModel::Pwl { n_knots, knots_c, at_knot } => {
                 let n = *n_knots as usize;
                 if !(2..=MAX_KNOTS).contains(&n) {
                     return Err(TempModelError::KnotCount(*n_knots));
                 }
-                if !knots_c.iter().take(n).all(|k| k.is_finite()) || !at_knot.iter().take(n).all(|c| c.is_finite()) {
-                    return Err(TempModelError::NonFinite);
-                }
-                if knots_c.iter().take(n).zip(knots_c.iter().skip(1).take(n - 1)).any(|(a, b)| !(b > a)) {
-                    return Err(TempModelError::KnotsNotIncreasing);
-                }
+                (at_knot.get(..n).unwrap_or(&[]), knots_c.get(..n).unwrap_or(&[]))
             }
+        };
+        if !sets.iter().all(CoefDelta::is_finite) || !knots.iter().all(|k| k.is_finite()) {
+            return Err(TempModelError::NonFinite);
+        }
+        if knots.windows(2).any(|w| matches!(w, [a, b] if !(b > a))) {
+            return Err(TempModelError::KnotsNotIncreasing);
         }
         Ok(())
     }

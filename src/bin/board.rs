@@ -511,6 +511,9 @@ impl Uart {
     }
 
     /// Sends `bytes` in order; stops at the first byte the transmitter does not take in time.
+    /// Out of line and not unrolled: the link is not on the per-sample path.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn write_all(&mut self, bytes: &[u8]) -> Result<(), TxStuck> {
         for &b in bytes {
             let mut polls = 0;

@@ -309,13 +309,33 @@ pub fn crc16_ccitt(bytes: &[u8]) -> u16 {
     crc16_ccitt_update(0xFFFF, bytes)
 }
 
-/// Feeds `bytes` into the running CRC `crc` (see [`crc16_ccitt`]).
-pub fn crc16_ccitt_update(mut crc: u16, bytes: &[u8]) -> u16 {
-    for &b in bytes {
-        crc ^= u16::from(b) << 8;
-        for _ in 0..8 {
+/// The CRC-16-CCITT register after shifting in four zero bits from `n << 12`: the step
+/// [`crc16_ccitt_update`] takes per nibble. 32 bytes, where a byte-wise table takes 512.
+const CRC16_NIBBLE: [u16; 16] = {
+    let mut table = [0u16; 16];
+    let mut n = 0;
+    while n < 16 {
+        let mut crc = (n as u16) << 12;
+        let mut bit = 0;
+        while bit < 4 {
             crc = if crc & 0x8000 != 0 { (crc << 1) ^ 0x1021 } else { crc << 1 };
+            bit += 1;
         }
+        table[n] = crc;
+        n += 1;
+    }
+    table
+};
+
+/// Feeds `bytes` into the running CRC `crc` (see [`crc16_ccitt`]), four bits per step. One
+/// small out-of-line copy, optimised for size, serves the ADC frames (15 bytes) and the
+/// output link (22 bytes).
+#[inline(never)]
+#[cfg_attr(unstable_target, optimize(size))]
+pub fn crc16_ccitt_update(mut crc: u16, bytes: &[u8]) -> u16 {
+    let step = |crc: u16, nibble: u8| (crc << 4) ^ CRC16_NIBBLE[usize::from(((crc >> 12) as u8 ^ nibble) & 0x0f)];
+    for &b in bytes {
+        crc = step(step(crc, b >> 4), b & 0x0f);
     }
     crc
 }
