@@ -394,7 +394,17 @@ impl Xtask {
                 x.run(c)?;
                 let mut c = x.command("llvm-size");
                 c.arg("-A").arg(x.elf("flight"));
-                x.run(c)
+                println!("$ {}", show(&c));
+                let sections = output(&mut c)?;
+                print!("{sections}");
+                let (flash, ram) = flash_and_ram(&sections)?;
+                let verdict = |used: u64, budget: u64| if used <= budget { "met" } else { "MISSED" };
+                println!("flight image: flash {flash} B of {FLASH_BUDGET} ({})", verdict(flash, FLASH_BUDGET));
+                println!("flight image: static RAM {ram} B of {RAM_BUDGET} ({})", verdict(ram, RAM_BUDGET));
+                if flash > FLASH_BUDGET || ram > RAM_BUDGET {
+                    return Err("the flight image is over its flash or RAM budget".into());
+                }
+                Ok(())
             })
             && self.step(5, "host samples per second (criterion)", |x| {
                 x.run(x.host_cargo(["bench", "-p", "host-tests", "--bench", "throughput"]))
@@ -611,6 +621,35 @@ impl Xtask {
         let status = c.status().map_err(|e| format!("cannot start `{}`: {e}", show(&c)))?;
         if status.success() { Ok(()) } else { Err(format!("`{}` exited with {status}", show(&c))) }
     }
+}
+
+/// Flash budget of the flight image \[B\]: 32 KiB.
+const FLASH_BUDGET: u64 = 32 * 1024;
+/// Static RAM budget of the flight image \[B\]: 8 KiB.
+const RAM_BUDGET: u64 = 8 * 1024;
+
+/// Flash (what is loaded: vector table, code, constants, initial values of `.data`) and
+/// static RAM (`.data`, `.bss`, `.uninit`) of an image, from `llvm-size -A`.
+fn flash_and_ram(sections: &str) -> Result<(u64, u64)> {
+    let (mut flash, mut ram, mut seen) = (0, 0, 0);
+    for line in sections.lines() {
+        let mut cols = line.split_whitespace();
+        let (Some(name), Some(size)) = (cols.next(), cols.next()) else { continue };
+        let Ok(size) = size.parse::<u64>() else { continue };
+        match name {
+            ".vector_table" | ".text" | ".rodata" => flash += size,
+            ".data" => (flash, ram) = (flash + size, ram + size),
+            ".bss" | ".uninit" => ram += size,
+            _ => continue,
+        }
+        seen += 1;
+    }
+    if seen < 4 {
+        return Err(format!(
+            "llvm-size -A: expected .vector_table, .text, .rodata, .data and .bss, found {seen} of them"
+        ));
+    }
+    Ok((flash, ram))
 }
 
 /// Seconds of the fuzz pass in `cargo xtask test` (`XTASK_FUZZ_SECONDS` overrides).
@@ -962,4 +1001,35 @@ fn relative(s: &OsStr) -> String {
     let p = Path::new(s);
     let s: OsString = p.strip_prefix(&root).map(|r| r.as_os_str().to_owned()).unwrap_or_else(|_| s.to_owned());
     s.to_string_lossy().into_owned()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `llvm-size -A` of a flight image as the Debian LLVM prints it (sizes changed).
+    const SIZES: &str = "flight  :
+section               size        addr
+.vector_table          192           0
+.text                31912         192
+.rodata                456       32104
+.data                   16   536870912
+.gnu.sgstubs             0       32576
+.bss                  2892   536870928
+.uninit                  4   536873820
+.defmt                   1           0
+.debug_loc          443013           0
+Total              1621862
+";
+
+    #[test]
+    fn flash_counts_what_is_loaded_and_ram_what_is_reserved() {
+        assert_eq!(flash_and_ram(SIZES), Ok((192 + 31_912 + 456 + 16, 16 + 2_892 + 4)));
+    }
+
+    #[test]
+    fn a_listing_without_the_image_sections_is_an_error() {
+        let err = flash_and_ram("section size addr\n.debug_loc 10 0\nTotal 10\n").unwrap_err();
+        assert!(err.contains("found 0"), "{err}");
+    }
 }
