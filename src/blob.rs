@@ -1203,6 +1203,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
 /// The vibration section and the flight-phase profiles, if present (see
 /// `docs/calibration-blob.md`). Profiles without a vibration section are refused: they mean
 /// nothing without the coefficients.
+#[inline(never)]
 #[cfg_attr(unstable_target, optimize(size))]
 fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError> {
     let Some(p) = Payload::get(blob, section::VIBRATION) else {
@@ -1244,7 +1245,6 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
         let at = PROFILES_HEADER_BYTES + PROFILE_BYTES * i;
         let profile = i as u8;
         let v = at + 8;
-        let level = |axis: usize, field: Field, ok: &dyn Fn(f64) -> bool| p.value(v + 8 * axis, field, ok);
         let freq_ok = |x: f64| (0.0..=limits::FREQ_MAX_HZ).contains(&x);
         let kind = p.byte(at);
         p.reserved_zero(at + 1..at + 8)?;
@@ -1256,7 +1256,8 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
             PROFILE_SINE => {
                 let mut amp_g = [0.0; 3];
                 for (j, a) in amp_g.iter_mut().enumerate() {
-                    *a = level(j, Field::ProfileAmp { profile, axis: j as u8 }, &|x| x.abs() <= MAX_LEVEL_G)?;
+                    *a =
+                        p.value(v + 8 * j, Field::ProfileAmp { profile, axis: j as u8 }, |x| x.abs() <= MAX_LEVEL_G)?;
                 }
                 let freq_hz = p.value(v + 24, Field::ProfileFreq { profile }, freq_ok)?;
                 p.reserved_zero(v + 32..v + 40)?;
@@ -1265,7 +1266,7 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
             PROFILE_RANDOM => {
                 let mut sigma_g = [0.0; 3];
                 for (j, s) in sigma_g.iter_mut().enumerate() {
-                    *s = level(j, Field::ProfileSigma { profile, axis: j as u8 }, &|x| {
+                    *s = p.value(v + 8 * j, Field::ProfileSigma { profile, axis: j as u8 }, |x| {
                         (0.0..=MAX_LEVEL_G).contains(&x)
                     })?;
                 }
