@@ -1,5 +1,5 @@
 //! Puts `memory.x` (and an empty `device.x`) on the linker's search path for the Cortex-M4F
-//! binaries, and decides whether they may use two unstable compiler features (bare-metal
+//! binaries, and decides whether they may use three unstable compiler features (bare-metal
 //! targets only; host builds of the library do nothing here).
 //!
 //! `cfg(unstable_target)`: set for a bare-metal build whose compiler accepts unstable features
@@ -8,7 +8,10 @@
 //!   precomputation) is compiled with `#[optimize(size)]`; the per-sample path keeps
 //!   `opt-level = 3`;
 //! - `f32` square roots are the FPU's `vsqrt.f32` (`core::f32::math::sqrt`) instead of libm's
-//!   integer algorithm; both are correctly rounded, so the results are the same bits.
+//!   integer algorithm; both are correctly rounded, so the results are the same bits;
+//! - the blob's text fields, already checked to be printable ASCII, become `&str` through the
+//!   ASCII view (`[u8]::as_ascii`) instead of the UTF-8 validator, whose code and 256-byte
+//!   table the flight image then does without; the text is the same.
 //!
 //! On a stable compiler the same code builds without them: larger and a little slower.
 

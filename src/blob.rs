@@ -990,8 +990,17 @@ impl<'a> Payload<'a> {
         if b.is_empty() || b.len() > MAX_TEXT_BYTES || !b.iter().all(|c| (0x20..=0x7e).contains(c)) {
             return Err(BlobError::OutOfRange { field, offset: self.base });
         }
-        core::str::from_utf8(b).map_err(|_| BlobError::OutOfRange { field, offset: self.base })
+        ascii_str(b).ok_or(BlobError::OutOfRange { field, offset: self.base })
     }
+}
+
+/// `b` as text, when it is ASCII. On the target the ASCII view (no UTF-8 validator and its
+/// 256-byte table in flash); elsewhere UTF-8 validation, which gives the same text for ASCII.
+fn ascii_str(b: &[u8]) -> Option<&str> {
+    #[cfg(unstable_target)]
+    return b.as_ascii().map(|a| a.as_str());
+    #[cfg(not(unstable_target))]
+    return core::str::from_utf8(b).ok();
 }
 
 fn in_temp_limits(t: f64) -> bool {

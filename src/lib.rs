@@ -29,7 +29,7 @@
 //! | [`drivers`] | sensor drivers (ADS131M04 ADC, TMP117 temperature) over embedded-hal, and the sample source's fault policy |
 //! | [`frame`] | the flight image's serial output frames: layout, fixed-point accelerations, encoder and decoder |
 #![no_std]
-#![cfg_attr(unstable_target, feature(optimize_attribute, core_float_math))]
+#![cfg_attr(unstable_target, feature(optimize_attribute, core_float_math, ascii_char))]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 

@@ -497,7 +497,7 @@ fn the_sample_source_flags_counts_and_falls_back() {
     i2c_t.push(I2cT::write_read(TMP, vec![0x01], vec![0x02, 0x20]));
     let i2c = I2cMock::new(&i2c_t);
 
-    let cfg = SourceConfig { temp_poll_interval: 2, max_signal_hold: 1, max_temp_age: 3 };
+    let cfg = SourceConfig { temp_poll_interval: 2, max_signal_hold: 1, max_temp_age: 3, reinit_interval: 0 };
     let mut src =
         SampleSource::new(Ads131m04::new(spi, pin, adc::Config::default()), Tmp117::new(i2c, Address::Gnd), cfg);
 
@@ -577,5 +577,93 @@ fn before_the_first_temperature_the_source_delivers_nan_flagged_stale() {
     let (mut spi, mut pin) = adc.destroy();
     spi.done();
     pin.done();
+    tmp.destroy().done();
+}
+
+/// The TMP117 configuration of the initialisation tests: CONV = 001b, AVG = 10b (0x00C0).
+const TMP_CFG: temp::Config = temp::Config { cycle: temp::ConvCycle::C125ms, averaging: temp::Averaging::X32 };
+
+fn tmp117_nack_on_id() -> I2cT {
+    I2cT::write_read(TMP, vec![0x0F], vec![0, 0])
+        .with_error(embedded_hal::i2c::ErrorKind::NoAcknowledge(embedded_hal::i2c::NoAcknowledgeSource::Address))
+}
+
+#[test]
+fn a_sensor_that_failed_to_initialise_is_not_read_and_is_tried_again() {
+    let sample = |c0: i32| frame_tx(vec![0; 18], out_frame(STATUS_OK_DRDY012, [c0, 0, 0, 0]));
+    // Boot: another ADC (ID 0x2201) and no answer from the TMP117.
+    let mut spi_t = init_frames(0x2201)[..6].to_vec();
+    let mut i2c_t = vec![tmp117_nack_on_id()];
+    // Sample 3: the ADC's retry succeeds and it is read at once; samples 4 to 7 read it.
+    spi_t.extend(init_frames(0x2403));
+    for c0 in [0x40_0000, 0x20_0000, -0x20_0000, 0x10_0000, -0x40_0000] {
+        spi_t.extend(sample(c0));
+    }
+    // Sample 6: the TMP117 answers its retry and is polled at once (25 °C); sample 7 polls it
+    // again (no new conversion).
+    i2c_t.push(I2cT::write_read(TMP, vec![0x0F], vec![0x01, 0x17]));
+    i2c_t.push(I2cT::write(TMP, vec![0x01, 0x00, 0xC0]));
+    i2c_t.extend(temp_ready(0x0C80));
+    i2c_t.push(I2cT::write_read(TMP, vec![0x01], vec![0x02, 0x20]));
+    let adc =
+        Ads131m04::new(SpiMock::new(&spi_t), PinMock::new(&[State::Low; 5].map(PinT::get)), adc::Config::default());
+    let cfg = SourceConfig { temp_poll_interval: 1, max_signal_hold: 1, max_temp_age: 10, reinit_interval: 3 };
+    let mut src = SampleSource::init(adc, Tmp117::new(I2cMock::new(&i2c_t), Address::Gnd), TMP_CFG, cfg);
+    assert!(!src.adc_ready() && !src.temp_ready());
+
+    // Samples 1 and 2: neither sensor is touched; NaN signals, no temperature, both flagged.
+    for _ in 0..2 {
+        let r = src.read();
+        assert!(r.signals_v.iter().all(|v| v.is_nan()) && r.temp_c.is_nan());
+        assert_eq!((r.signal_fault, r.temp_fault), (Some(SignalFault::Uninitialised), Some(TempFault::Uninitialised)));
+        assert_eq!(r.status, Status::SENSOR_FAULT);
+    }
+    // Sample 3: the ADC first.
+    let r = src.read();
+    assert!(src.adc_ready() && !src.temp_ready());
+    assert_f32_near(r.signals_v[0], 0.6);
+    assert_eq!((r.signal_fault, r.temp_fault), (None, Some(TempFault::Uninitialised)));
+    // Samples 4 and 5: the next attempt is not due yet.
+    for reference in [0.3, -0.3] {
+        let r = src.read();
+        assert_f32_near(r.signals_v[0], reference);
+        assert!(r.temp_c.is_nan());
+        assert_eq!(r.temp_fault, Some(TempFault::Uninitialised));
+    }
+    // Sample 6: the TMP117, three samples after the ADC.
+    let r = src.read();
+    assert!(src.adc_ready() && src.temp_ready());
+    assert_f32_near(r.signals_v[0], 0.15);
+    assert_eq!((r.temp_c, r.signal_fault, r.temp_fault, r.status), (25.0, None, None, Status::OK));
+    // Sample 7: both ready, no further attempt.
+    let r = src.read();
+    assert_f32_near(r.signals_v[0], -0.6);
+    assert_eq!((r.temp_c, r.status), (25.0, Status::OK));
+
+    assert_eq!(src.reinit_attempts(), 2);
+    let c = *src.fault_counts();
+    assert_eq!((c.signal_uninitialised, c.signal_total()), (2, 2));
+    // Samples 1 to 5 skipped their polls; with no temperature yet, each was also stale.
+    assert_eq!((c.temp_uninitialised, c.temp_stale, c.temp_total()), (5, 5, 10));
+    let (adc, tmp) = src.destroy();
+    finish(adc);
+    tmp.destroy().done();
+}
+
+#[test]
+fn with_no_reinit_interval_a_failed_sensor_stays_unread() {
+    let adc = adc_with(&init_frames(0x2201)[..6], &[]);
+    let tmp = Tmp117::new(I2cMock::new(&[tmp117_nack_on_id()]), Address::Gnd);
+    let cfg = SourceConfig { reinit_interval: 0, ..SourceConfig::default() };
+    let mut src = SampleSource::init(adc, tmp, TMP_CFG, cfg);
+    for _ in 0..100 {
+        let r = src.read();
+        assert!(r.signals_v.iter().all(|v| v.is_nan()));
+        assert_eq!(r.signal_fault, Some(SignalFault::Uninitialised));
+    }
+    assert_eq!((src.reinit_attempts(), src.adc_ready(), src.temp_ready()), (0, false, false));
+    assert_eq!(src.fault_counts().signal_uninitialised, 100);
+    let (adc, tmp) = src.destroy();
+    finish(adc);
     tmp.destroy().done();
 }

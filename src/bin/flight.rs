@@ -7,8 +7,8 @@
 //! - The sensors are initialised on the board's peripherals ([`board`]): the ADS131M04 on the
 //!   PL022 SPI with its DRDY line on GPIO0, the TMP117 on the SBCon I²C, behind the sample
 //!   source and its fault policy ([`bins_comp::drivers::SampleSource`], [`SOURCE_CONFIG`]).
-//!   A sensor that does not answer is not fatal: its reads fail, and every sample says so
-//!   (`SENSOR_FAULT`).
+//!   A sensor that does not answer is not fatal: it is not read, every sample says so
+//!   (`SENSOR_FAULT`), and its initialisation is tried again every second.
 //! - SysTick fires at [`TICK_HZ`]. Its handler runs [`isr::Isr::on_tick`]: one sample from the
 //!   sensors, one pipeline step, one result into the queue.
 //! - `main` is the consumer: it drains the queue into output frames on UART0
@@ -54,8 +54,10 @@ const QUEUE: usize = 32;
 const HEALTH_EVERY: u32 = TICK_HZ;
 /// The fault policy's timing at 1 kHz sampling: the TMP117 polled every 32 samples (32 ms; it
 /// converts every 125 ms at its default averaging), one held sample bridging an isolated ADC
-/// glitch, a temperature at most 2 s (16 conversions) old.
-const SOURCE_CONFIG: SourceConfig = SourceConfig { temp_poll_interval: 32, max_signal_hold: 1, max_temp_age: 2000 };
+/// glitch, a temperature at most 2 s (16 conversions) old, a sensor that failed to initialise
+/// tried again every second.
+const SOURCE_CONFIG: SourceConfig =
+    SourceConfig { temp_poll_interval: 32, max_signal_hold: 1, max_temp_age: 2000, reinit_interval: TICK_HZ };
 
 /// The flight sample source on this board.
 type Source = SampleSource<Pl022, DrdyPin, SbCon>;
@@ -118,11 +120,10 @@ fn run() -> ! {
     let (Some(board), Some(mut cp)) = (Board::take(), cortex_m::Peripherals::take()) else { SCB::sys_reset() };
     let uart = board.uart;
     let (pipeline, boot) = flashed_pipeline();
-    let mut adc = Ads131m04::new(board.spi, board.drdy, adc::Config::default());
-    let adc_ready = adc.init().is_ok();
-    let mut temp = Tmp117::new(board.i2c, temp::Address::Gnd);
-    let temp_ready = temp.init(temp::Config::default()).is_ok();
-    let source = SampleSource::new(adc, temp, SOURCE_CONFIG);
+    let adc = Ads131m04::new(board.spi, board.drdy, adc::Config::default());
+    let temp = Tmp117::new(board.i2c, temp::Address::Gnd);
+    let source = SampleSource::init(adc, temp, temp::Config::default(), SOURCE_CONFIG);
+    let (adc_ready, temp_ready) = (source.adc_ready(), source.temp_ready());
 
     // SAFETY: `main` runs once and this is the only reference ever taken to the queue; its
     // halves are then owned by exactly one context each (producer: the interrupt's state,

@@ -186,11 +186,10 @@ fn main() -> ! {
     );
     let mut vib_state = bins_comp::PipelineState::<f32, 16>::new();
     // The flight sample source behind the sampling interrupt's body, as the firmware boots it.
-    let mut adc = bins_comp::drivers::Ads131m04::new(bus::Spi::default(), bus::Pin, Default::default());
-    let adc_ok = adc.init().is_ok();
-    let mut temp = bins_comp::drivers::Tmp117::new(bus::Bus::default(), Default::default());
-    let temp_ok = temp.init(Default::default()).is_ok();
-    let source = bins_comp::drivers::SampleSource::new(adc, temp, Default::default());
+    let adc = bins_comp::drivers::Ads131m04::new(bus::Spi::default(), bus::Pin, Default::default());
+    let temp = bins_comp::drivers::Tmp117::new(bus::Bus::default(), Default::default());
+    let source = bins_comp::drivers::SampleSource::init(adc, temp, Default::default(), Default::default());
+    let (adc_ok, temp_ok) = (source.adc_ready(), source.temp_ready());
     // SAFETY: the only reference ever taken to the queue; its halves are then owned by the
     // interrupt's state and the consumer below.
     let Some(queue) = (unsafe { (&raw mut QUEUE_ISR).as_mut() }) else { semihosting::process::exit(1) };

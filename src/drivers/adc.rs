@@ -447,6 +447,8 @@ where
     /// Checks the ID register, then writes MODE, CLOCK and GAIN1 from the configuration, each
     /// acknowledged by the device. Expects the power-on or reset state of the input CRC
     /// (off); 8 frames.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn init(&mut self) -> Result<(), Error<SPI::Error, DRDY::Error>> {
         let id = self.read_register(reg::ID)?;
         if id & ID_MASK != ID_EXPECTED {

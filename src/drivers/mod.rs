@@ -25,6 +25,12 @@
 //!   good temperature is kept. A temperature older than [`SourceConfig::max_temp_age`]
 //!   samples (or none yet) is delivered as NaN, counted as stale; the compensation then
 //!   works at T0 and flags [`Status::NONFINITE_INPUT`] | [`Status::TEMP_CLAMPED`].
+//! - **Initialisation.** A sensor whose initialisation failed (at boot, [`SampleSource::init`])
+//!   is not read: its samples get the fallbacks above with the fault `Uninitialised`
+//!   (signals NaN; temperature polls skipped, so it goes stale). Its initialisation is tried
+//!   again every [`SourceConfig::reinit_interval`] samples, one sensor per attempt (the ADC
+//!   first), so that an attempt adds at most one sensor's initialisation to its sample's bus
+//!   time. A sensor that answers is read from the next sample on.
 //! - Every sample with a fault carries [`Status::SENSOR_FAULT`] in [`Reading::status`], to be
 //!   OR-ed into the compensated sample's status by the caller:
 //!
@@ -60,6 +66,8 @@ pub enum SignalFault {
     BadStatus,
     /// A command was not acknowledged, or the device is not an ADS131M04.
     Protocol,
+    /// The ADC's initialisation has not succeeded yet, so it is not read.
+    Uninitialised,
 }
 
 impl<SE, PE> From<&adc::Error<SE, PE>> for SignalFault {
@@ -84,6 +92,8 @@ pub enum TempFault {
     WrongDevice,
     /// No good temperature within [`SourceConfig::max_temp_age`] samples: NaN delivered.
     Stale,
+    /// The sensor's initialisation has not succeeded yet, so this sample's poll was skipped.
+    Uninitialised,
 }
 
 impl TempFault {
@@ -97,7 +107,7 @@ impl TempFault {
     }
 }
 
-/// Fault counters since [`SampleSource::new`], saturating at `u32::MAX`. Driver faults count
+/// Fault counters since [`SampleSource::new`] or [`SampleSource::init`], saturating at `u32::MAX`. Driver faults count
 /// failed driver calls; `temp_stale` counts samples delivered with a NaN temperature.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct FaultCounts {
@@ -113,12 +123,16 @@ pub struct FaultCounts {
     pub signal_bad_status: u32,
     /// [`SignalFault::Protocol`].
     pub signal_protocol: u32,
+    /// [`SignalFault::Uninitialised`].
+    pub signal_uninitialised: u32,
     /// [`TempFault::Bus`].
     pub temp_bus: u32,
     /// [`TempFault::WrongDevice`].
     pub temp_wrong_device: u32,
     /// [`TempFault::Stale`].
     pub temp_stale: u32,
+    /// [`TempFault::Uninitialised`].
+    pub temp_uninitialised: u32,
 }
 
 impl FaultCounts {
@@ -131,6 +145,7 @@ impl FaultCounts {
             SignalFault::NotReady => &mut self.signal_not_ready,
             SignalFault::BadStatus => &mut self.signal_bad_status,
             SignalFault::Protocol => &mut self.signal_protocol,
+            SignalFault::Uninitialised => &mut self.signal_uninitialised,
         };
         *c = c.saturating_add(1);
     }
@@ -141,6 +156,7 @@ impl FaultCounts {
             TempFault::Bus => &mut self.temp_bus,
             TempFault::WrongDevice => &mut self.temp_wrong_device,
             TempFault::Stale => &mut self.temp_stale,
+            TempFault::Uninitialised => &mut self.temp_uninitialised,
         };
         *c = c.saturating_add(1);
     }
@@ -154,6 +170,7 @@ impl FaultCounts {
             self.signal_not_ready,
             self.signal_bad_status,
             self.signal_protocol,
+            self.signal_uninitialised,
         ]
         .iter()
         .fold(0u32, |a, &b| a.saturating_add(b))
@@ -161,7 +178,9 @@ impl FaultCounts {
 
     /// All temperature faults.
     pub fn temp_total(&self) -> u32 {
-        [self.temp_bus, self.temp_wrong_device, self.temp_stale].iter().fold(0u32, |a, &b| a.saturating_add(b))
+        [self.temp_bus, self.temp_wrong_device, self.temp_stale, self.temp_uninitialised]
+            .iter()
+            .fold(0u32, |a, &b| a.saturating_add(b))
     }
 }
 
@@ -176,14 +195,17 @@ pub struct SourceConfig {
     pub max_signal_hold: u32,
     /// Oldest temperature still delivered, in samples since it was read.
     pub max_temp_age: u32,
+    /// Samples between attempts to initialise a sensor whose initialisation failed (0: never
+    /// try again).
+    pub reinit_interval: u32,
 }
 
 impl Default for SourceConfig {
     /// For the ADC at 4 kSPS (OSR 1024, 8.192 MHz) and the TMP117 converting every 125 ms
     /// (CONV = 000b, AVG = 8): a poll every 16 ms, one held sample, temperature at most 2 s
-    /// (16 conversion cycles) old.
+    /// (16 conversion cycles) old, a failed sensor tried again every second.
     fn default() -> Self {
-        SourceConfig { temp_poll_interval: 64, max_signal_hold: 1, max_temp_age: 8000 }
+        SourceConfig { temp_poll_interval: 64, max_signal_hold: 1, max_temp_age: 8000, reinit_interval: 4000 }
     }
 }
 
@@ -208,6 +230,13 @@ pub struct SampleSource<SPI, DRDY, I2C> {
     adc: Ads131m04<SPI, DRDY>,
     temp: Tmp117<I2C>,
     config: SourceConfig,
+    /// What the TMP117 is (re)initialised with.
+    temp_config: temp::Config,
+    adc_ready: bool,
+    temp_ready: bool,
+    /// Samples until the next initialisation attempt of a sensor that is not ready.
+    until_reinit: u32,
+    reinit_attempts: u32,
     last_signals_v: Option<[f32; 3]>,
     held: u32,
     last_temp_c: Option<f32>,
@@ -222,13 +251,18 @@ where
     DRDY: InputPin,
     I2C: I2c,
 {
-    /// Takes the two drivers (already initialised); the first [`read`](Self::read) polls the
-    /// temperature.
+    /// Takes the two drivers, already initialised (the TMP117 with the default
+    /// [`temp::Config`]); the first [`read`](Self::read) polls the temperature.
     pub fn new(adc: Ads131m04<SPI, DRDY>, temp: Tmp117<I2C>, config: SourceConfig) -> Self {
         SampleSource {
             adc,
             temp,
             config,
+            temp_config: temp::Config::default(),
+            adc_ready: true,
+            temp_ready: true,
+            until_reinit: 0,
+            reinit_attempts: 0,
             last_signals_v: None,
             held: 0,
             last_temp_c: None,
@@ -238,12 +272,48 @@ where
         }
     }
 
+    /// Initialises both sensors and takes them. A sensor that fails is not read, and its
+    /// initialisation is tried again every [`SourceConfig::reinit_interval`] samples (see the
+    /// [module documentation](self)); [`adc_ready`](Self::adc_ready) and
+    /// [`temp_ready`](Self::temp_ready) tell how the boot went.
+    pub fn init(
+        mut adc: Ads131m04<SPI, DRDY>,
+        mut temp: Tmp117<I2C>,
+        temp_config: temp::Config,
+        config: SourceConfig,
+    ) -> Self {
+        let adc_ready = adc.init().is_ok();
+        let temp_ready = temp.init(temp_config).is_ok();
+        SampleSource {
+            temp_config,
+            adc_ready,
+            temp_ready,
+            until_reinit: config.reinit_interval.saturating_sub(1),
+            ..SampleSource::new(adc, temp, config)
+        }
+    }
+
+    /// True while the ADC is initialised and read.
+    pub fn adc_ready(&self) -> bool {
+        self.adc_ready
+    }
+
+    /// True while the TMP117 is initialised and polled.
+    pub fn temp_ready(&self) -> bool {
+        self.temp_ready
+    }
+
+    /// Initialisation attempts after boot (each of one sensor).
+    pub fn reinit_attempts(&self) -> u32 {
+        self.reinit_attempts
+    }
+
     /// Gives the drivers back.
     pub fn destroy(self) -> (Ads131m04<SPI, DRDY>, Tmp117<I2C>) {
         (self.adc, self.temp)
     }
 
-    /// Fault counters since [`new`](Self::new).
+    /// Fault counters since [`new`](Self::new) or [`init`](Self::init).
     pub fn fault_counts(&self) -> &FaultCounts {
         &self.counts
     }
@@ -252,37 +322,68 @@ where
     /// Never fails: a driver error yields the fallback of the module documentation, the fault
     /// kind, and [`Status::SENSOR_FAULT`].
     pub fn read(&mut self) -> Reading {
+        if !(self.adc_ready && self.temp_ready) {
+            self.reinit_when_due();
+        }
         let (signals_v, signal_fault) = self.read_signals();
         let (temp_c, temp_fault) = self.read_temp();
         let status = if signal_fault.is_some() || temp_fault.is_some() { Status::SENSOR_FAULT } else { Status::OK };
         Reading { signals_v, temp_c, signal_fault, temp_fault, status }
     }
 
+    /// One initialisation attempt of a sensor that is not ready, when one is due: the ADC
+    /// first, the TMP117 once the ADC is ready. Off the normal path: out of line, optimised
+    /// for size.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
+    fn reinit_when_due(&mut self) {
+        if self.config.reinit_interval == 0 {
+            return;
+        }
+        if self.until_reinit > 0 {
+            self.until_reinit -= 1;
+            return;
+        }
+        self.until_reinit = self.config.reinit_interval - 1;
+        self.reinit_attempts = self.reinit_attempts.saturating_add(1);
+        if !self.adc_ready {
+            self.adc_ready = self.adc.init().is_ok();
+        } else {
+            self.temp_ready = self.temp.init(self.temp_config).is_ok();
+        }
+    }
+
     fn read_signals(&mut self) -> ([f32; 3], Option<SignalFault>) {
-        match self.adc.read_signals_v() {
-            Ok(s) => {
-                self.last_signals_v = Some(s);
-                self.held = 0;
-                (s, None)
-            }
-            Err(e) => {
-                let f = SignalFault::from(&e);
-                self.counts.record_signal(f);
-                match self.last_signals_v {
-                    Some(s) if self.held < self.config.max_signal_hold => {
-                        self.held += 1;
-                        (s, Some(f))
-                    }
-                    _ => ([f32::NAN; 3], Some(f)),
+        let fault = if !self.adc_ready {
+            SignalFault::Uninitialised
+        } else {
+            match self.adc.read_signals_v() {
+                Ok(s) => {
+                    self.last_signals_v = Some(s);
+                    self.held = 0;
+                    return (s, None);
                 }
+                Err(e) => SignalFault::from(&e),
             }
+        };
+        self.counts.record_signal(fault);
+        match self.last_signals_v {
+            Some(s) if self.held < self.config.max_signal_hold => {
+                self.held += 1;
+                (s, Some(fault))
+            }
+            _ => ([f32::NAN; 3], Some(fault)),
         }
     }
 
     fn read_temp(&mut self) -> (f32, Option<TempFault>) {
         self.temp_age = self.temp_age.saturating_add(1);
         let mut fault = None;
-        if self.until_poll == 0 {
+        if self.until_poll == 0 && !self.temp_ready {
+            self.until_poll = self.config.temp_poll_interval.saturating_sub(1);
+            self.counts.record_temp(TempFault::Uninitialised);
+            fault = Some(TempFault::Uninitialised);
+        } else if self.until_poll == 0 {
             self.until_poll = self.config.temp_poll_interval.saturating_sub(1);
             match self.temp.read_temp_c() {
                 Ok(t) => {

@@ -178,6 +178,8 @@ impl<I2C: I2c> Tmp117<I2C> {
     }
 
     /// Checks the device ID, then programs continuous conversion with `config`.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn init(&mut self, config: Config) -> Result<(), Error<I2C::Error>> {
         let id = self.read_register(reg::DEVICE_ID)?;
         if id & DEVICE_ID_MASK != DEVICE_ID {
