@@ -667,3 +667,37 @@ fn with_no_reinit_interval_a_failed_sensor_stays_unread() {
     finish(adc);
     tmp.destroy().done();
 }
+
+#[test]
+fn an_adc_that_reports_a_reset_is_initialised_again_on_the_next_sample() {
+    let sample = |st: u16, c0: i32| frame_tx(vec![0; 18], out_frame(st, [c0, 0, 0, 0]));
+    let mut spi_t = init_frames(0x2403);
+    spi_t.extend(sample(STATUS_OK_DRDY012, 0x40_0000));
+    // STATUS.RESET (bit 10): the part is back at its register defaults.
+    spi_t.extend(sample(STATUS_OK_DRDY012 | 0x0400, 0x20_0000));
+    spi_t.extend(init_frames(0x2403));
+    spi_t.extend(sample(STATUS_OK_DRDY012, -0x20_0000));
+    let adc =
+        Ads131m04::new(SpiMock::new(&spi_t), PinMock::new(&[State::Low; 3].map(PinT::get)), adc::Config::default());
+    let mut i2c_t = vec![I2cT::write_read(TMP, vec![0x0F], vec![0x01, 0x17]), I2cT::write(TMP, vec![0x01, 0x00, 0xC0])];
+    i2c_t.extend(temp_ready(0x0C80));
+    let cfg = SourceConfig { temp_poll_interval: 1000, max_signal_hold: 1, max_temp_age: 1000, reinit_interval: 1000 };
+    let mut src = SampleSource::init(adc, Tmp117::new(I2cMock::new(&i2c_t), Address::Gnd), TMP_CFG, cfg);
+    assert!(src.adc_ready() && src.temp_ready());
+
+    let r1 = src.read();
+    assert_f32_near(r1.signals_v[0], 0.6);
+    // The reset is a bad status: the last good signals are held, and the ADC is no longer ready.
+    let r2 = src.read();
+    assert_eq!((r2.signals_v, r2.signal_fault), (r1.signals_v, Some(SignalFault::BadStatus)));
+    assert!(!src.adc_ready());
+    // The next sample initialises it again and reads it, without waiting for the interval.
+    let r3 = src.read();
+    assert!(src.adc_ready());
+    assert_f32_near(r3.signals_v[0], -0.3);
+    assert_eq!((r3.temp_c, r3.signal_fault, r3.status), (25.0, None, Status::OK));
+    assert_eq!(src.reinit_attempts(), 1);
+    let (adc, tmp) = src.destroy();
+    finish(adc);
+    tmp.destroy().done();
+}

@@ -30,7 +30,9 @@
 //!   (signals NaN; temperature polls skipped, so it goes stale). Its initialisation is tried
 //!   again every [`SourceConfig::reinit_interval`] samples, one sensor per attempt (the ADC
 //!   first), so that an attempt adds at most one sensor's initialisation to its sample's bus
-//!   time. A sensor that answers is read from the next sample on.
+//!   time. A sensor that answers is read from the next sample on. An ADC that reports a reset
+//!   (STATUS.RESET, e.g. after a brown-out: its registers are back at their defaults) is
+//!   treated the same way, with its first attempt on the next sample.
 //! - Every sample with a fault carries [`Status::SENSOR_FAULT`] in [`Reading::status`], to be
 //!   OR-ed into the compensated sample's status by the caller:
 //!
@@ -363,7 +365,15 @@ where
                     self.held = 0;
                     return (s, None);
                 }
-                Err(e) => SignalFault::from(&e),
+                Err(e) => {
+                    if matches!(e, adc::Error::BadStatus(st) if st & adc::status::RESET != 0) {
+                        // The ADC has reset (a brown-out, say) to its register defaults: it is
+                        // initialised again from the next sample on.
+                        self.adc_ready = false;
+                        self.until_reinit = 0;
+                    }
+                    SignalFault::from(&e)
+                }
             }
         };
         self.counts.record_signal(fault);
