@@ -20,7 +20,7 @@
 //! |---|---|---|---|
 //! | [`Kind::Sample`] (1), one per sample | bit i: axis i saturated ([`accel_to_fixed`]) | x, y, z acceleration \[g\], [`I8F24`] bits | [`Status`] bits |
 //! | [`Kind::Boot`] (2), once, before the first sample | [`BootFrame`]: bit 0 blob accepted, bit 1 ADC initialised, bit 2 temperature sensor initialised | sampling rate \[Hz\], vibration profiles, the blob's stored CRC-32 (0 if rejected) | [`FORMAT_VERSION`] |
-//! | [`Kind::Health`] (3), periodic | 0 | signal faults, temperature faults, sampling overruns (counts since boot) | frames the link could not send |
+//! | [`Kind::Health`] (3), periodic | [`HealthFrame`]: bit 1 ADC ready, bit 2 temperature sensor ready (now: initialised, at boot or by a later attempt) | signal faults, temperature faults, sampling overruns (counts since boot) | frames the link could not send |
 //!
 //! # Acceleration format
 //!
@@ -45,8 +45,9 @@ pub use fixed::types::I8F24;
 pub const FRAME_BYTES: usize = 24;
 /// First two bytes of every frame.
 pub const SYNC: [u8; 2] = [0xA5, 0x5A];
-/// The layout described here; sent in the boot frame.
-pub const FORMAT_VERSION: u32 = 1;
+/// The layout described here; sent in the boot frame. 2: health frames carry the sensors'
+/// readiness in their flags (version 1 sent 0 there).
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Bytes covered by the CRC (the CRC follows them).
 const CRC_AT: usize = FRAME_BYTES - 2;
@@ -132,6 +133,11 @@ pub struct HealthFrame {
     pub overruns: u32,
     /// Frames the serial link could not send (transmitter stuck).
     pub link_errors: u32,
+    /// The ADC is initialised and read ([`SampleSource::adc_ready`](crate::drivers::SampleSource::adc_ready)).
+    pub adc_ready: bool,
+    /// The temperature sensor is initialised and polled
+    /// ([`SampleSource::temp_ready`](crate::drivers::SampleSource::temp_ready)).
+    pub temp_ready: bool,
 }
 
 /// One output frame.
@@ -163,10 +169,15 @@ pub enum FrameError {
 
 /// Boot frame flag: blob accepted.
 const BOOT_BLOB: u8 = 1 << 0;
-/// Boot frame flag: ADC initialised.
-const BOOT_ADC: u8 = 1 << 1;
-/// Boot frame flag: temperature sensor initialised.
-const BOOT_TEMP: u8 = 1 << 2;
+/// Boot and health frame flag: ADC initialised.
+const FLAG_ADC: u8 = 1 << 1;
+/// Boot and health frame flag: temperature sensor initialised.
+const FLAG_TEMP: u8 = 1 << 2;
+
+/// The flags byte of the sensors' readiness.
+fn sensor_flags(adc_ready: bool, temp_ready: bool) -> u8 {
+    (if adc_ready { FLAG_ADC } else { 0 }) | if temp_ready { FLAG_TEMP } else { 0 }
+}
 
 /// An acceleration \[g\] in the frame's fixed-point format, and whether it had to be
 /// saturated: rounded to the nearest multiple of 2⁻²⁴ g (ties to even) when in range, else
@@ -207,12 +218,12 @@ impl Frame {
                 (flags, f.accel_g.map(|a| a.to_bits().cast_unsigned()), f.status.0)
             }
             Frame::Boot(f) => {
-                let flags = if f.blob_accepted { BOOT_BLOB } else { 0 }
-                    | if f.adc_ready { BOOT_ADC } else { 0 }
-                    | if f.temp_ready { BOOT_TEMP } else { 0 };
+                let flags = if f.blob_accepted { BOOT_BLOB } else { 0 } | sensor_flags(f.adc_ready, f.temp_ready);
                 (flags, [f.tick_hz, f.vibration_profiles, f.blob_crc32], f.format_version)
             }
-            Frame::Health(f) => (0, [f.signal_faults, f.temp_faults, f.overruns], f.link_errors),
+            Frame::Health(f) => {
+                (sensor_flags(f.adc_ready, f.temp_ready), [f.signal_faults, f.temp_faults, f.overruns], f.link_errors)
+            }
         };
         let [q0, q1] = self.seq().to_le_bytes();
         let [[a0, a1, a2, a3], [b0, b1, b2, b3], [d0, d1, d2, d3]] = words.map(u32::to_le_bytes);
@@ -256,8 +267,8 @@ impl Frame {
             Some(Kind::Boot) => Ok(Frame::Boot(BootFrame {
                 seq,
                 blob_accepted: flags & BOOT_BLOB != 0,
-                adc_ready: flags & BOOT_ADC != 0,
-                temp_ready: flags & BOOT_TEMP != 0,
+                adc_ready: flags & FLAG_ADC != 0,
+                temp_ready: flags & FLAG_TEMP != 0,
                 tick_hz: w0,
                 vibration_profiles: w1,
                 blob_crc32: w2,
@@ -269,6 +280,8 @@ impl Frame {
                 temp_faults: w1,
                 overruns: w2,
                 link_errors: tail,
+                adc_ready: flags & FLAG_ADC != 0,
+                temp_ready: flags & FLAG_TEMP != 0,
             })),
             None => Err(FrameError::UnknownKind(kind)),
         }

@@ -62,7 +62,15 @@ fn boot_frame() -> BootFrame {
 }
 
 fn health_frame() -> HealthFrame {
-    HealthFrame { seq: 0xFFFF, signal_faults: 19_000, temp_faults: 19_594, overruns: 3, link_errors: u32::MAX }
+    HealthFrame {
+        seq: 0xFFFF,
+        signal_faults: 19_000,
+        temp_faults: 19_594,
+        overruns: 3,
+        link_errors: u32::MAX,
+        adc_ready: true,
+        temp_ready: false,
+    }
 }
 
 // ---- layout -------------------------------------------------------------------------------
@@ -75,7 +83,9 @@ fn every_kind_is_laid_out_as_documented() {
     let b = boot_frame();
     assert_eq!(Frame::Boot(b).encode().to_vec(), layout(2, 0b101, 0, [1000, 7, 0x0164_975C], FORMAT_VERSION));
     let h = health_frame();
-    assert_eq!(Frame::Health(h).encode().to_vec(), layout(3, 0, 0xFFFF, [19_000, 19_594, 3], u32::MAX));
+    assert_eq!(Frame::Health(h).encode().to_vec(), layout(3, 0b010, 0xFFFF, [19_000, 19_594, 3], u32::MAX));
+    let h = HealthFrame { adc_ready: false, temp_ready: true, ..h };
+    assert_eq!(Frame::Health(h).encode().to_vec(), layout(3, 0b100, 0xFFFF, [19_000, 19_594, 3], u32::MAX));
 }
 
 #[test]
@@ -94,6 +104,7 @@ fn every_kind_round_trips() {
         Frame::Boot(boot_frame()),
         Frame::Boot(BootFrame { blob_accepted: false, adc_ready: true, temp_ready: false, ..boot_frame() }),
         Frame::Health(health_frame()),
+        Frame::Health(HealthFrame { adc_ready: false, temp_ready: true, ..health_frame() }),
     ];
     for f in frames {
         assert_eq!(Frame::decode(&f.encode()), Ok(f), "{f:?}");

@@ -165,16 +165,22 @@ fn run() -> ! {
             until_health -= 1;
             if until_health == 0 {
                 until_health = HEALTH_EVERY;
-                let (counts, overruns) = critical_section::with(|cs| match ISR.borrow(cs).try_borrow().as_deref() {
-                    Ok(Slot::Running(i)) => (*i.source.fault_counts(), i.tick.overruns()),
-                    _ => (FaultCounts::default(), 0),
-                });
+                let (counts, overruns, adc_ready, temp_ready) =
+                    critical_section::with(|cs| match ISR.borrow(cs).try_borrow().as_deref() {
+                        Ok(Slot::Running(i)) => {
+                            let s = &i.source;
+                            (*s.fault_counts(), i.tick.overruns(), s.adc_ready(), s.temp_ready())
+                        }
+                        _ => (FaultCounts::default(), 0, false, false),
+                    });
                 link.send(Frame::Health(HealthFrame {
                     seq: 0,
                     signal_faults: counts.signal_total(),
                     temp_faults: counts.temp_total(),
                     overruns,
                     link_errors: link.errors,
+                    adc_ready,
+                    temp_ready,
                 }));
             }
         }

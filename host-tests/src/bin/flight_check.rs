@@ -9,8 +9,8 @@
 //!   consecutive sequence numbers (mod 2¹⁶);
 //! - every sample frame carries `SENSOR_FAULT` and not `INVALID_CALIBRATION`, none saturated;
 //! - at least one health frame; in each, the signal and temperature fault counts are at least
-//!   the samples sent before it and grow from one health frame to the next; no overrun and no
-//!   link error.
+//!   the samples sent before it and grow from one health frame to the next; neither sensor is
+//!   reported ready (the image keeps trying to initialise them); no overrun and no link error.
 
 use bins_comp::Status;
 use bins_comp::frame::{FORMAT_VERSION, Frame, Frames};
@@ -88,6 +88,13 @@ fn main() {
                 if last_signal.is_some_and(|l| sig <= l) || last_temp.is_some_and(|l| tmp <= l) {
                     fail(format!("{path}: health frame {}: fault counts did not grow", h.seq));
                 }
+                // No sensor is attached: the periodic attempts must not report one as ready.
+                if h.adc_ready || h.temp_ready {
+                    fail(format!(
+                        "{path}: health frame {}: ADC ready {}, TMP117 ready {} with no sensor attached",
+                        h.seq, h.adc_ready, h.temp_ready
+                    ));
+                }
                 if h.overruns != 0 || h.link_errors != 0 {
                     fail(format!(
                         "{path}: health frame {}: {} overruns, {} link errors",
@@ -107,7 +114,7 @@ fn main() {
     println!(
         "{path}: {} frames ({samples} samples, {health} health, 1 boot; {remainder} bytes of a cut-off frame), sequence \
          consecutive; every sample flagged SENSOR_FAULT; last health frame: {} signal faults, {} temperature faults, 0 \
-         overruns",
+         overruns, neither sensor ready",
         all.len(),
         last_signal.unwrap_or(0),
         last_temp.unwrap_or(0),
