@@ -109,8 +109,9 @@ impl TempFault {
     }
 }
 
-/// Fault counters since [`SampleSource::new`] or [`SampleSource::init`], saturating at `u32::MAX`. Driver faults count
-/// failed driver calls; `temp_stale` counts samples delivered with a NaN temperature.
+/// Fault counters since [`SampleSource::new`] or [`SampleSource::init`], saturating at
+/// `u32::MAX`. Driver faults count failed driver calls; `temp_stale` counts samples delivered
+/// with a NaN temperature; the `uninitialised` counts, samples of a sensor not read.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct FaultCounts {
     /// [`SignalFault::Bus`].
