@@ -59,6 +59,61 @@ pub enum VibrationSource {
     Online,
 }
 
+impl VibrationSource {
+    /// The source named `name`: `none`, `online`, or `profile:N` with N a decimal profile index
+    /// (0 to 255; whether the configuration has that profile is decided per sample, see
+    /// [`Pipeline::step`]). `None` for anything else. A `const fn`, so that a firmware image can
+    /// take its source from a build-time setting.
+    pub const fn parse(name: &str) -> Option<Self> {
+        let b = name.as_bytes();
+        if eq(b, b"none") {
+            return Some(VibrationSource::None);
+        }
+        if eq(b, b"online") {
+            return Some(VibrationSource::Online);
+        }
+        let prefix = b"profile:";
+        if b.len() <= prefix.len() || b.len() > prefix.len() + 3 {
+            return None;
+        }
+        let mut i = 0;
+        while i < prefix.len() {
+            if b[i] != prefix[i] {
+                return None;
+            }
+            i += 1;
+        }
+        let mut n: u32 = 0;
+        while i < b.len() {
+            let d = b[i];
+            if !d.is_ascii_digit() {
+                return None;
+            }
+            n = n * 10 + (d - b'0') as u32;
+            i += 1;
+        }
+        if n > u8::MAX as u32 {
+            return None;
+        }
+        Some(VibrationSource::Profile(n as u8))
+    }
+}
+
+/// `a == b`, in a `const fn`.
+const fn eq(a: &[u8], b: &[u8]) -> bool {
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut i = 0;
+    while i < a.len() {
+        if a[i] != b[i] {
+            return false;
+        }
+        i += 1;
+    }
+    true
+}
+
 /// The configuration of the per-sample step: calibration and VE model. Immutable after boot.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pipeline<F> {

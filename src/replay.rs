@@ -2,8 +2,9 @@
 //!
 //! The firmware's timer interrupt and the host's `bins-cal replay` run the same code here:
 //! [`Tick::step`] takes one sample (or notes that none was ready), runs
-//! [`Pipeline::step`] with [`SOURCE`] and returns the result with the overrun bit
-//! ([`Status::OVERRUN`]) set if data was lost since the previous result. With no overrun, the
+//! [`Pipeline::step`] with a VE source (the flight image's is [`SOURCE`]; a replay's is chosen
+//! per recording) and returns the result with the overrun bit ([`Status::OVERRUN`]) set if
+//! data was lost since the previous result. With no overrun and the same source, the
 //! firmware's results equal the host's bit for bit (same code, same `f32` operations, same
 //! order of samples).
 //!
@@ -25,7 +26,8 @@ pub const OUTPUT_BYTES: usize = 16;
 /// Samples in the online vibration window (at 1 kHz: 64 ms, four periods of a 62.5 Hz
 /// vibration).
 pub const WINDOW: usize = 64;
-/// Where the replayed VE comes from: the online moment window.
+/// Where the flight image's VE comes from, and a replay's unless another source is chosen:
+/// the online moment window.
 pub const SOURCE: VibrationSource = VibrationSource::Online;
 
 /// One sample's inputs.
@@ -116,11 +118,12 @@ impl<F: Float, const W: usize> Tick<F, W> {
         self.overruns
     }
 
-    /// One sample through the pipeline, flagged [`Status::OVERRUN`] if data was lost since the
-    /// previous result. Bounded time, no allocation, no panic.
+    /// One sample through the pipeline with the VE of `source` subtracted, flagged
+    /// [`Status::OVERRUN`] if data was lost since the previous result. Bounded time, no
+    /// allocation, no panic.
     #[inline]
-    pub fn step(&mut self, input: &Input<F>) -> Sample<F> {
-        let mut s = self.pipeline.step(&mut self.state, input.u_v, input.temp_c, SOURCE);
+    pub fn step(&mut self, input: &Input<F>, source: VibrationSource) -> Sample<F> {
+        let mut s = self.pipeline.step(&mut self.state, input.u_v, input.temp_c, source);
         s.status.insert(input.status);
         if self.pending_overrun {
             s.status.insert(Status::OVERRUN);

@@ -1154,3 +1154,23 @@ fn pipeline_is_bounded_for_arbitrary_inputs() {
         }
     }
 }
+
+#[test]
+fn vibration_sources_parse_by_name() {
+    use bins_comp::VibrationSource as V;
+    for (name, source) in [
+        ("none", V::None),
+        ("online", V::Online),
+        ("profile:0", V::Profile(0)),
+        ("profile:7", V::Profile(7)),
+        ("profile:007", V::Profile(7)),
+        ("profile:255", V::Profile(255)),
+    ] {
+        assert_eq!(V::parse(name), Some(source), "{name}");
+    }
+    for name in
+        ["", "None", "online ", "profile", "profile:", "profile:256", "profile:1000", "profile:-1", "profile:1x"]
+    {
+        assert_eq!(V::parse(name), None, "{name:?}");
+    }
+}

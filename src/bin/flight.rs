@@ -36,7 +36,7 @@ mod isr;
 
 use bins_comp::drivers::{Ads131m04, FaultCounts, SampleSource, SourceConfig, Tmp117, adc, temp};
 use bins_comp::frame::{BootFrame, FORMAT_VERSION, Frame, HealthFrame, SampleFrame};
-use bins_comp::{Pipeline, Sample};
+use bins_comp::{Pipeline, Sample, VibrationSource};
 use board::{Board, DrdyPin, Pl022, SbCon, Uart};
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::{SCB, SYST};
@@ -58,6 +58,9 @@ const HEALTH_EVERY: u32 = TICK_HZ;
 /// tried again every second.
 const SOURCE_CONFIG: SourceConfig =
     SourceConfig { temp_poll_interval: 32, max_signal_hold: 1, max_temp_age: 2000, reinit_interval: TICK_HZ };
+
+/// The VE subtracted in flight: the online moment window ([`bins_comp::replay::SOURCE`]).
+const VE_SOURCE: VibrationSource = bins_comp::replay::SOURCE;
 
 /// The flight sample source on this board.
 type Source = SampleSource<Pl022, DrdyPin, SbCon>;

@@ -1,5 +1,6 @@
-//! The sampling interrupt's body, shared by the replay firmware and the link check (`mod isr;`
-//! in each), so the link check proves exactly this code panic-free.
+//! The sampling interrupt's body, shared by the flight image, the replay firmware and the link
+//! check (`mod isr;` in each), so the link check proves exactly this code panic-free. Each image
+//! names the VE source of its steps as a constant, `crate::VE_SOURCE`.
 //!
 //! Deadline: one tick period (1 ms at the default 1 kHz). The body takes one sample, runs one
 //! [`Tick::step`] (bounded: see `bench` in the README for the instructions it takes) and pushes
@@ -47,7 +48,7 @@ impl<S: SampleIn, const Q: usize> Isr<S, Q> {
     pub fn on_tick(&mut self) -> bool {
         match self.source.take() {
             Take::Sample(input) => {
-                let s = self.tick.step(&input);
+                let s = self.tick.step(&input, crate::VE_SOURCE);
                 if self.output.enqueue(s).is_err() {
                     self.tick.overrun();
                 }

@@ -53,6 +53,9 @@ struct Output {
 /// Samples compensated before exiting.
 const ITERATIONS: u32 = 64;
 
+/// The VE source of the interrupt body's steps: the flight image's.
+const VE_SOURCE: bins_comp::VibrationSource = bins_comp::replay::SOURCE;
+
 static mut INPUT: Input = Input { u_v: [0.1, -0.2, 0.55], temp_c: 45.0, variant: 3 };
 static mut OUTPUT: Output = Output { accel_g: [0.0; 3], status: 0 };
 

@@ -6,7 +6,8 @@
 //!   `INVALID_CALIBRATION`).
 //! - SysTick fires at [`TICK_HZ`] (default 1 kHz; `REPLAY_TICK_HZ` at build time). Its handler
 //!   runs [`isr::Isr::on_tick`]: one sample from the input queue, one pipeline step
-//!   ([`bins_comp::replay`]), one result into the output queue.
+//!   ([`bins_comp::replay`]) with the VE of [`VE_SOURCE`] subtracted (the online window unless
+//!   `REPLAY_VE` says otherwise at build time), one result into the output queue.
 //! - `main` is the consumer and the prefetcher: it keeps the input queue filled from
 //!   `target/fw-replay/in.bin` ([`INPUT_BYTES`] per sample, relative to QEMU's working
 //!   directory), drains the output queue into `target/fw-replay/out.bin` ([`OUTPUT_BYTES`] per
@@ -24,7 +25,7 @@ mod interrupts;
 mod isr;
 
 use bins_comp::replay::{self, INPUT_BYTES, Input, OUTPUT_BYTES};
-use bins_comp::{Pipeline, Sample};
+use bins_comp::{Pipeline, Sample, VibrationSource};
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::{SCB, SYST};
 use cortex_m_rt::{ExceptionFrame, entry, exception};
@@ -45,6 +46,16 @@ const OUT_PATH: &core::ffi::CStr = c"target/fw-replay/out.bin";
 const CORE_CLOCK_HZ: u32 = 25_000_000;
 /// Sampling rate \[Hz\]: `REPLAY_TICK_HZ` at build time, else 1000.
 const TICK_HZ: u32 = parse_hz(option_env!("REPLAY_TICK_HZ"), 1000);
+/// The VE subtracted: `REPLAY_VE` at build time (`none`, `online` or `profile:N`, see
+/// [`VibrationSource::parse`]), else [`replay::SOURCE`], the flight image's. Any other value
+/// stops the build.
+const VE_SOURCE: VibrationSource = match option_env!("REPLAY_VE") {
+    None => replay::SOURCE,
+    Some(name) => match VibrationSource::parse(name) {
+        Some(source) => source,
+        None => panic!("REPLAY_VE must be none, online or profile:N"),
+    },
+};
 /// Length of the input queue (it holds one sample less).
 const IN_QUEUE: usize = 64;
 /// Length of the output queue (it holds one result less).
@@ -161,7 +172,7 @@ fn run() -> Result<(), RunError> {
     cp.SYST.clear_current();
     cp.SYST.enable_interrupt();
     cp.SYST.enable_counter();
-    defmt::info!("replay: SysTick at {} Hz", TICK_HZ);
+    defmt::info!("replay: SysTick at {} Hz, VE source {}", TICK_HZ, defmt::Debug2Format(&VE_SOURCE));
 
     let mut outbuf = [0u8; CHUNK * OUTPUT_BYTES];
     let mut out_len = 0usize;

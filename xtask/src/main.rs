@@ -316,24 +316,37 @@ impl Xtask {
 
     fn build_firmware(&mut self) -> Result {
         let args = ["--release", "--features", "firmware-log", "--bin", "firmware", "--bin", "replay"];
-        self.run(self.thumb_cargo("build", args)?)
+        let mut c = self.thumb_cargo("build", args)?;
+        c.env("REPLAY_VE", DEFAULT_VE);
+        self.run(c)
     }
 
-    /// `cargo xtask replay REC.csv --calib CAL.bin -o OUT.csv`: the recording through the replay
-    /// firmware in QEMU (SysTick at 1 kHz, or `REPLAY_TICK_HZ` at build time), results as CSV.
+    /// The replay firmware subtracting the VE of `ve` (`REPLAY_VE`; cargo rebuilds the image
+    /// when it changes).
+    fn build_replay(&self, ve: &str) -> Result {
+        let mut c = self.thumb_cargo("build", ["--release", "--features", "firmware-log", "--bin", "replay"])?;
+        c.env("REPLAY_VE", ve);
+        self.run(c)
+    }
+
+    /// `cargo xtask replay REC.csv --calib CAL.bin -o OUT.csv [--ve SOURCE]`: the recording
+    /// through the replay firmware in QEMU (SysTick at 1 kHz, or `REPLAY_TICK_HZ` at build
+    /// time) with the VE of SOURCE subtracted (`online`, the default, `none` or `profile:N`, as
+    /// `bins-cal replay --ve`), results as CSV.
     fn replay(&mut self, args: &[String]) -> bool {
-        let (mut rec, mut calib, mut out) = (None, None, None);
+        let (mut rec, mut calib, mut out, mut ve) = (None, None, None, Some(DEFAULT_VE.to_string()));
         let mut it = args.iter();
         while let Some(a) = it.next() {
             match a.as_str() {
                 "--calib" => calib = it.next().cloned(),
                 "-o" | "--output" => out = it.next().cloned(),
+                "--ve" => ve = it.next().cloned(),
                 _ if rec.is_none() => rec = Some(a.clone()),
                 _ => rec = None,
             }
         }
-        let (Some(rec), Some(calib), Some(out)) = (rec, calib, out) else {
-            eprintln!("usage: cargo xtask replay REC.csv --calib CAL.bin -o OUT.csv");
+        let (Some(rec), Some(calib), Some(out), Some(ve)) = (rec, calib, out, ve) else {
+            eprintln!("usage: cargo xtask replay REC.csv --calib CAL.bin -o OUT.csv [--ve online|none|profile:N]");
             return false;
         };
         let cwd = env::current_dir().unwrap_or_default();
@@ -347,7 +360,7 @@ impl Xtask {
             && {
                 let t = Instant::now();
                 let work = self.root.join("target/replay");
-                match self.calib_hex(&work).and_then(|hex| self.replay_firmware(&rec, &calib, &hex, &out, &work)) {
+                match self.calib_hex(&work).and_then(|hex| self.replay_firmware(&rec, &calib, &hex, &out, &work, &ve)) {
                     Ok(()) => {
                         println!("replay: {} in {:.1} s wall", out.display(), t.elapsed().as_secs_f64());
                         true
@@ -419,14 +432,16 @@ impl Xtask {
     }
 
     /// A recording through the replay firmware in QEMU, in `work`: the recording as the input
-    /// stream, the blob in CALIB (at the address of the Intel HEX file `hex`), the output
-    /// stream back to CSV (`t_s` from the recording).
-    fn replay_firmware(&self, rec: &Path, calib: &Path, hex: &Path, out: &Path, work: &Path) -> Result {
+    /// stream, the blob in CALIB (at the address of the Intel HEX file `hex`), the VE of `ve`
+    /// subtracted, the output stream back to CSV (`t_s` from the recording).
+    fn replay_firmware(&self, rec: &Path, calib: &Path, hex: &Path, out: &Path, work: &Path, ve: &str) -> Result {
         let stream_dir = work.join("target/fw-replay");
         std::fs::create_dir_all(&stream_dir).map_err(|e| format!("{}: {e}", stream_dir.display()))?;
+        // `bins-cal` checks the source's name before the firmware is built with it.
         let mut c = self.bins_cal();
-        c.arg("replay").arg("--rec").arg(rec).arg("--write-stream").arg(stream_dir.join("in.bin"));
+        c.arg("replay").arg("--rec").arg(rec).arg("--ve").arg(ve).arg("--write-stream").arg(stream_dir.join("in.bin"));
         self.run(c)?;
+        self.build_replay(ve)?;
         self.run_qemu_with_blob(&self.elf("replay"), work, calib, hex)?;
         let mut c = self.bins_cal();
         c.arg("replay").arg("--rec").arg(rec).arg("--read-stream").arg(stream_dir.join("out.bin")).arg("-o").arg(out);
@@ -435,7 +450,8 @@ impl Xtask {
 
     /// The short recording ([`REPLAY_SCENARIO`]) through the replay firmware in QEMU and
     /// through `bins-cal replay` on the host, with the paper's calibration (method 2,
-    /// simplified, piecewise-linear) and the same with method 1: the CSVs must be identical.
+    /// simplified, piecewise-linear) and the same with method 1, both with the online VE, and
+    /// method 2 with flight-phase profile 0's: the CSVs must be identical.
     fn replay_test(&mut self) -> Result {
         self.run(self.host_cargo(["build", "--release", "-q", "-p", "bins-cal"]))?;
         let dir = self.root.join(REPLAY_DIR);
@@ -456,19 +472,28 @@ impl Xtask {
         let mut c = self.bins_cal();
         c.args(["blob", "encode"]).arg(&m1_toml).arg("-o").arg(&m1_blob);
         self.run(c)?;
-        for (name, blob) in [("method2", self.root.join(BLOB)), ("method1", m1_blob)] {
+        let blob = self.root.join(BLOB);
+        for (name, blob, ve) in [
+            ("method2", &blob, DEFAULT_VE),
+            ("method1", &m1_blob, DEFAULT_VE),
+            ("method2-profile0", &blob, "profile:0"),
+        ] {
             let (fw, host) = (dir.join(format!("{name}-qemu.csv")), dir.join(format!("{name}-host.csv")));
-            self.replay_firmware(&rec, &blob, &self.root.join(BLOB_HEX), &fw, &dir)?;
-            self.replay_host_identical(name, &rec, &blob, &fw, &host)?;
+            self.replay_firmware(&rec, blob, &self.root.join(BLOB_HEX), &fw, &dir, ve)?;
+            self.replay_host_identical(name, &rec, blob, &fw, &host, ve)?;
+        }
+        // The source reached the firmware: profile 0's VE is not the online estimate.
+        if read(&dir.join("method2-qemu.csv"))? == read(&dir.join("method2-profile0-qemu.csv"))? {
+            return Err("replay: the firmware's output with profile 0's VE equals the online VE's".into());
         }
         Ok(())
     }
 
     /// `bins-cal replay` of `rec` with `blob` on the host into `host`, which must equal the
     /// firmware's output `fw` byte for byte.
-    fn replay_host_identical(&self, name: &str, rec: &Path, blob: &Path, fw: &Path, host: &Path) -> Result {
+    fn replay_host_identical(&self, name: &str, rec: &Path, blob: &Path, fw: &Path, host: &Path, ve: &str) -> Result {
         let mut c = self.bins_cal();
-        c.arg("replay").arg("--rec").arg(rec).arg("--calib").arg(blob).arg("-o").arg(host);
+        c.arg("replay").arg("--rec").arg(rec).arg("--calib").arg(blob).arg("--ve").arg(ve).arg("-o").arg(host);
         self.run(c)?;
         let (a, b) = (read(fw)?, read(host)?);
         let rows = a.iter().filter(|&&c| c == b'\n').count().saturating_sub(1);
@@ -652,6 +677,10 @@ fn flash_and_ram(sections: &str) -> Result<(u64, u64)> {
     Ok((flash, ram))
 }
 
+/// The VE source of a replay unless another is chosen (`REPLAY_VE`, `bins-cal replay --ve`):
+/// the online moment window, as in flight.
+const DEFAULT_VE: &str = "online";
+
 /// Seconds of the fuzz pass in `cargo xtask test` (`XTASK_FUZZ_SECONDS` overrides).
 const FUZZ_SECONDS: u32 = 30;
 
@@ -666,6 +695,10 @@ const DEMO_SHAKER: &str = "scenarios/paper-unit-shaker.toml";
 /// The method of the blob the replay firmware runs (the poly:2 calibration), as `verify`
 /// labels it: the host's number the firmware's is compared with.
 const DEMO_BLOB_METHOD: &str = "method 1";
+/// The VE source of the demo's replay: none. The tilter recording has no vibration, and at its
+/// 10 Hz logging rate a 64-sample online block spans 6.4 s, in which a move of the tilter would
+/// read as vibration.
+const DEMO_VE: &str = "none";
 
 /// A file in the demo directory, as a string argument.
 fn demo_path(x: &Xtask, name: &str) -> String {
@@ -741,9 +774,9 @@ fn demo_replay(x: &mut Xtask) -> Result {
     let (rec, blob, hex) = (dir.join("paper-tilter.csv"), dir.join("cal-poly2.bin"), dir.join("cal-poly2.hex"));
     let (fw, host) = (dir.join("replay-qemu.csv"), dir.join("replay-host.csv"));
     let t = Instant::now();
-    x.replay_firmware(&rec, &blob, &hex, &fw, &dir)?;
+    x.replay_firmware(&rec, &blob, &hex, &fw, &dir, DEMO_VE)?;
     println!("replay firmware: {} in {:.1} s wall", fw.display(), t.elapsed().as_secs_f64());
-    x.replay_host_identical("paper-tilter", &rec, &blob, &fw, &host)
+    x.replay_host_identical("paper-tilter", &rec, &blob, &fw, &host, DEMO_VE)
 }
 
 fn demo_verify(x: &mut Xtask) -> Result {
@@ -852,8 +885,8 @@ fn demo_summary(dir: &Path) -> Result {
     }
     let n = replayed.iter().filter(|&&c| c == b'\n').count().saturating_sub(1);
     println!(
-        "replay firmware in QEMU = bins-cal replay on the host, bit for bit ({n} rows, {}); its |g| error minus the \
-         host's {DEMO_BLOB_METHOD} (f64, no VE) in the {} check dwells: at most {:.1} µg",
+        "replay firmware in QEMU (VE source {DEMO_VE}) = bins-cal replay on the host, bit for bit ({n} rows, {}); its \
+         |g| error minus the host's {DEMO_BLOB_METHOD} (f64, no VE) in the {} check dwells: at most {:.3} µg",
         fw.display(),
         pairs.len(),
         worst * 1e3

@@ -199,6 +199,31 @@ fn verify_replayed_reads_the_replay_output_in_the_same_dwells() {
     let png = std::fs::read(v.join("verify.png")).unwrap();
     assert_eq!(&png[1..4], b"PNG");
 
+    // The VE source: this blob has no VE model, so no source subtracts anything; `none` is
+    // never waiting for an online estimate, the default (`online`) is until its first block.
+    let none = dir.join("r-replay-none.csv");
+    ok(&["replay", "--rec", s(&rec), "--calib", s(&blob), "--ve", "none", "-o", s(&none)]);
+    let rows = |p: &Path| -> Vec<([String; 3], u32)> {
+        let text = std::fs::read_to_string(p).unwrap();
+        text.lines()
+            .skip(1)
+            .map(|l| {
+                let c: Vec<&str> = l.split(',').collect();
+                ([c[1].to_string(), c[2].to_string(), c[3].to_string()], c[4].parse().unwrap())
+            })
+            .collect()
+    };
+    let (online_rows, none_rows) = (rows(&out), rows(&none));
+    assert_eq!(online_rows.len(), none_rows.len());
+    let waiting = bins_comp::Status::VIBRATION_ESTIMATE_NOT_READY.0;
+    assert!(online_rows.first().is_some_and(|r| r.1 & waiting != 0));
+    assert!(none_rows.iter().all(|r| r.1 & waiting == 0));
+    assert!(online_rows.iter().zip(&none_rows).all(|(a, b)| a.0 == b.0), "accelerations differ");
+    // A usage error: clap's message, naming the flag and the value.
+    let o = common::run(&["replay", "--rec", s(&rec), "--calib", s(&blob), "--ve", "profile:x", "-o", s(&none)]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("--ve") && e.contains("profile:x"), "{e}");
+
     // Bad inputs: one line naming the replay output; no verify.csv.
     let text = std::fs::read_to_string(&out).unwrap();
     let tmp = tempfile::tempdir().unwrap();

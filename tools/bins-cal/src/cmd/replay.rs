@@ -12,7 +12,7 @@ use bins_cal::calfile::{CalibrationFile, describe};
 use bins_cal::fsio::AtomicFile;
 use bins_cal::recording::{Reader, Row};
 use bins_comp::replay::{self, Input, OUTPUT_BYTES, Tick, WINDOW};
-use bins_comp::{Calibration, Pipeline, Sample, Status, VibrationConfig};
+use bins_comp::{Calibration, Pipeline, Sample, Status, VibrationConfig, VibrationSource};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -35,6 +35,15 @@ pub struct Args {
     /// row) and write them as the output CSV.
     #[arg(long, value_name = "OUT.bin")]
     read_stream: Option<PathBuf>,
+    /// The VE subtracted: `online` (the moment window over the replayed samples, as in
+    /// flight), `none`, or `profile:N` (the calibration's flight-phase profile N). The replay
+    /// firmware takes the same choice as `REPLAY_VE` at build time.
+    #[arg(long, value_name = "SOURCE", default_value = "online", value_parser = parse_source)]
+    ve: VibrationSource,
+}
+
+fn parse_source(name: &str) -> Result<VibrationSource, String> {
+    VibrationSource::parse(name).ok_or_else(|| format!("`{name}` is not none, online or profile:N (N = 0 to 255)"))
 }
 
 /// Runs `bins-cal replay …`.
@@ -74,7 +83,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let Some(calib) = &args.calib else { bail!("--calib is required") };
         let mut tick = Tick::<f32, WINDOW>::new(load_pipeline(calib)?);
         while reader.read_row(&mut row)? {
-            write_row(csv.writer(), row.t_s, &tick.step(&input_of(&row)))?;
+            write_row(csv.writer(), row.t_s, &tick.step(&input_of(&row), args.ve))?;
         }
     }
     csv.commit()
