@@ -468,7 +468,16 @@ fn tmp117_reads_only_when_data_ready_and_reports_bus_errors() {
 // ---- the sample source -----------------------------------------------------------------------
 
 fn temp_ready(raw: u16) -> [I2cT; 2] {
-    [I2cT::write_read(TMP, vec![0x01], vec![0x22, 0x20]), I2cT::write_read(TMP, vec![0x00], raw.to_be_bytes().to_vec())]
+    temp_ready_with(0x0220, raw)
+}
+
+/// A poll finding a new conversion `raw`, the configuration register holding `settings`.
+fn temp_ready_with(settings: u16, raw: u16) -> [I2cT; 2] {
+    let cfg = settings | temp::config::DATA_READY;
+    [
+        I2cT::write_read(TMP, vec![0x01], cfg.to_be_bytes().to_vec()),
+        I2cT::write_read(TMP, vec![0x00], raw.to_be_bytes().to_vec()),
+    ]
 }
 
 #[test]
@@ -603,8 +612,8 @@ fn a_sensor_that_failed_to_initialise_is_not_read_and_is_tried_again() {
     // again (no new conversion).
     i2c_t.push(I2cT::write_read(TMP, vec![0x0F], vec![0x01, 0x17]));
     i2c_t.push(I2cT::write(TMP, vec![0x01, 0x00, 0xC0]));
-    i2c_t.extend(temp_ready(0x0C80));
-    i2c_t.push(I2cT::write_read(TMP, vec![0x01], vec![0x02, 0x20]));
+    i2c_t.extend(temp_ready_with(0x00C0, 0x0C80));
+    i2c_t.push(I2cT::write_read(TMP, vec![0x01], vec![0x00, 0xC0]));
     let adc =
         Ads131m04::new(SpiMock::new(&spi_t), PinMock::new(&[State::Low; 5].map(PinT::get)), adc::Config::default());
     let cfg = SourceConfig { temp_poll_interval: 1, max_signal_hold: 1, max_temp_age: 10, reinit_interval: 3 };
@@ -680,7 +689,7 @@ fn an_adc_that_reports_a_reset_is_initialised_again_on_the_next_sample() {
     let adc =
         Ads131m04::new(SpiMock::new(&spi_t), PinMock::new(&[State::Low; 3].map(PinT::get)), adc::Config::default());
     let mut i2c_t = vec![I2cT::write_read(TMP, vec![0x0F], vec![0x01, 0x17]), I2cT::write(TMP, vec![0x01, 0x00, 0xC0])];
-    i2c_t.extend(temp_ready(0x0C80));
+    i2c_t.extend(temp_ready_with(0x00C0, 0x0C80));
     let cfg = SourceConfig { temp_poll_interval: 1000, max_signal_hold: 1, max_temp_age: 1000, reinit_interval: 1000 };
     let mut src = SampleSource::init(adc, Tmp117::new(I2cMock::new(&i2c_t), Address::Gnd), TMP_CFG, cfg);
     assert!(src.adc_ready() && src.temp_ready());
@@ -700,4 +709,58 @@ fn an_adc_that_reports_a_reset_is_initialised_again_on_the_next_sample() {
     let (adc, tmp) = src.destroy();
     finish(adc);
     tmp.destroy().done();
+}
+
+#[test]
+fn a_tmp117_that_lost_its_configuration_is_initialised_again_on_the_next_sample() {
+    let init = [I2cT::write_read(TMP, vec![0x0F], vec![0x01, 0x17]), I2cT::write(TMP, vec![0x01, 0x00, 0xC0])];
+    let mut i2c_t = init.to_vec();
+    // Sample 1: 25 °C with the settings written (CONV = 001b, AVG = 10b).
+    i2c_t.extend(temp_ready_with(0x00C0, 0x0C80));
+    // Sample 2: the register holds the reset value 0x0220 (1 s cycle, 8× averaging).
+    i2c_t.push(I2cT::write_read(TMP, vec![0x01], vec![0x22, 0x20]));
+    // Sample 3: initialised again, then polled at once: 25.5 °C.
+    i2c_t.extend(init);
+    i2c_t.extend(temp_ready_with(0x00C0, 0x0CC0));
+    let frames = |n: usize| {
+        let mut t = init_frames(0x2403);
+        for _ in 0..n {
+            t.extend(frame_tx(vec![0; 18], out_frame(STATUS_OK_DRDY012, [0x40_0000, 0, 0, 0])));
+        }
+        t
+    };
+    let adc =
+        Ads131m04::new(SpiMock::new(&frames(3)), PinMock::new(&[State::Low; 3].map(PinT::get)), adc::Config::default());
+    let cfg = SourceConfig { temp_poll_interval: 1, max_signal_hold: 1, max_temp_age: 100, reinit_interval: 1000 };
+    let mut src = SampleSource::init(adc, Tmp117::new(I2cMock::new(&i2c_t), Address::Gnd), TMP_CFG, cfg);
+
+    assert_eq!(src.read().temp_c, 25.0);
+    let r2 = src.read();
+    assert_eq!((r2.temp_c, r2.temp_fault, r2.status), (25.0, Some(TempFault::ConfigLost), Status::SENSOR_FAULT));
+    assert!(!src.temp_ready());
+    let r3 = src.read();
+    assert!(src.temp_ready());
+    assert_eq!((r3.temp_c, r3.temp_fault, r3.status), (25.5, None, Status::OK));
+    assert_eq!((src.reinit_attempts(), src.fault_counts().temp_config_lost), (1, 1));
+    let (adc, tmp) = src.destroy();
+    finish(adc);
+    tmp.destroy().done();
+}
+
+#[test]
+fn tmp117_reports_lost_settings_only_after_init() {
+    // Before init nothing is known to compare with: the reset configuration is read as usual.
+    let mut t = Tmp117::new(I2cMock::new(&temp_ready(0x0C80)), Address::Gnd);
+    assert_eq!(t.read_temp_c(), Ok(25.0));
+    t.destroy().done();
+    // After init, the flags (Data_Ready, alerts) may change, the settings may not.
+    let mut i2c_t = vec![I2cT::write_read(TMP, vec![0x0F], vec![0x01, 0x17]), I2cT::write(TMP, vec![0x01, 0x00, 0xC0])];
+    i2c_t.push(I2cT::write_read(TMP, vec![0x01], vec![0xE0, 0xC0]));
+    i2c_t.push(I2cT::write_read(TMP, vec![0x00], vec![0x0C, 0x80]));
+    i2c_t.push(I2cT::write_read(TMP, vec![0x01], vec![0x20, 0x40]));
+    let mut t = Tmp117::new(I2cMock::new(&i2c_t), Address::Gnd);
+    t.init(TMP_CFG).unwrap();
+    assert_eq!(t.read_temp_c(), Ok(25.0));
+    assert_eq!(t.read_temp_c(), Err(temp::Error::ConfigLost(0x2040)));
+    t.destroy().done();
 }

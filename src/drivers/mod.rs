@@ -30,9 +30,10 @@
 //!   (signals NaN; temperature polls skipped, so it goes stale). Its initialisation is tried
 //!   again every [`SourceConfig::reinit_interval`] samples, one sensor per attempt (the ADC
 //!   first), so that an attempt adds at most one sensor's initialisation to its sample's bus
-//!   time. A sensor that answers is read from the next sample on. An ADC that reports a reset
-//!   (STATUS.RESET, e.g. after a brown-out: its registers are back at their defaults) is
-//!   treated the same way, with its first attempt on the next sample.
+//!   time. A sensor that answers is read from the next sample on. A sensor that reports a
+//!   reset (e.g. after a brown-out: its registers are back at their defaults) is treated the
+//!   same way, with its first attempt on the next sample: the ADC by STATUS.RESET, the TMP117
+//!   by its configuration settings ([`temp::Error::ConfigLost`]).
 //! - Every sample with a fault carries [`Status::SENSOR_FAULT`] in [`Reading::status`], to be
 //!   OR-ed into the compensated sample's status by the caller:
 //!
@@ -96,6 +97,9 @@ pub enum TempFault {
     Stale,
     /// The sensor's initialisation has not succeeded yet, so this sample's poll was skipped.
     Uninitialised,
+    /// This sample's poll found the sensor's configuration lost (it has reset); the last good
+    /// temperature was kept and the sensor is initialised again.
+    ConfigLost,
 }
 
 impl TempFault {
@@ -104,6 +108,7 @@ impl TempFault {
         match e {
             temp::Error::I2c(_) => Some(TempFault::Bus),
             temp::Error::WrongDevice(_) => Some(TempFault::WrongDevice),
+            temp::Error::ConfigLost(_) => Some(TempFault::ConfigLost),
             temp::Error::NotReady => None,
         }
     }
@@ -136,6 +141,8 @@ pub struct FaultCounts {
     pub temp_stale: u32,
     /// [`TempFault::Uninitialised`].
     pub temp_uninitialised: u32,
+    /// [`TempFault::ConfigLost`].
+    pub temp_config_lost: u32,
 }
 
 impl FaultCounts {
@@ -160,6 +167,7 @@ impl FaultCounts {
             TempFault::WrongDevice => &mut self.temp_wrong_device,
             TempFault::Stale => &mut self.temp_stale,
             TempFault::Uninitialised => &mut self.temp_uninitialised,
+            TempFault::ConfigLost => &mut self.temp_config_lost,
         };
         *c = c.saturating_add(1);
     }
@@ -181,7 +189,7 @@ impl FaultCounts {
 
     /// All temperature faults.
     pub fn temp_total(&self) -> u32 {
-        [self.temp_bus, self.temp_wrong_device, self.temp_stale, self.temp_uninitialised]
+        [self.temp_bus, self.temp_wrong_device, self.temp_stale, self.temp_uninitialised, self.temp_config_lost]
             .iter()
             .fold(0u32, |a, &b| a.saturating_add(b))
     }
@@ -405,6 +413,11 @@ where
                     fault = TempFault::from_error(&e);
                     if let Some(f) = fault {
                         self.counts.record_temp(f);
+                    }
+                    if fault == Some(TempFault::ConfigLost) {
+                        // Reset to its defaults: initialised again from the next sample on.
+                        self.temp_ready = false;
+                        self.until_reinit = 0;
                     }
                 }
             }

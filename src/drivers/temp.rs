@@ -49,6 +49,10 @@ pub mod config {
     pub const AVG_SHIFT: u16 = 5;
     /// Soft_Reset (self-clearing).
     pub const SOFT_RESET: u16 = 1 << 1;
+    /// The settings [`Config::word`](super::Config::word) programs and a reset restores to
+    /// 0x0220: MOD, CONV, AVG, T/nA, POL, DR/Alert (bits 11:2). The flags above them and the
+    /// self-clearing reset bit below are not settings.
+    pub const SETTINGS_MASK: u16 = 0x0FFC;
 }
 
 /// Device ID register: DID\[11:0\] = 0x117, DID_REV in bits 15:12 (§7.6, device ID register).
@@ -139,6 +143,9 @@ pub enum Error<E> {
     /// No conversion has completed since the last read (Data_Ready clear), or none at all
     /// since reset (the result still holds [`TEMP_RESET_VALUE`]).
     NotReady,
+    /// The configuration register's settings are not the ones [`Tmp117::init`] wrote: the
+    /// sensor has reset (a brown-out, say). Its value is included.
+    ConfigLost(u16),
 }
 
 /// A temperature register value in °C: the 16 bits read as two's complement with 7 fractional
@@ -151,12 +158,14 @@ pub fn raw_to_celsius(raw: u16) -> f32 {
 pub struct Tmp117<I2C> {
     i2c: I2C,
     address: u8,
+    /// The settings written by the last successful [`init`](Self::init).
+    settings: Option<u16>,
 }
 
 impl<I2C: I2c> Tmp117<I2C> {
     /// Takes the bus; no traffic until [`init`](Self::init).
     pub fn new(i2c: I2C, address: Address) -> Self {
-        Tmp117 { i2c, address: address as u8 }
+        Tmp117 { i2c, address: address as u8, settings: None }
     }
 
     /// Gives the bus back.
@@ -185,13 +194,21 @@ impl<I2C: I2c> Tmp117<I2C> {
         if id & DEVICE_ID_MASK != DEVICE_ID {
             return Err(Error::WrongDevice(id));
         }
-        self.write_register(reg::CONFIGURATION, config.word())
+        self.write_register(reg::CONFIGURATION, config.word())?;
+        self.settings = Some(config.word() & config::SETTINGS_MASK);
+        Ok(())
     }
 
     /// The latest temperature in °C if a new conversion has completed: reads the configuration
-    /// register (which clears Data_Ready), and the result register if Data_Ready was set.
+    /// register (which clears Data_Ready), and the result register if Data_Ready was set. After
+    /// [`init`](Self::init), a configuration whose settings differ from the ones written is
+    /// [`Error::ConfigLost`] (a reset; undetectable only for a configuration equal to the reset
+    /// default, 1 s cycle and 8× averaging).
     pub fn read_temp_c(&mut self) -> Result<f32, Error<I2C::Error>> {
         let cfg = self.read_register(reg::CONFIGURATION)?;
+        if self.settings.is_some_and(|w| cfg & config::SETTINGS_MASK != w) {
+            return Err(Error::ConfigLost(cfg));
+        }
         if cfg & config::DATA_READY == 0 {
             return Err(Error::NotReady);
         }
