@@ -76,16 +76,14 @@ impl VibrationSource {
         if b.len() <= prefix.len() || b.len() > prefix.len() + 3 {
             return None;
         }
-        let mut i = 0;
-        while i < prefix.len() {
-            if b[i] != prefix[i] {
-                return None;
-            }
-            i += 1;
+        let (head, digits) = b.split_at(prefix.len());
+        if !eq(head, prefix) {
+            return None;
         }
         let mut n: u32 = 0;
-        while i < b.len() {
-            let d = b[i];
+        let mut i = 0;
+        while i < digits.len() {
+            let d = digits[i];
             if !d.is_ascii_digit() {
                 return None;
             }
