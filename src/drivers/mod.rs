@@ -398,23 +398,24 @@ where
     fn read_temp(&mut self) -> (f32, Option<TempFault>) {
         self.temp_age = self.temp_age.saturating_add(1);
         let mut fault = None;
-        if self.until_poll == 0 && !self.temp_ready {
+        if self.until_poll == 0 {
             self.until_poll = self.config.temp_poll_interval.saturating_sub(1);
-            self.counts.record_temp(TempFault::Uninitialised);
-            fault = Some(TempFault::Uninitialised);
-        } else if self.until_poll == 0 {
-            self.until_poll = self.config.temp_poll_interval.saturating_sub(1);
-            match self.temp.read_temp_c() {
+            let polled = if self.temp_ready {
+                self.temp.read_temp_c().map_err(|e| TempFault::from_error(&e))
+            } else {
+                Err(Some(TempFault::Uninitialised))
+            };
+            match polled {
                 Ok(t) => {
                     self.last_temp_c = Some(t);
                     self.temp_age = 0;
                 }
-                Err(e) => {
-                    fault = TempFault::from_error(&e);
-                    if let Some(f) = fault {
+                Err(f) => {
+                    fault = f;
+                    if let Some(f) = f {
                         self.counts.record_temp(f);
                     }
-                    if fault == Some(TempFault::ConfigLost) {
+                    if f == Some(TempFault::ConfigLost) {
                         // Reset to its defaults: initialised again from the next sample on.
                         self.temp_ready = false;
                         self.until_reinit = 0;
