@@ -716,20 +716,9 @@ impl<F: Float> VibrationConfig<F> {
 
     /// [`correction_for_output_g`](Self::correction_for_output_g) for measured window moments
     /// (the exact moment form, see
-    /// [`predict_from_moments_g`](Self::predict_from_moments_g)), with `y_g` the window mean.
-    pub fn correction_from_moments_g(&self, m: &window::WindowMoments<F>, y_g: &Vec3<F>) -> (Vec3<F>, bool) {
-        let mut out = [F::ZERO; 3];
-        let mut clamped = false;
-        for (o, axis) in out.iter_mut().zip(Axis::ALL) {
-            let (ve, c) = self.correction_from_moments_on_g(m, y_g, axis);
-            *o = ve;
-            clamped |= c;
-        }
-        (out, clamped)
-    }
-
-    /// [`correction_from_moments_g`](Self::correction_from_moments_g) for one accelerometer
-    /// (`axis`): its VE \[g\] and whether its solution was clamped.
+    /// [`predict_from_moments_g`](Self::predict_from_moments_g)), with `y_g` the window mean,
+    /// for one accelerometer (`axis`; the online estimate solves one per step): its VE \[g\]
+    /// and whether its solution was clamped.
     pub fn correction_from_moments_on_g(&self, m: &window::WindowMoments<F>, y_g: &Vec3<F>, axis: Axis) -> (F, bool) {
         let cf = match axis {
             Axis::X => &self.cf[0],
