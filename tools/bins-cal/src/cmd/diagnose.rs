@@ -3,7 +3,7 @@
 //! method is in `docs/diagnosis.md`.
 
 use anyhow::{Context, anyhow};
-use bins_cal::diagnose::{diagnose_files, plot};
+use bins_cal::diagnose::{Options, diagnose_files, plot};
 use bins_cal::fsio;
 use std::path::PathBuf;
 
@@ -25,12 +25,17 @@ pub struct Args {
     /// Also write the augmented model (the found terms) as TOML.
     #[arg(long, value_name = "MODEL.toml")]
     model: Option<PathBuf>,
+    /// The sensor's random walk [mg/√h] (its specification) to test mechanisms against;
+    /// without it, estimated from the data with every mechanism of the library in the model.
+    #[arg(long, value_name = "MG_PER_SQRT_H")]
+    random_walk: Option<f64>,
 }
 
 /// Runs `bins-cal diagnose`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let t0 = std::time::Instant::now();
-    let d = diagnose_files(&args.sim, &args.real).map_err(|e| anyhow!("{e}"))?;
+    let opt = Options { random_walk_mg_per_sqrt_h: args.random_walk };
+    let d = diagnose_files(&args.sim, &args.real, &opt).map_err(|e| anyhow!("{e}"))?;
     let r = &d.report;
     let json = serde_json::to_string_pretty(r).context("report")?;
     fsio::write_atomic(&args.report, json.as_bytes())?;
@@ -47,8 +52,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for n in &r.notes {
         println!("note: {n}");
     }
-    if r.effects.is_empty() && r.ambiguous.is_empty() {
-        println!("no mechanism found above the noise");
+    if r.verdict.values().all(|v| v == "at the noise") {
+        println!("no mechanism found above the noise: the raw residual is at the noise floor on every axis");
+    } else if r.effects.is_empty() && r.ambiguous.is_empty() {
+        println!("no mechanism in the library explains the residual");
     }
     for e in &r.effects {
         println!("effect {} on {}: {}", e.id, e.axes.join(","), e.explanation);
@@ -58,16 +65,51 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     for a in &r.ambiguous {
-        println!("ambiguous on {}: {} — separate by: {}", a.axes.join(","), a.ids.join(" / "), a.separating_test);
+        println!(
+            "ambiguous on {}: {} (modelled as {}) — separate by: {}",
+            a.axes.join(","),
+            a.ids.join(" / "),
+            a.modelled_as,
+            a.separating_test
+        );
     }
+    let rw_from = if r.random_walk_source == "given" { "given" } else { "estimated with the whole library in" };
     for ax in ["x", "y", "z"] {
         let g = |m: &std::collections::BTreeMap<String, f64>| m.get(ax).copied().unwrap_or(f64::NAN);
         println!(
-            "{ax}: noise floor {:.4} mg; held-out RMS {:.4} → {:.4} mg",
+            "{ax}: {}; noise floor {:.4} mg; held-out RMS of the raw residual {:.4} → {:.4} mg; unexplained {:.4} mg",
+            r.verdict.get(ax).map_or("", String::as_str),
             g(&r.noise_floor_mg),
             g(&r.heldout_rms_before_mg),
-            g(&r.heldout_rms_after_mg)
+            g(&r.heldout_rms_after_mg),
+            g(&r.unexplained_rms_mg),
         );
+        let sensor = r
+            .sensor_random_walk_mg_per_sqrt_h
+            .get(ax)
+            .map_or("not measurable".to_string(), |v| format!("{v:.3} mg/√h"));
+        println!(
+            "   drift {:.4} mg RMS (not subtracted); random walk tested against {:.3} mg/√h ({rw_from}), the sensor's own at τ ≤ 60 s: {sensor}",
+            g(&r.drift_rms_mg),
+            g(&r.random_walk_mg_per_sqrt_h),
+        );
+    }
+    for (title, strata) in [("mismatch located", &r.located), ("unexplained structure located", &r.unexplained_located)] {
+        let shown: Vec<_> = strata
+            .iter()
+            .filter(|s| r.verdict.get(&s.axis).is_some_and(|v| v != "at the noise" && v != "explained"))
+            .take(6)
+            .collect();
+        if shown.is_empty() || (title.starts_with("unexplained") && r.verdict.values().all(|v| v != "unexplained" && v != "partly explained")) {
+            continue;
+        }
+        println!("{title} (strongest {} of {}):", shown.len(), strata.len());
+        for s in shown {
+            println!(
+                "    {}: {} {}: mean {:+.3} mg (z = {:.1}, {} rows, {:.0} s)",
+                s.axis, s.dimension, s.value, s.mean_mg, s.z, s.rows, s.duration_s
+            );
+        }
     }
     println!("report: {}", args.report.display());
     for p in plots {

@@ -19,7 +19,7 @@
 //! deviance by less than [`AMBIGUOUS_LR`]: the data cannot tell them apart.
 
 use super::mech::{Context, Mech};
-use super::noise::{Filter, Step, estimate_q, smooth_level};
+use super::noise::{Filter, Step, estimate_q, short_tau_q, smooth_level};
 use super::stats::{chi2_sf, chol_solve, dot};
 
 /// Family-wise false-discovery level of the whole diagnosis.
@@ -39,15 +39,24 @@ struct Cand {
     cols: Vec<usize>,
 }
 
-/// The candidate columns of one accelerometer, each scaled to unit RMS.
+/// The candidate columns of one accelerometer, each scaled to unit RMS; the first
+/// `forced.len()` are the nuisance columns every model carries.
 struct Bank {
     cols: Vec<Vec<f64>>,
     cands: Vec<Cand>,
+    forced: Vec<usize>,
+}
+
+/// Scales `c` to unit RMS (`None` for a zero or non-finite column).
+fn unit_rms(c: &[f64]) -> Option<Vec<f64>> {
+    let rms = (dot(c, c) / c.len().max(1) as f64).sqrt();
+    (rms > 1e-300 && rms.is_finite()).then(|| c.iter().map(|v| v / rms).collect())
 }
 
 impl Bank {
     fn new(ctx: &Context) -> Self {
-        let mut cols = Vec::new();
+        let mut cols: Vec<Vec<f64>> = ctx.nuisance.iter().filter_map(|c| unit_rms(c)).collect();
+        let forced: Vec<usize> = (0..cols.len()).collect();
         let mut cands = Vec::new();
         for m in Mech::ALL {
             if !ctx.available(m) {
@@ -58,12 +67,8 @@ impl Bank {
             for th in thetas {
                 let cs = ctx.columns(m, th.unwrap_or(0.0));
                 let mut idx = Vec::new();
-                for c in cs {
-                    let rms = (dot(&c, &c) / c.len().max(1) as f64).sqrt();
-                    if !(rms > 1e-300) || !rms.is_finite() {
-                        continue;
-                    }
-                    cols.push(c.iter().map(|v| v / rms).collect());
+                for c in cs.iter().filter_map(|c| unit_rms(c)) {
+                    cols.push(c);
                     idx.push(cols.len() - 1);
                 }
                 if !idx.is_empty() {
@@ -71,7 +76,17 @@ impl Bank {
                 }
             }
         }
-        Bank { cols, cands }
+        Bank { cols, cands, forced }
+    }
+
+    /// The column indices of a model: the nuisance, then its members'.
+    fn cols_of(&self, model: &[usize]) -> Vec<usize> {
+        self.forced.iter().copied().chain(model.iter().flat_map(|&c| self.cands[c].cols.iter().copied())).collect()
+    }
+
+    /// The columns of a model themselves.
+    fn slices_of(&self, model: &[usize]) -> Vec<&[f64]> {
+        self.cols_of(model).into_iter().map(|i| self.cols[i].as_slice()).collect()
     }
 }
 
@@ -256,14 +271,29 @@ pub struct AxisFit {
     pub ambiguous: Vec<(Mech, Vec<(Mech, f64)>)>,
     /// The forward search.
     pub trace: Vec<StepInfo>,
-    /// The drift nuisance of the final model at every row \[g\].
+    /// The drift of the final model at every row \[g\]: the smoothed random-walk level of
+    /// what the terms leave. Reported and drawn on its own, never subtracted.
     pub drift: Vec<f64>,
+    /// RMS of the drift about its mean \[g\].
+    pub drift_rms: f64,
     /// Model prediction at every row \[g\].
     pub prediction: Vec<f64>,
-    /// RMS \[g\] of residual − drift, before and after the model, all rows.
+    /// RMS \[g\] of the residual with one offset removed, before and after the model (the
+    /// terms and the re-fitted nuisance), all rows.
     pub rms: (f64, f64),
-    /// The same on held-out blocks (β fitted without them).
+    /// The same on held-out blocks (coefficients and offset fitted without them).
     pub heldout_rms: (f64, f64),
+}
+
+/// RMS of `v` about its mean (over the rows of `mask`, all when `None`).
+pub fn centred_rms(v: &[f64], mask: Option<&[bool]>) -> f64 {
+    let inc = |i: usize| mask.is_none_or(|m| m[i]);
+    let (s, c) = (0..v.len()).filter(|&i| inc(i)).fold((0.0, 0usize), |(s, c), i| (s + v[i], c + 1));
+    if c == 0 {
+        return 0.0;
+    }
+    let m = s / c as f64;
+    ((0..v.len()).filter(|&i| inc(i)).map(|i| (v[i] - m).powi(2)).sum::<f64>() / c as f64).sqrt()
 }
 
 fn inflation(w: &[f64], used: &[bool]) -> f64 {
@@ -333,7 +363,7 @@ struct Selector<'a> {
 
 impl Selector<'_> {
     fn cols(&self, model: &[usize]) -> Vec<usize> {
-        model.iter().flat_map(|&c| self.bank.cands[c].cols.iter().copied()).collect()
+        self.bank.cols_of(model)
     }
 
     fn df(&self, c: usize) -> usize {
@@ -444,48 +474,79 @@ impl Selector<'_> {
     }
 }
 
-/// Diagnoses one accelerometer.
-pub fn fit_axis(ctx: &Context, n_axes_tested: usize) -> AxisFit {
+/// The random-walk intensity [g²/s] the selection tests against: restricted maximum
+/// likelihood with the richest model in (the nuisance and every available mechanism at its
+/// best grid θ), as an F-test takes its variance from the full model. Estimated under the
+/// null alone, the random walk takes any slow structure for drift (a heating/cooling
+/// difference of 10× the noise becomes a few mg/√h) and nothing can be named against it.
+fn rich_q(bank: &Bank, grams: &Grams, t: &[f64], r: &[f64], y: &[f64]) -> f64 {
+    let mut rich: Vec<usize> = Vec::new();
+    for m in Mech::ALL {
+        let mut best: Option<(usize, f64)> = None;
+        for (ci, c) in bank.cands.iter().enumerate() {
+            if c.mech != m {
+                continue;
+            }
+            let mut idx = bank.cols_of(&[]);
+            idx.extend(c.cols.iter().copied());
+            if let Some(sse) = grams.sse(&idx)
+                && best.is_none_or(|b| sse < b.1)
+            {
+                best = Some((ci, sse));
+            }
+        }
+        if let Some((c, _)) = best {
+            rich.push(c);
+        }
+    }
+    estimate_q(t, r, y, &bank.slices_of(&rich))
+}
+
+/// Diagnoses one accelerometer. `random_walk`: the random-walk intensity [g²/s] to test
+/// against (a sensor specification); `None` estimates it: the smaller of the richest model's
+/// ([`rich_q`]) and the upper bound of what the residual shows at averaging times up to a
+/// minute ([`short_tau_q`], structure the library cannot fit does not count as drift there).
+pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -> AxisFit {
     let p = ctx.p;
-    let axis = ctx.axis;
-    let (t, r, y) = (&p.t, &p.r_white[axis], &p.r[axis]);
+    let (t, r, y) = (&p.t, &p.r_white[ctx.axis], &p.r[ctx.axis]);
     let n = y.len();
     let bank = Bank::new(ctx);
     let fold = folds_of(n);
     let alpha = ALPHA / (Mech::ALL.len() * n_axes_tested.max(1)) as f64;
-    let mut model: Vec<usize> = Vec::new();
-    let mut trace = Vec::new();
-    let mut q = estimate_q(t, r, y, &[]);
-    // The Gram matrices of the last search round, reused for the ambiguity check.
-    let mut last_grams: Option<Grams> = None;
-    for round in 0..4 {
-        let grams = Grams::new(t, r, q, y, &bank, &fold);
-        let filt = Filter::new(t, r, q, |_| true);
-        let used: Vec<bool> = filt.step.iter().map(|s| *s == Step::Update).collect();
-        let bank_ref = &bank;
-        let infl_of = move |m: &[usize]| {
-            let cols: Vec<&[f64]> =
-                m.iter().flat_map(|&c| bank_ref.cands[c].cols.iter().map(|&i| bank_ref.cols[i].as_slice())).collect();
-            match gls(&filt, y, &cols) {
-                Some((_, _, _, res)) => inflation(&res, &used),
-                None => f64::INFINITY,
+    let (q, grams) = match random_walk {
+        Some(q) => (q, Grams::new(t, r, q, y, &bank, &fold)),
+        None => {
+            // θ of the richest model picked by least squares (white noise: the deterministic
+            // structure decides), the random walk estimated with it in, then θ picked again
+            // against that noise model and the random walk re-estimated.
+            let g0 = Grams::new(t, r, 0.0, y, &bank, &fold);
+            let q1 = rich_q(&bank, &g0, t, r, y);
+            let q_short = {
+                let runs = p.static_runs();
+                let segs: Vec<&[f64]> = runs.iter().map(|&(a, b)| &y[a..b]).collect();
+                short_tau_q(&segs, p.dt).map_or(f64::INFINITY, |q| q.1)
+            };
+            let q1 = q1.min(q_short);
+            let g1 = Grams::new(t, r, q1, y, &bank, &fold);
+            let q2 = rich_q(&bank, &g1, t, r, y).min(q_short);
+            if (q2 / q1.max(1e-300)).ln().abs() < 0.4 || (q1 == 0.0 && q2 == 0.0) {
+                (q1, g1)
+            } else {
+                (q2, Grams::new(t, r, q2, y, &bank, &fold))
             }
-        };
-        let sel = Selector { bank: &bank, grams, infl_of: Box::new(infl_of), alpha };
-        trace.clear();
-        let new_model = sel.run(model.clone(), &mut trace);
-        last_grams = Some(sel.grams);
-        let cols: Vec<&[f64]> =
-            new_model.iter().flat_map(|&c| bank.cands[c].cols.iter().map(|&i| bank.cols[i].as_slice())).collect();
-        let q_new = estimate_q(t, r, y, &cols);
-        let stable = new_model == model && (q_new / q.max(1e-300)).ln().abs() < 0.4;
-        let q_stable = (q_new / q.max(1e-300)).ln().abs() < 0.4 || (q == 0.0 && q_new == 0.0);
-        model = new_model;
-        q = q_new;
-        if stable || (q_stable && round > 0) {
-            break;
         }
-    }
+    };
+    let filt = Filter::new(t, r, q, |_| true);
+    let used: Vec<bool> = filt.step.iter().map(|s| *s == Step::Update).collect();
+    let bank_ref = &bank;
+    let infl_of = move |m: &[usize]| match gls(&filt, y, &bank_ref.slices_of(m)) {
+        Some((_, _, _, res)) => inflation(&res, &used),
+        None => f64::INFINITY,
+    };
+    let sel = Selector { bank: &bank, grams, infl_of: Box::new(infl_of), alpha };
+    let mut trace = Vec::new();
+    let mut model = sel.run(Vec::new(), &mut trace);
+    let last_grams = Some(sel.grams);
     // Backward pruning on the refined model (θ off the grid): a term that no longer passes
     // was only compensating a grid θ of another.
     let n_used = n.saturating_sub(1).max(2) as f64;
@@ -523,7 +584,7 @@ fn ambiguity(bank: &Bank, model: &[usize], grams: &Grams, infl: f64) -> Vec<(Mec
     if model.is_empty() {
         return Vec::new();
     }
-    let colsidx = |m: &[usize]| -> Vec<usize> { m.iter().flat_map(|&c| bank.cands[c].cols.iter().copied()).collect() };
+    let colsidx = |m: &[usize]| bank.cols_of(m);
     let mut ambiguous = Vec::new();
     let sse_full = grams.sse(&colsidx(model));
     for (k, &c) in model.iter().enumerate() {
@@ -572,7 +633,7 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     let mut members: Vec<(Mech, Option<f64>)> =
         model.iter().map(|&c| (bank.cands[c].mech, bank.cands[c].theta)).collect();
     let cols_of = |ms: &[(Mech, Option<f64>)]| -> Vec<Vec<f64>> {
-        ms.iter().flat_map(|(m, th)| ctx.columns(*m, th.unwrap_or(0.0))).collect()
+        ctx.nuisance.iter().cloned().chain(ms.iter().flat_map(|(m, th)| ctx.columns(*m, th.unwrap_or(0.0)))).collect()
     };
     let sse_of = |ms: &[(Mech, Option<f64>)]| -> f64 {
         let cols = cols_of(ms);
@@ -623,8 +684,14 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     let infl = inflation(&res, &used);
     let sigma2 = sse / (nu - beta.len() as f64).max(1.0);
     let mut terms = Vec::new();
-    let mut off = 0;
+    let mut off = ctx.nuisance.len();
+    // The nuisance (SIM's own terms re-fitted) is part of the prediction, never a term.
     let mut prediction = vec![0.0; n];
+    for (c, b) in cols[..off].iter().zip(&beta) {
+        for (o, v) in prediction.iter_mut().zip(c) {
+            *o += b * v;
+        }
+    }
     for (k, (m, th)) in members.iter().enumerate() {
         let nc = ctx.columns(*m, th.unwrap_or(0.0)).len();
         let coef = beta[off..off + nc].to_vec();
@@ -683,28 +750,30 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
         terms.push(Term { mech: *m, theta: *th, theta_ci, coef, se, lr_drop, p_drop, contribution, columns: tcols });
         off += nc;
     }
-    // RMS of residual − drift, before and after; held-out with β from the other folds.
+    // Honest figures: the raw residual with one constant offset removed, before and after
+    // the model; held-out rows use coefficients and offset fitted without their fold. The
+    // drift (the random-walk level of what the model leaves) is its own figure, never
+    // subtracted.
     let e: Vec<f64> = y.iter().zip(&prediction).map(|(a, b)| a - b).collect();
     let drift = smooth_level(t, r, q, &e);
-    let rms = |v: &mut dyn Iterator<Item = f64>| {
-        let (s, c) = v.fold((0.0, 0usize), |(s, c), x| (s + x * x, c + 1));
-        (s / c.max(1) as f64).sqrt()
-    };
-    let before = rms(&mut y.iter().zip(&drift).map(|(a, d)| a - d));
-    let after = rms(&mut e.iter().zip(&drift).map(|(a, d)| a - d));
+    let before = centred_rms(y, None);
+    let after = centred_rms(&e, None);
+    let drift_rms = centred_rms(&drift, None);
     let (mut sb, mut sa, mut cnt) = (0.0, 0.0, 0usize);
     for k in 0..FOLDS {
         let fk = Filter::new(t, r, q, |i| fold[i] != k);
         let bk = if refs.is_empty() { Some(Vec::new()) } else { gls(&fk, y, &refs).map(|g| g.0) };
         let bk = bk.unwrap_or_else(|| beta.clone());
         let ek: Vec<f64> = (0..n).map(|i| y[i] - refs.iter().zip(&bk).map(|(c, b)| c[i] * b).sum::<f64>()).collect();
-        let dk = smooth_level(t, r, q, &ek);
-        for i in 0..n {
-            if fold[i] == k {
-                sb += (y[i] - dk[i]).powi(2);
-                sa += (ek[i] - dk[i]).powi(2);
-                cnt += 1;
-            }
+        let train = |v: &[f64]| {
+            let (s, c) = (0..n).filter(|&i| fold[i] != k).fold((0.0, 0usize), |(s, c), i| (s + v[i], c + 1));
+            s / c.max(1) as f64
+        };
+        let (oy, oe) = (train(y), train(&ek));
+        for i in (0..n).filter(|&i| fold[i] == k) {
+            sb += (y[i] - oy).powi(2);
+            sa += (ek[i] - oe).powi(2);
+            cnt += 1;
         }
     }
     let c = cnt.max(1) as f64;
@@ -716,6 +785,7 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
         ambiguous: Vec::new(),
         trace: Vec::new(),
         drift,
+        drift_rms,
         prediction,
         rms: (before, after),
         heldout_rms: ((sb / c).sqrt(), (sa / c).sqrt()),

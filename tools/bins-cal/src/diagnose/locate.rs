@@ -1,9 +1,10 @@
-//! Where the mismatch is: the residual minus the drift nuisance (the random-walk level of the
-//! noise model, estimated with the found terms removed, so it carries no mechanism) averaged
-//! over strata of the test (rig position, temperature range, heating/cooling/steady, ramp
-//! rate, vibration condition, time since power-on). The standard error is that of the noise
-//! model: the white variances of the stratum's rows, times the variance inflation of the
-//! remaining autocorrelation (effective sample size = rows / inflation).
+//! Where the mismatch is: the raw residual (one offset removed), or what the model leaves of
+//! it, averaged over strata of the test (time window, rig position, temperature band,
+//! heating/cooling/steady, ramp rate, vibration condition, time since power-on). The standard
+//! error is that of the noise model: the white variances of the stratum's rows times the
+//! variance inflation of the remaining autocorrelation, plus the random walk's share over the
+//! stratum's time span (`q·span/3`), so a stratum is located only where the mean departs from
+//! what white noise and the drift of the noise model would give.
 
 use super::fit::AxisFit;
 use super::prep::{AXES, Prepared};
@@ -22,7 +23,7 @@ pub struct Stratum {
     pub rows: usize,
     /// Time spent in it \[s\].
     pub duration_s: f64,
-    /// Mean residual (relative to the whole record's median) \[mg\].
+    /// Mean residual (relative to the whole record's mean) \[mg\].
     pub mean_mg: f64,
     /// Standard error of the mean \[mg\].
     pub se_mg: f64,
@@ -40,6 +41,16 @@ fn strata(p: &Prepared) -> Vec<(String, String, Vec<bool>)> {
     let mut out = Vec::new();
     for (k, name) in p.pos_names.iter().enumerate() {
         out.push(("pos".into(), name.clone(), p.pos.iter().map(|x| *x == Some(k)).collect()));
+    }
+    let (t0, t1) = (p.t.first().copied().unwrap_or(0.0), p.t.last().copied().unwrap_or(0.0));
+    if t1 > t0 {
+        let nw = 8;
+        let w = (t1 - t0) / nw as f64;
+        for b in 0..nw {
+            let (lo, hi) = (t0 + b as f64 * w, t0 + (b + 1) as f64 * w);
+            let m: Vec<bool> = p.t.iter().map(|&x| x >= lo && (x < hi || (b == nw - 1 && x <= hi))).collect();
+            out.push(("time".into(), format!("{lo:.0}…{hi:.0} s"), m));
+        }
     }
     let (tmin, tmax) = p.temp.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
     if tmax - tmin > 1.0 {
@@ -83,18 +94,29 @@ fn strata(p: &Prepared) -> Vec<(String, String, Vec<bool>)> {
 }
 
 /// The strata of every accelerometer whose mean residual is significant (|z| ≥ [`Z_LOCATED`]),
-/// most significant first.
-pub fn locate(p: &Prepared, fits: &[AxisFit]) -> Vec<Stratum> {
+/// most significant first: of the raw residual, or (`after_model`) of what the model leaves.
+pub fn locate(p: &Prepared, fits: &[AxisFit], after_model: bool) -> Vec<Stratum> {
     let n = p.t.len();
     let st = strata(p);
     let mut found = Vec::new();
     for fit in fits {
         let axis = fit.axis;
-        let y: Vec<f64> = p.r[axis].iter().zip(&fit.drift).map(|(v, d)| v - d).collect();
+        let raw: Vec<f64> = if after_model {
+            p.r[axis].iter().zip(&fit.prediction).map(|(v, m)| v - m).collect()
+        } else {
+            p.r[axis].clone()
+        };
+        let mean_all = raw.iter().sum::<f64>() / n.max(1) as f64;
+        let y: Vec<f64> = raw.iter().map(|v| v - mean_all).collect();
         for (dim, val, mask) in &st {
             let (mut sum, mut var, mut rows, mut dur) = (0.0, 0.0, 0usize, 0.0);
+            let (mut first, mut last) = (f64::NAN, f64::NAN);
             for i in 0..n {
                 if mask[i] {
+                    if first.is_nan() {
+                        first = p.t[i];
+                    }
+                    last = p.t[i];
                     sum += y[i];
                     var += p.r_white[axis][i];
                     rows += 1;
@@ -103,7 +125,8 @@ pub fn locate(p: &Prepared, fits: &[AxisFit]) -> Vec<Stratum> {
             }
             let rf = rows as f64;
             let mean = sum / rf;
-            let se = (var * fit.inflation).sqrt() / rf;
+            let span = (last - first).max(0.0);
+            let se = ((var * fit.inflation) / (rf * rf) + fit.q * span / 3.0).sqrt();
             let z = if se > 0.0 { mean / se } else { 0.0 };
             if z.abs() >= Z_LOCATED {
                 found.push(Stratum {

@@ -26,8 +26,13 @@ pub const T0_C: f64 = 20.0;
 pub enum Mech {
     /// The sensor's effective temperature lags the thermistor (first-order lag, τ).
     ThermalLag,
-    /// Rate-independent heating/cooling difference (play of width h).
+    /// Rate-independent heating/cooling difference (play of width h) of the temperature the
+    /// constants follow: through SIM's temperature sensitivity.
     ThermalHysteresis,
+    /// Additive heating/cooling difference of the bias: a play of width h, its output
+    /// `(play_h(T) − T)/(h/2)` ∈ [−1, 1] times an amplitude linear in T, independent of SIM's
+    /// temperature sensitivity.
+    BiasHysteresis,
     /// The die heats after power-on, unseen by the thermistor: `S'(T)·ΔT_sh·(1 − e^(−P/τ))`.
     SelfHeating,
     /// Turn-on transient of the bias: `A·e^(−P/τ)`.
@@ -36,7 +41,7 @@ pub enum Mech {
     BiasTempOrder,
     /// Scale-factor temperature dependence missing: `f_i (s1 ΔT + s2 ΔT²)`.
     ScaleTemp,
-    /// Temperature dependence of the cross-sensitivities missing: `f_j ΔT`, j ≠ i.
+    /// Temperature dependence of the cross-sensitivities missing: `f_j ΔT`, `f_j ΔT²`, j ≠ i.
     CrossCouplingTemp,
     /// Static cross-axis sensitivity / misalignment: `f_j`, j ≠ i.
     CrossAxis,
@@ -54,9 +59,10 @@ pub enum Mech {
 
 impl Mech {
     /// Every mechanism, in report order.
-    pub const ALL: [Mech; 13] = [
+    pub const ALL: [Mech; 14] = [
         Mech::ThermalLag,
         Mech::ThermalHysteresis,
+        Mech::BiasHysteresis,
         Mech::SelfHeating,
         Mech::Warmup,
         Mech::BiasTempOrder,
@@ -75,6 +81,7 @@ impl Mech {
         match self {
             Mech::ThermalLag => "thermal_lag",
             Mech::ThermalHysteresis => "thermal_hysteresis",
+            Mech::BiasHysteresis => "bias_hysteresis",
             Mech::SelfHeating => "self_heating",
             Mech::Warmup => "warmup",
             Mech::BiasTempOrder => "bias_temp_order",
@@ -98,7 +105,7 @@ impl Mech {
     pub fn theta(self) -> Option<&'static str> {
         match self {
             Mech::ThermalLag | Mech::SelfHeating | Mech::Warmup => Some("tau_s"),
-            Mech::ThermalHysteresis => Some("width_C"),
+            Mech::ThermalHysteresis | Mech::BiasHysteresis => Some("width_C"),
             _ => None,
         }
     }
@@ -112,6 +119,9 @@ impl Mech {
             Mech::ThermalHysteresis => {
                 "rate-independent heating/cooling difference (play of width h): the constants follow the temperature through a backlash"
             }
+            Mech::BiasHysteresis => {
+                "additive bias hysteresis: heating and cooling legs differ by ±(a0 + a1 ΔT) through a play of width h, independent of the temperature sensitivity"
+            }
             Mech::SelfHeating => {
                 "the die warms after power-on by ΔT_sh with time constant τ, unseen by the thermistor: error = dS/dT·ΔT_sh·(1 − e^(−P/τ))"
             }
@@ -120,7 +130,9 @@ impl Mech {
                 "bias vs temperature of higher order than simulated: b1 ΔT + b2 ΔT² + b3 ΔT³ (ΔT = T − 20 °C)"
             }
             Mech::ScaleTemp => "scale-factor temperature dependence missing: f_i·(s1 ΔT + s2 ΔT²)",
-            Mech::CrossCouplingTemp => "temperature dependence of the cross-sensitivities missing: f_j·ΔT, j ≠ i",
+            Mech::CrossCouplingTemp => {
+                "temperature dependence of the cross-sensitivities missing: f_j·(c1 ΔT + c2 ΔT²), j ≠ i"
+            }
             Mech::CrossAxis => "static cross-axis sensitivity / misalignment: f_j, j ≠ i",
             Mech::ScaleFactor => "scale factor differs from the simulated one: f_i",
             Mech::SfAsymmetry => {
@@ -144,6 +156,9 @@ pub fn separating_test(a: Mech, b: Mech) -> String {
     use Mech::*;
     let (a, b) = if a <= b { (a, b) } else { (b, a) };
     match (a, b) {
+        (ThermalHysteresis, BiasHysteresis) => "positions or temperature ranges where the temperature sensitivity differs (e.g. +1 g and −1 g on an axis whose scale factor has a tempco): thermal hysteresis follows dS/dT, an additive bias play does not".into(),
+        (ThermalLag, BiasHysteresis) => "two ramp rates with holds at the ends of the ramps: a lag's error scales with the rate and decays during a hold, an additive play does neither".into(),
+        (BiasHysteresis, BiasTempOrder) => "holds at several temperatures, reached by heating and by cooling: the bias curve is the same both ways, a play is not".into(),
         (ThermalLag, ThermalHysteresis) => "two ramp rates with holds at the ends of the ramps: a lag's error scales with the rate and decays during a hold, hysteresis does neither".into(),
         (SfAsymmetry, NonlinearityK2) => "tilted positions (e.g. ±0.5 g, ±0.7 g along the axis): asymmetry grows as |f|, k2 as f²; or vibration at two amplitudes".into(),
         (SelfHeating, Warmup) => "power the unit on twice, in opposite positions (±1 g) or at two chamber temperatures: self-heating follows the local temperature sensitivity dS/dT, a warm-up transient does not".into(),
@@ -323,6 +338,77 @@ pub struct Context<'a> {
     pub temp_range: f64,
     /// `S(T, f)` at every row.
     pub s_now: Vec<f64>,
+    /// SIM's own temperature terms, re-fitted in every model (empty unless SIM was fitted to
+    /// this very recording: see [`sim_fitted_forms`]).
+    pub nuisance: Vec<Vec<f64>>,
+    /// The powers of ΔT whose bias term is in [`Context::nuisance`] (those orders are then
+    /// not "of higher order than simulated").
+    pub nuisance_orders: Vec<i32>,
+    /// What the nuisance is, for the report.
+    pub nuisance_names: Vec<String>,
+}
+
+/// SIM's own calibration forms `b_j(f)·ΔTᵖ` (`b` = 1, f_x, f_y, f_z; p = 1…3; ΔT from the
+/// raw `temp_C`, as a calibration uses it) that REAL − SIM is orthogonal to: |corr|·√n below
+/// 0.01, where an independent residual gives about 1. Two or more such forms mean SIM is a
+/// least-squares calibration of this very recording: its coefficients absorbed whatever the
+/// residual had along them, so a mechanism that is tested without re-fitting them is tested
+/// against a residual with a hole in it (and "bias of higher order than simulated" would only
+/// be the calibration re-adjusting itself). Returns the independent forms (collinear
+/// duplicates dropped) with their names and bias orders; empty when SIM is an independent
+/// prediction.
+pub fn sim_fitted_forms(p: &Prepared, axis: usize) -> (Vec<Vec<f64>>, Vec<String>, Vec<i32>) {
+    let n = p.t.len();
+    let y = &p.r[axis];
+    if n < 50 {
+        return Default::default();
+    }
+    let centred = |v: &[f64]| -> Vec<f64> {
+        let m = v.iter().sum::<f64>() / n as f64;
+        v.iter().map(|x| x - m).collect()
+    };
+    let yc = centred(y);
+    let yy = yc.iter().map(|v| v * v).sum::<f64>();
+    if !(yy > 0.0) {
+        return Default::default();
+    }
+    let names = ["", "·f_x", "·f_y", "·f_z"];
+    let (mut cols, mut labels, mut orders): (Vec<Vec<f64>>, Vec<String>, Vec<i32>) = Default::default();
+    let mut kept_centred: Vec<Vec<f64>> = Vec::new();
+    for pw in 1..=3i32 {
+        for j in 0..4 {
+            let c: Vec<f64> = (0..n)
+                .map(|k| {
+                    let b = if j == 0 { 1.0 } else { p.f[k][j - 1] };
+                    b * (p.temp[k] - T0_C).powi(pw)
+                })
+                .collect();
+            let cc = centred(&c);
+            let c2 = cc.iter().map(|v| v * v).sum::<f64>();
+            if !(c2 > 1e-12 * n as f64) {
+                continue;
+            }
+            let z = cc.iter().zip(&yc).map(|(a, b)| a * b).sum::<f64>() / (c2 * yy).sqrt() * (n as f64).sqrt();
+            if !(z.abs() < 0.01) {
+                continue;
+            }
+            // Not a duplicate of a form already kept (one orientation: f_z·ΔT = −ΔT).
+            let (sse, _) = ls_sse(&cc, &kept_centred);
+            if !(sse > 1e-8 * c2) {
+                continue;
+            }
+            kept_centred.push(cc);
+            cols.push(c);
+            labels.push(format!("ΔT^{pw}{}", names[j]));
+            if j == 0 {
+                orders.push(pw);
+            }
+        }
+    }
+    if cols.len() < 2 {
+        return Default::default();
+    }
+    (cols, labels, orders)
 }
 
 impl<'a> Context<'a> {
@@ -331,15 +417,33 @@ impl<'a> Context<'a> {
         let s = fit_sensitivity(p, axis);
         let (tmin, tmax) = p.temp_s.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
         let s_now = (0..p.t.len()).map(|k| s.eval(p.temp_s[k], &p.f[k])).collect();
-        Context { p, axis, v2: v2_columns(p, axis), s, temp_range: tmax - tmin, s_now }
+        let (nuisance, nuisance_names, nuisance_orders) = sim_fitted_forms(p, axis);
+        Context {
+            p,
+            axis,
+            v2: v2_columns(p, axis),
+            s,
+            temp_range: tmax - tmin,
+            s_now,
+            nuisance,
+            nuisance_orders,
+            nuisance_names,
+        }
     }
 
     /// Whether the mechanism can be tried on this data at all.
     pub fn available(&self, m: Mech) -> bool {
         let thermal = self.temp_range > 0.5;
+        // A term in f_j is indistinguishable from a bias term when f_j never changes.
+        let varies = |j: usize| self.p.f.iter().any(|f| (f[j] - self.p.f[0][j]).abs() > 1e-6);
+        let (i, j, k) = (self.axis, (self.axis + 1) % 3, (self.axis + 2) % 3);
         match m {
-            Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasTempOrder => thermal,
-            Mech::ScaleTemp | Mech::CrossCouplingTemp => thermal,
+            Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis => thermal,
+            Mech::BiasTempOrder => thermal && self.nuisance_orders.len() < 3,
+            Mech::ScaleTemp => thermal && varies(i),
+            Mech::CrossCouplingTemp => thermal && (varies(j) || varies(k)),
+            Mech::CrossAxis => varies(j) || varies(k),
+            Mech::ScaleFactor => varies(i),
             Mech::SelfHeating => self.p.power.is_some(),
             Mech::Warmup => self.p.power.is_some(),
             _ => true,
@@ -353,7 +457,7 @@ impl<'a> Context<'a> {
         let dur = p.t.last().copied().unwrap_or(0.0) - p.t.first().copied().unwrap_or(0.0);
         let (lo, hi) = match m {
             Mech::ThermalLag => ((3.0 * p.dt).max(1.0), 0.25 * dur),
-            Mech::ThermalHysteresis => (0.02, 0.5 * self.temp_range),
+            Mech::ThermalHysteresis | Mech::BiasHysteresis => (0.02, 0.5 * self.temp_range),
             Mech::SelfHeating | Mech::Warmup => {
                 let pmax = p.power.as_ref().map_or(0.0, |v| v.iter().fold(0.0, |a: f64, &b| a.max(b)));
                 ((3.0 * p.dt).max(1.0), 0.5 * pmax)
@@ -383,6 +487,11 @@ impl<'a> Context<'a> {
                 let te = play(&p.temp_s, theta);
                 vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - self.s_now[r]).collect()]
             }
+            Mech::BiasHysteresis => {
+                let te = play(&p.temp_s, theta);
+                let d: Vec<f64> = (0..n).map(|r| (te[r] - p.temp_s[r]) / (0.5 * theta)).collect();
+                vec![d.clone(), (0..n).map(|r| d[r] * dtc(r)).collect()]
+            }
             Mech::SelfHeating => {
                 let pw = p.power.as_deref().unwrap_or(&[]);
                 vec![(0..n).map(|r| self.s.deriv(p.temp_s[r], &p.f[r]) * -(-pw[r] / theta).exp_m1()).collect()]
@@ -391,9 +500,15 @@ impl<'a> Context<'a> {
                 let pw = p.power.as_deref().unwrap_or(&[]);
                 vec![(0..n).map(|r| (-pw[r] / theta).exp()).collect()]
             }
-            Mech::BiasTempOrder => (1..=3).map(|e| (0..n).map(|r| dtc(r).powi(e)).collect()).collect(),
+            Mech::BiasTempOrder => (1..=3)
+                .filter(|e| !self.nuisance_orders.contains(e))
+                .map(|e| (0..n).map(|r| dtc(r).powi(e)).collect())
+                .collect(),
             Mech::ScaleTemp => (1..=2).map(|e| (0..n).map(|r| p.f[r][i] * dtc(r).powi(e)).collect()).collect(),
-            Mech::CrossCouplingTemp => [j, k].iter().map(|&c| (0..n).map(|r| p.f[r][c] * dtc(r)).collect()).collect(),
+            Mech::CrossCouplingTemp => [(j, 1), (k, 1), (j, 2), (k, 2)]
+                .iter()
+                .map(|&(c, e)| (0..n).map(|r| p.f[r][c] * dtc(r).powi(e)).collect())
+                .collect(),
             Mech::CrossAxis => [j, k].iter().map(|&c| (0..n).map(|r| p.f[r][c]).collect()).collect(),
             Mech::ScaleFactor => vec![(0..n).map(|r| p.f[r][i]).collect()],
             Mech::SfAsymmetry => vec![self.v2[0].clone()],

@@ -51,26 +51,61 @@ pub struct Diagnosis {
     pub report: report::Report,
 }
 
+/// How the diagnosis runs.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Options {
+    /// The sensor's random walk [mg/√h] to test mechanisms against (a specification);
+    /// `None`: estimated from the data with the richest model in ([`fit::fit_axis`]).
+    pub random_walk_mg_per_sqrt_h: Option<f64>,
+}
+
+impl Options {
+    /// The random-walk intensity [g²/s] of [`Options::random_walk_mg_per_sqrt_h`].
+    pub fn random_walk_g2_per_s(&self) -> Option<f64> {
+        self.random_walk_mg_per_sqrt_h.map(|rw| (rw * 1e-3).powi(2) / 3600.0)
+    }
+}
+
 /// Diagnoses a pair of recordings held in memory (`sim_name`, `real_name` name them in
-/// errors and in the report).
+/// errors and in the report), with the default [`Options`].
 pub fn diagnose(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> Result<Diagnosis, DiagnoseError> {
+    diagnose_with(sim, real, sim_name, real_name, &Options::default())
+}
+
+/// [`diagnose`] with options.
+pub fn diagnose_with(
+    sim: &[Row],
+    real: &[Row],
+    sim_name: &Path,
+    real_name: &Path,
+    opt: &Options,
+) -> Result<Diagnosis, DiagnoseError> {
+    if let Some(rw) = opt.random_walk_mg_per_sqrt_h
+        && !(rw.is_finite() && rw >= 0.0)
+    {
+        return Err(DiagnoseError(format!("--random-walk {rw}: must be a finite value ≥ 0 mg/√h")));
+    }
     let p = prep::prepare(sim, real, sim_name, real_name)?;
     let floor = report::noise_floor(&p);
     let mut axes = Vec::new();
     let mut sensitivity = Vec::new();
+    let mut nuisance = Vec::new();
     for axis in 0..3 {
         let ctx = mech::Context::new(&p, axis);
-        axes.push(fit::fit_axis(&ctx, 3));
+        axes.push(fit::fit_axis(&ctx, 3, opt.random_walk_g2_per_s()));
         sensitivity.push(ctx.s.clone());
+        nuisance.push(ctx.nuisance_names.clone());
     }
-    let located = locate::locate(&p, &axes);
-    let report = report::build(&p, &axes, &sensitivity, floor, located, sim_name, real_name);
+    let located = locate::locate(&p, &axes, false);
+    let unexplained_located = locate::locate(&p, &axes, true);
+    let input = report::Inputs { sim: sim_name, real: real_name, opt, nuisance: &nuisance };
+    let report = report::build(&p, &axes, &sensitivity, floor, located, unexplained_located, &input);
     Ok(Diagnosis { prepared: p, sensitivity, axes, report })
 }
 
 /// Reads both recordings (errors name file, line and column) and diagnoses them.
-pub fn diagnose_files(sim: &Path, real: &Path) -> Result<Diagnosis, DiagnoseError> {
+pub fn diagnose_files(sim: &Path, real: &Path, opt: &Options) -> Result<Diagnosis, DiagnoseError> {
     let (_, s) = read_all(sim).map_err(|e| DiagnoseError(e.to_string()))?;
     let (_, r) = read_all(real).map_err(|e| DiagnoseError(e.to_string()))?;
-    diagnose(&s, &r, sim, real)
+    diagnose_with(&s, &r, sim, real, opt)
 }

@@ -1,10 +1,11 @@
 //! PNG plots of a diagnosis (plotters, bitmap backend, the embedded DejaVu Sans through
 //! ab_glyph, so no system font library is needed):
 //!
-//! - `residual_<axis>.png`: the residual minus the drift nuisance over time, before and after
-//!   the model (block means, at most 2000 points);
-//! - `effect_<id>_<axis>.png`: the partial residual (residual − drift − the other terms)
-//!   against the term's fitted contribution, with the line y = x and binned means.
+//! - `residual_<axis>.png`: the raw residual (one offset removed) over time, before and after
+//!   the model, and the drift the noise model sees in what the model leaves, as its own curve
+//!   (block means, at most 2000 points);
+//! - `effect_<id>_<axis>.png`: the partial residual (residual − the rest of the model, offset
+//!   removed) against the term's fitted contribution, with the line y = x and binned means.
 //!
 //! Each file is drawn into a temporary sibling and renamed, so none is half-written.
 
@@ -79,14 +80,20 @@ pub fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, DiagnoseEr
     for fit in &d.axes {
         let ax = super::prep::AXES[fit.axis];
         let y = &p.r[fit.axis];
-        let before: Vec<f64> = y.iter().zip(&fit.drift).map(|(a, b)| (a - b) * 1e3).collect();
-        let after: Vec<f64> = before.iter().zip(&fit.prediction).map(|(a, b)| a - b * 1e3).collect();
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        let my = mean(y);
+        let before: Vec<f64> = y.iter().map(|a| (a - my) * 1e3).collect();
+        let e: Vec<f64> = y.iter().zip(&fit.prediction).map(|(a, b)| a - b).collect();
+        let me = mean(&e);
+        let after: Vec<f64> = e.iter().map(|a| (a - me) * 1e3).collect();
+        let drift: Vec<f64> = fit.drift.iter().map(|a| (a - me) * 1e3).collect();
         let pb = decimate(&hours, &before, 2000);
         let pa = decimate(&hours, &after, 2000);
+        let pd = decimate(&hours, &drift, 2000);
         let (x0, x1) = range(hours.iter().copied());
         let (y0, y1) = range(pb.iter().chain(&pa).map(|q| q.1));
         let title = format!(
-            "accelerometer {ax}: residual − drift, held-out RMS {:.4} → {:.4} mg",
+            "accelerometer {ax}: REAL − SIM, held-out RMS {:.4} → {:.4} mg",
             fit.heldout_rms.0 * 1e3,
             fit.heldout_rms.1 * 1e3
         );
@@ -117,6 +124,12 @@ pub fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, DiagnoseEr
                 .map_err(|e| e.to_string())?
                 .label("after the found terms")
                 .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], ca.stroke_width(2)));
+            let cd = RGBColor(44, 160, 44);
+            chart
+                .draw_series(LineSeries::new(pd.iter().copied(), cd.stroke_width(2)))
+                .map_err(|e| e.to_string())?
+                .label("drift left (random walk, not subtracted)")
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], cd.stroke_width(2)));
             chart
                 .configure_series_labels()
                 .position(SeriesLabelPosition::UpperRight)
@@ -126,12 +139,11 @@ pub fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, DiagnoseEr
                 .draw()
                 .map_err(|e| e.to_string())
         })?);
-        for (k, term) in fit.terms.iter().enumerate() {
-            let others: Vec<f64> = (0..y.len())
-                .map(|i| fit.terms.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, t)| t.contribution[i]).sum())
-                .collect();
+        for term in fit.terms.iter() {
+            let partial: Vec<f64> = (0..y.len()).map(|i| y[i] - fit.prediction[i] + term.contribution[i]).collect();
+            let off = mean(&partial) - mean(&term.contribution);
             let xs: Vec<f64> = term.contribution.iter().map(|v| v * 1e3).collect();
-            let ys: Vec<f64> = (0..y.len()).map(|i| (y[i] - fit.drift[i] - others[i]) * 1e3).collect();
+            let ys: Vec<f64> = partial.iter().map(|v| (v - off) * 1e3).collect();
             // Sort by the regressor for binned means.
             let mut idx: Vec<usize> = (0..xs.len()).collect();
             idx.sort_by(|a, b| xs[*a].total_cmp(&xs[*b]));

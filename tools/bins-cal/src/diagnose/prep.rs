@@ -60,6 +60,25 @@ pub struct Prepared {
     pub notes: Vec<String>,
 }
 
+impl Prepared {
+    /// The constant-reference runs without vibration, `(first, end)` row ranges, at least
+    /// three rows long (all runs when there are none without vibration).
+    pub fn static_runs(&self) -> Vec<(usize, usize)> {
+        let n = self.t.len();
+        let mut runs: Vec<(usize, usize)> = Vec::new();
+        let mut s = 0;
+        for i in 1..=n {
+            if i == n || self.seg[i] != self.seg[s] {
+                runs.push((s, i));
+                s = i;
+            }
+        }
+        let quiet: Vec<(usize, usize)> =
+            runs.iter().copied().filter(|&(a, b)| matches!(self.vib[a], Vibration::None) && b - a >= 3).collect();
+        if quiet.is_empty() { runs } else { quiet }
+    }
+}
+
 /// Axis names.
 pub const AXES: [&str; 3] = ["x", "y", "z"];
 

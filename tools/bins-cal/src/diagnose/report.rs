@@ -4,8 +4,8 @@ use super::fit::AxisFit;
 use super::locate::Stratum;
 use super::mech::{Mech, Sensitivity, separating_test};
 use super::prep::{AXES, Prepared};
+use super::noise::short_tau_q;
 use super::stats::allan_dev;
-use bins_comp::vibration::Vibration;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -120,19 +120,41 @@ pub struct Report {
     pub noise_floor_mg: PerAxis<f64>,
     /// Allan deviation of the residual in the static segments.
     pub allan: Vec<AllanPoint>,
-    /// Random-walk intensity of the fitted noise model, as drift per √hour [mg/√h].
+    /// Random-walk intensity the mechanisms were tested against, as drift per √hour [mg/√h].
     pub random_walk_mg_per_sqrt_h: PerAxis<f64>,
-    /// Strata that carry the mismatch.
+    /// Where that random walk comes from: `given` (`--random-walk`) or `estimated` (restricted
+    /// maximum likelihood with the richest model in).
+    pub random_walk_source: String,
+    /// The sensor's own random walk [mg/√h]: from the Hadamard variance of what the model
+    /// leaves in the static segments, at averaging times up to a minute
+    /// ([`short_tau_q`](super::noise::short_tau_q)); absent when no segment is long enough.
+    pub sensor_random_walk_mg_per_sqrt_h: PerAxis<f64>,
+    /// RMS of the drift (the random-walk level of what the model leaves, smoothed) \[mg\]:
+    /// reported and drawn on its own, never subtracted from the figures.
+    pub drift_rms_mg: PerAxis<f64>,
+    /// Structure above the white noise that the model does not explain: `√(after² − floor²)`
+    /// of the held-out RMS \[mg\].
+    pub unexplained_rms_mg: PerAxis<f64>,
+    /// Per accelerometer, one of `at the noise` (the raw residual is at the noise floor),
+    /// `explained` (the model brings it there), `partly explained`, `unexplained`.
+    pub verdict: PerAxis<String>,
+    /// SIM's own calibration terms re-fitted with every model, per accelerometer (when SIM is
+    /// a least-squares calibration of this very recording); never named as a mechanism.
+    pub sim_terms_refitted: PerAxis<Vec<String>>,
+    /// Strata where the raw residual departs from its mean beyond the noise model.
     pub located: Vec<Stratum>,
+    /// Strata where what the model leaves departs from its mean beyond the noise model: where
+    /// the unexplained structure is.
+    pub unexplained_located: Vec<Stratum>,
     /// The named mechanisms.
     pub effects: Vec<Effect>,
     /// Groups the data cannot separate.
     pub ambiguous: Vec<Ambiguous>,
-    /// RMS of residual − drift before the model \[mg\].
+    /// RMS of the raw residual (one offset removed) before the model \[mg\].
     pub rms_before_mg: PerAxis<f64>,
-    /// After \[mg\].
+    /// After the model \[mg\].
     pub rms_after_mg: PerAxis<f64>,
-    /// Held-out (β fitted without the block) before \[mg\].
+    /// Held-out (coefficients and offset fitted without the block) before \[mg\].
     pub heldout_rms_before_mg: PerAxis<f64>,
     /// Held-out after \[mg\].
     pub heldout_rms_after_mg: PerAxis<f64>,
@@ -146,21 +168,7 @@ pub struct Report {
 /// vibration (all segments when there are none).
 pub fn noise_floor(p: &Prepared) -> ([f64; 3], Vec<AllanPoint>) {
     let n = p.t.len();
-    let mut runs: Vec<(usize, usize)> = Vec::new();
-    let mut s = 0;
-    for i in 1..=n {
-        if i == n || p.seg[i] != p.seg[s] {
-            runs.push((s, i));
-            s = i;
-        }
-    }
-    let quiet: Vec<(usize, usize)> = runs
-        .iter()
-        .copied()
-        .filter(|&(a, _)| matches!(p.vib[a], Vibration::None))
-        .filter(|&(a, b)| b - a >= 3)
-        .collect();
-    let use_runs = if quiet.is_empty() { runs.clone() } else { quiet };
+    let use_runs = p.static_runs();
     let longest = use_runs.iter().map(|(a, b)| b - a).max().unwrap_or(0);
     let mut ms = Vec::new();
     let mut m = 1;
@@ -231,13 +239,17 @@ pub fn coef_names(m: Mech, s: &Sensitivity, axis: usize) -> Vec<(String, f64)> {
             }
         }
         Mech::Warmup => vec![("amp_mg".into(), 1e3)],
+        Mech::BiasHysteresis => vec![("amp_mg".into(), 1e3), ("amp_mg_per_C".into(), 1e3)],
         Mech::BiasTempOrder => {
             vec![("b1_mg_per_C".into(), 1e3), ("b2_mg_per_C2".into(), 1e3), ("b3_mg_per_C3".into(), 1e3)]
         }
         Mech::ScaleTemp => vec![("s1_ppm_per_C".into(), 1e6), ("s2_ppm_per_C2".into(), 1e6)],
-        Mech::CrossCouplingTemp => {
-            vec![(format!("c_{}{}_ppm_per_C", ax[i], ax[j]), 1e6), (format!("c_{}{}_ppm_per_C", ax[i], ax[k]), 1e6)]
-        }
+        Mech::CrossCouplingTemp => vec![
+            (format!("c_{}{}_ppm_per_C", ax[i], ax[j]), 1e6),
+            (format!("c_{}{}_ppm_per_C", ax[i], ax[k]), 1e6),
+            (format!("c_{}{}_ppm_per_C2", ax[i], ax[j]), 1e6),
+            (format!("c_{}{}_ppm_per_C2", ax[i], ax[k]), 1e6),
+        ],
         Mech::CrossAxis => vec![(format!("m_{}{}_ppm", ax[i], ax[j]), 1e6), (format!("m_{}{}_ppm", ax[i], ax[k]), 1e6)],
         Mech::ScaleFactor => vec![("sf_ppm".into(), 1e6)],
         Mech::SfAsymmetry => vec![("delta_1a_ppm".into(), 1e6)],
@@ -245,6 +257,34 @@ pub fn coef_names(m: Mech, s: &Sensitivity, axis: usize) -> Vec<(String, f64)> {
         Mech::NonlinearityK3 => vec![("k3_ug_per_g3".into(), 1e6)],
         Mech::VibrationCross => vec![("m31_ug_per_g2".into(), 1e6), ("m32_ug_per_g2".into(), 1e6)],
     }
+}
+
+/// A held-out RMS within this factor of the noise floor is "at the noise".
+pub const AT_NOISE: f64 = 1.2;
+
+/// The verdict on one accelerometer from the held-out figures and the floor.
+pub fn verdict(before: f64, after: f64, floor: f64, named: bool) -> &'static str {
+    if before <= AT_NOISE * floor {
+        "at the noise"
+    } else if after <= AT_NOISE * floor {
+        "explained"
+    } else if named && after <= 0.7 * before {
+        "partly explained"
+    } else {
+        "unexplained"
+    }
+}
+
+/// What the report names besides the data.
+pub struct Inputs<'a> {
+    /// SIM's file.
+    pub sim: &'a Path,
+    /// REAL's file.
+    pub real: &'a Path,
+    /// The options the diagnosis ran with.
+    pub opt: &'a super::Options,
+    /// Per accelerometer, SIM's own terms re-fitted as a nuisance.
+    pub nuisance: &'a [Vec<String>],
 }
 
 /// Accelerometers, the mechanism modelled, deviance differences per accelerometer.
@@ -257,9 +297,10 @@ pub fn build(
     sens: &[Sensitivity],
     floor: ([f64; 3], Vec<AllanPoint>),
     located: Vec<Stratum>,
-    sim: &Path,
-    real: &Path,
+    unexplained_located: Vec<Stratum>,
+    input: &Inputs,
 ) -> Report {
+    let (sim, real) = (input.sim, input.real);
     // Ambiguous groups per axis: the member and its alternatives.
     let mut amb_groups: BTreeMap<Vec<String>, AmbGroup> = BTreeMap::new();
     let mut ambiguous_member: Vec<Vec<Mech>> = vec![Vec::new(); 3];
@@ -346,6 +387,24 @@ pub fn build(
             ));
         }
     }
+    let runs = p.static_runs();
+    let sensor_rw: PerAxis<f64> = (0..3)
+        .filter_map(|i| {
+            let e: Vec<f64> = p.r[i].iter().zip(&axes[i].prediction).map(|(a, b)| a - b).collect();
+            let segs: Vec<&[f64]> = runs.iter().map(|&(a, b)| &e[a..b]).collect();
+            short_tau_q(&segs, p.dt).map(|q| (AXES[i].to_string(), (q.0 * 3600.0).sqrt() * 1e3))
+        })
+        .collect();
+    let named = |i: usize| !axes[i].terms.is_empty();
+    for (i, names) in input.nuisance.iter().enumerate() {
+        if !names.is_empty() {
+            notes.push(format!(
+                "accelerometer {}: REAL − SIM is orthogonal to SIM's own temperature terms ({}): SIM is a least-squares calibration of this recording; those terms are re-fitted with every model and never named",
+                AXES[i],
+                names.join(", ")
+            ));
+        }
+    }
     Report {
         sim: sim.display().to_string(),
         real: real.display().to_string(),
@@ -356,7 +415,17 @@ pub fn build(
         noise_floor_mg: per_axis(|i| floor.0[i] * 1e3),
         allan: floor.1,
         random_walk_mg_per_sqrt_h: per_axis(|i| (axes[i].q * 3600.0).sqrt() * 1e3),
+        random_walk_source: if input.opt.random_walk_mg_per_sqrt_h.is_some() { "given" } else { "estimated" }.into(),
+        sensor_random_walk_mg_per_sqrt_h: sensor_rw,
+        drift_rms_mg: per_axis(|i| axes[i].drift_rms * 1e3),
+        unexplained_rms_mg: per_axis(|i| {
+            let (a, f) = (axes[i].heldout_rms.1, floor.0[i]);
+            (a * a - f * f).max(0.0).sqrt() * 1e3
+        }),
+        verdict: per_axis(|i| verdict(axes[i].heldout_rms.0, axes[i].heldout_rms.1, floor.0[i], named(i)).to_string()),
+        sim_terms_refitted: per_axis(|i| input.nuisance[i].clone()),
         located,
+        unexplained_located,
         effects,
         ambiguous,
         rms_before_mg: per_axis(|i| axes[i].rms.0 * 1e3),

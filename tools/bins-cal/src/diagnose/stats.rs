@@ -2,6 +2,31 @@
 //! problems (normal equations of columns scaled to unit norm), the χ² tail probability, the
 //! overlapping Allan deviation.
 
+/// `ln det A` of a symmetric positive-definite `A` (`p×p`, row-major) by Cholesky; `None`
+/// when it is not positive definite.
+pub fn chol_logdet(a: &[f64], p: usize) -> Option<f64> {
+    let mut l = vec![0.0; p * p];
+    let mut log_det = 0.0;
+    for i in 0..p {
+        for j in 0..=i {
+            let mut s = a[i * p + j];
+            for k in 0..j {
+                s -= l[i * p + k] * l[j * p + k];
+            }
+            if i == j {
+                if !(s > 0.0) {
+                    return None;
+                }
+                l[i * p + i] = s.sqrt();
+                log_det += s.ln();
+            } else {
+                l[i * p + j] = s / l[j * p + j];
+            }
+        }
+    }
+    Some(log_det)
+}
+
 /// Solves `A·x = b` for a symmetric positive-definite `A` (`p×p`, row-major) by Cholesky.
 /// Returns `None` when a pivot falls below `rel_tol` times its diagonal element (the columns
 /// are collinear on this data). Also returns the diagonal of `A⁻¹` (for standard errors).
@@ -170,6 +195,40 @@ pub fn allan_dev(segments: &[&[f64]], ms: &[usize]) -> Vec<(usize, f64, usize)> 
         }
         if n > 0 {
             out.push((m, (0.5 * sum / n as f64).sqrt(), n));
+        }
+    }
+    out
+}
+
+/// Overlapping Hadamard variance at cluster sizes `ms`, pooled over `segments`:
+/// `⅙⟨(ȳ_{k+2} − 2ȳ_{k+1} + ȳ_k)²⟩` of the cluster means. Blind to a constant slope (a
+/// temperature ramp's share of the residual), `σ²/m` for white noise of variance `σ²` and
+/// `q·τ/6` for a random walk of intensity `q`. Returns `(m, hvar, n_terms)`.
+pub fn hadamard_var(segments: &[&[f64]], ms: &[usize]) -> Vec<(usize, f64, usize)> {
+    let mut out = Vec::new();
+    for &m in ms {
+        let (mut sum, mut n) = (0.0, 0usize);
+        for seg in segments {
+            if seg.len() < 3 * m + 1 {
+                continue;
+            }
+            let mut s = Vec::with_capacity(seg.len() + 1);
+            s.push(0.0);
+            for v in seg.iter() {
+                s.push(s.last().copied().unwrap_or(0.0) + v);
+            }
+            let mf = m as f64;
+            for k in 0..=seg.len() - 3 * m {
+                let a = (s[k + m] - s[k]) / mf;
+                let b = (s[k + 2 * m] - s[k + m]) / mf;
+                let c = (s[k + 3 * m] - s[k + 2 * m]) / mf;
+                let d = c - 2.0 * b + a;
+                sum += d * d;
+                n += 1;
+            }
+        }
+        if n > 0 {
+            out.push((m, sum / (6.0 * n as f64), n));
         }
     }
     out
