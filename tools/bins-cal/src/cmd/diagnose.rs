@@ -29,6 +29,10 @@ pub struct Args {
 
 /// Runs `bins-cal diagnose`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    fsio::refuse_overwriting_inputs(
+        [&args.sim, &args.real],
+        [Some(&args.report), args.model.as_ref()].into_iter().flatten(),
+    )?;
     let t0 = std::time::Instant::now();
     let d = diagnose_files(&args.sim, &args.real).map_err(|e| anyhow!("{e}"))?;
     let r = &d.report;
