@@ -180,42 +180,43 @@ pub fn remove_temporaries_on_signals() {
     let set = unsafe {
         let mut set: libc::sigset_t = std::mem::zeroed();
         libc::sigemptyset(&mut set);
+        let mut any = false;
         for s in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
             let previous = libc::signal(s, libc::SIG_IGN);
             if previous != libc::SIG_IGN {
                 libc::signal(s, previous);
                 libc::sigaddset(&mut set, s);
+                any = true;
             }
         }
-        if libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut()) != 0 {
+        if !any || libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut()) != 0 {
             return;
         }
         set
     };
     let spawned = std::thread::Builder::new().name("signals".into()).spawn(move || {
-        loop {
-            let mut sig: libc::c_int = 0;
-            // SAFETY: `set` is an initialised signal set, `sig` a valid out-pointer.
-            if unsafe { libc::sigwait(&set, &mut sig) } != 0 {
-                continue;
-            }
-            // Held to the end: no temporary file is created or renamed from here on.
-            let live = live();
-            for p in live.iter() {
-                let _ = std::fs::remove_file(p);
-            }
-            // SAFETY: default disposition, unblocked in this thread only, then raised in this
-            // thread: the process ends by `sig` as if it had not been handled.
-            unsafe {
-                let mut one: libc::sigset_t = std::mem::zeroed();
-                libc::sigemptyset(&mut one);
-                libc::sigaddset(&mut one, sig);
-                libc::signal(sig, libc::SIG_DFL);
-                libc::pthread_sigmask(libc::SIG_UNBLOCK, &one, std::ptr::null_mut());
-                libc::raise(sig);
-            }
-            std::process::exit(128 + sig);
+        let mut sig: libc::c_int = 0;
+        // SAFETY: `set` is an initialised signal set, `sig` a valid out-pointer. It fails
+        // only for an invalid set; the signals then stay blocked (and the process running).
+        if unsafe { libc::sigwait(&set, &mut sig) } != 0 {
+            return;
         }
+        // Held to the end: no temporary file is created or renamed from here on.
+        let live = live();
+        for p in live.iter() {
+            let _ = std::fs::remove_file(p);
+        }
+        // SAFETY: default disposition, unblocked in this thread only, then raised in this
+        // thread: the process ends by `sig` as if it had not been handled.
+        unsafe {
+            let mut one: libc::sigset_t = std::mem::zeroed();
+            libc::sigemptyset(&mut one);
+            libc::sigaddset(&mut one, sig);
+            libc::signal(sig, libc::SIG_DFL);
+            libc::pthread_sigmask(libc::SIG_UNBLOCK, &one, std::ptr::null_mut());
+            libc::raise(sig);
+        }
+        std::process::exit(128 + sig);
     });
     if spawned.is_err() {
         // No thread to take them: unblock, the signals keep their default action.

@@ -2,6 +2,7 @@
 //! docs/recording-format.md): one test per defect a sweep of bad inputs found, then the sweep
 //! itself, which keeps them fixed — no panic, no input destroyed, no temporary file left after
 //! SIGINT/SIGTERM, and a one-line error naming the file for every bad input.
+#![cfg(unix)]
 
 mod common;
 
