@@ -382,6 +382,25 @@ impl CalibrationFile {
         Self::from_toml(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
     }
 
+    /// Reads a file and checks it as the firmware would check it ([`check`](Self::check));
+    /// returns the file and its blob. Errors name the file and the key or blob field. Every
+    /// command that uses a calibration file goes through this, so a calibration is accepted
+    /// or refused the same way whatever its container.
+    pub fn read_checked(path: &Path) -> anyhow::Result<(Self, Vec<u8>)> {
+        let file = Self::read(path)?;
+        let bytes = file.check().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        Ok((file, bytes))
+    }
+
+    /// The one validation of a calibration, whatever its container: the blob encoder's checks
+    /// ([`to_blob`](Self::to_blob): structure, physical ranges, conditioning), then the
+    /// firmware's own parser on the result ([`blob::parse`]). Returns the blob.
+    pub fn check(&self) -> Result<Vec<u8>, CalFileError> {
+        let bytes = self.to_blob()?;
+        blob::parse(&bytes).map_err(CalFileError::Blob)?;
+        Ok(bytes)
+    }
+
     /// The file as TOML text, with a header comment.
     pub fn to_toml(&self) -> String {
         let body = toml::to_string(self).unwrap_or_else(|e| format!("# cannot serialise: {e}\n"));

@@ -1,27 +1,120 @@
-//! Writing outputs so that nothing is ever half-written: the data goes to a temporary file in
-//! the destination's directory, is flushed to disk, and is renamed over the destination.
+//! Output safety (`docs/output-safety.md`): writing outputs so that nothing is ever
+//! half-written, nothing is left behind and no input is ever written over.
+//!
+//! - The data goes to a temporary file `.NAME.tmp-PID` in the destination's directory, is
+//!   flushed to disk, and is renamed over the destination ([`write_atomic`], [`AtomicFile`]).
+//! - The temporary files alive in the process are registered; after
+//!   [`remove_temporaries_on_signals`], SIGINT, SIGTERM and SIGHUP remove them before the
+//!   process ends by that signal. A process killed outright (SIGKILL, power loss) cannot do
+//!   that: the next write of the same output removes the `.NAME.tmp-PID` files whose process
+//!   is gone.
+//! - [`refuse_overwriting_inputs`]: a command refuses to start when one of its outputs is one
+//!   of its inputs, by name or through a link.
+//! - [`restore_sigpipe`]: writing into a closed pipe ends the process quietly, as it does any
+//!   Unix filter, instead of a panic of `println!`.
 
 use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
 
-/// Writes `data` to `path` atomically (temporary sibling file, fsync, rename). Errors name
-/// the file.
-pub fn write_atomic(path: &Path, data: &[u8]) -> anyhow::Result<()> {
+/// The temporary files this process has created and not yet renamed or removed.
+static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn live() -> MutexGuard<'static, Vec<PathBuf>> {
+    // A panic while the list was held leaves it consistent (pushes and removals only).
+    LIVE.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The directory and file name of an output.
+fn split(path: &Path) -> anyhow::Result<(PathBuf, String)> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
     let name = path.file_name().with_context(|| format!("{}: not a file name", path.display()))?;
-    let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
+    Ok((dir, name.to_string_lossy().into_owned()))
+}
+
+/// The temporary sibling of `path` for this process, after removing the temporary siblings
+/// of `path` left by processes that no longer exist.
+fn temp_path(path: &Path) -> anyhow::Result<PathBuf> {
+    let (dir, name) = split(path)?;
+    remove_stale(&dir, &name);
+    Ok(dir.join(format!(".{name}.tmp-{}", std::process::id())))
+}
+
+/// Removes `dir/.NAME.tmp-PID` for every PID (not this process's) that is not a running
+/// process. Errors are ignored: a file that cannot be listed or removed is left as it was.
+fn remove_stale(dir: &Path, name: &str) {
+    let prefix = format!(".{name}.tmp-");
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let file = entry.file_name();
+        let Some(pid) = file.to_str().and_then(|f| f.strip_prefix(&prefix)) else { continue };
+        if !pid.bytes().all(|b| b.is_ascii_digit()) {
+            continue;
+        }
+        let Ok(pid) = pid.parse::<u32>() else { continue };
+        if pid != std::process::id() && !process_exists(pid) {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// True when a process `pid` exists (or may: when it cannot be told, true).
+#[cfg(unix)]
+fn process_exists(pid: u32) -> bool {
+    // PID 0 and negative values address process groups, not a process.
+    let Ok(pid) = libc::pid_t::try_from(pid) else { return true };
+    if pid <= 0 {
+        return true;
+    }
+    // SAFETY: signal 0 performs only the existence and permission checks; nothing is sent.
+    let r = unsafe { libc::kill(pid, 0) };
+    r == 0 || std::io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
+}
+
+#[cfg(not(unix))]
+fn process_exists(_pid: u32) -> bool {
+    true
+}
+
+/// Creates the temporary file `tmp` and registers it, under the registry's lock (a signal
+/// handled meanwhile waits and then removes it).
+fn create_registered(tmp: &Path) -> std::io::Result<std::fs::File> {
+    let mut live = live();
+    let f = std::fs::File::create(tmp)?;
+    live.push(tmp.to_path_buf());
+    Ok(f)
+}
+
+/// Renames (`Some(dest)`) or removes (`None`) the registered temporary file `tmp`, and
+/// unregisters it, under the registry's lock.
+fn finish_registered(tmp: &Path, dest: Option<&Path>) -> std::io::Result<()> {
+    let mut live = live();
+    let r = match dest {
+        Some(d) => std::fs::rename(tmp, d),
+        None => std::fs::remove_file(tmp),
+    };
+    if let Some(i) = live.iter().position(|p| p == tmp) {
+        live.swap_remove(i);
+    }
+    r
+}
+
+/// Writes `data` to `path` atomically (temporary sibling file, fsync, rename). Errors name
+/// the file.
+pub fn write_atomic(path: &Path, data: &[u8]) -> anyhow::Result<()> {
+    let tmp = temp_path(path)?;
     let result = (|| -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
+        let mut f = create_registered(&tmp)?;
         f.write_all(data)?;
         f.sync_all()?;
-        std::fs::rename(&tmp, path)
+        finish_registered(&tmp, Some(path))
     })();
     if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
+        let _ = finish_registered(&tmp, None);
         return Err(anyhow::anyhow!("{}: {e}", path.display()));
     }
     Ok(())
@@ -40,13 +133,8 @@ pub struct AtomicFile {
 impl AtomicFile {
     /// Creates the temporary file beside `path`. Errors name the file.
     pub fn create(path: &Path) -> anyhow::Result<Self> {
-        let dir = match path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        let name = path.file_name().with_context(|| format!("{}: not a file name", path.display()))?;
-        let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
-        let f = std::fs::File::create(&tmp).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let tmp = temp_path(path)?;
+        let f = create_registered(&tmp).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
         Ok(AtomicFile { path: path.to_path_buf(), tmp, out: Some(std::io::BufWriter::with_capacity(1 << 20, f)) })
     }
 
@@ -61,8 +149,11 @@ impl AtomicFile {
         let result = (|| -> std::io::Result<()> {
             let f = out.into_inner().map_err(|e| e.into_error())?;
             f.sync_all()?;
-            std::fs::rename(&self.tmp, &self.path)
+            finish_registered(&self.tmp, Some(&self.path))
         })();
+        if result.is_err() {
+            let _ = finish_registered(&self.tmp, None);
+        }
         result.map_err(|e| anyhow::anyhow!("{}: {e}", self.path.display()))
     }
 }
@@ -71,7 +162,157 @@ impl Drop for AtomicFile {
     fn drop(&mut self) {
         if self.out.is_some() {
             self.out = None;
-            let _ = std::fs::remove_file(&self.tmp);
+            let _ = finish_registered(&self.tmp, None);
         }
     }
+}
+
+/// Removes the registered temporary files when the process receives SIGINT, SIGTERM or SIGHUP,
+/// then ends it by that signal (its parent sees the usual status, 130 for SIGINT, 143 for
+/// SIGTERM). The signals are blocked in the calling thread, and so in every thread it starts
+/// later; call it first in `main`. A signal the process was started with ignored (`nohup`)
+/// stays ignored.
+#[cfg(unix)]
+pub fn remove_temporaries_on_signals() {
+    // SAFETY: `sigset_t` is plain data, initialised by `sigemptyset` before any other use;
+    // `signal(s, SIG_IGN)` followed by restoring the previous disposition only reads the
+    // disposition; `pthread_sigmask` changes this thread's mask. Nothing else runs yet.
+    let set = unsafe {
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut set);
+        let mut any = false;
+        for s in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+            let previous = libc::signal(s, libc::SIG_IGN);
+            if previous != libc::SIG_IGN {
+                libc::signal(s, previous);
+                libc::sigaddset(&mut set, s);
+                any = true;
+            }
+        }
+        if !any || libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut()) != 0 {
+            return;
+        }
+        set
+    };
+    let spawned = std::thread::Builder::new().name("signals".into()).spawn(move || {
+        let mut sig: libc::c_int = 0;
+        // SAFETY: `set` is an initialised signal set, `sig` a valid out-pointer. It fails
+        // only for an invalid set; the signals then stay blocked (and the process running).
+        if unsafe { libc::sigwait(&set, &mut sig) } != 0 {
+            return;
+        }
+        // Held to the end: no temporary file is created or renamed from here on.
+        let live = live();
+        for p in live.iter() {
+            let _ = std::fs::remove_file(p);
+        }
+        // SAFETY: default disposition, unblocked in this thread only, then raised in this
+        // thread: the process ends by `sig` as if it had not been handled.
+        unsafe {
+            let mut one: libc::sigset_t = std::mem::zeroed();
+            libc::sigemptyset(&mut one);
+            libc::sigaddset(&mut one, sig);
+            libc::signal(sig, libc::SIG_DFL);
+            libc::pthread_sigmask(libc::SIG_UNBLOCK, &one, std::ptr::null_mut());
+            libc::raise(sig);
+        }
+        std::process::exit(128 + sig);
+    });
+    if spawned.is_err() {
+        // No thread to take them: unblock, the signals keep their default action.
+        // SAFETY: as above, this thread's mask only.
+        unsafe { libc::pthread_sigmask(libc::SIG_UNBLOCK, &set, std::ptr::null_mut()) };
+    }
+}
+
+/// Without Unix signals there is nothing to install.
+#[cfg(not(unix))]
+pub fn remove_temporaries_on_signals() {}
+
+/// Restores the default action of SIGPIPE (Rust ignores it, so that a write into a closed
+/// pipe fails and `println!` panics): the process then ends quietly when its reader goes
+/// away, as `bins-cal verify … | head -1` expects. Call it first in `main`.
+#[cfg(unix)]
+pub fn restore_sigpipe() {
+    // SAFETY: changes the disposition of one signal before any other thread runs.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
+/// Without Unix signals there is nothing to restore.
+#[cfg(not(unix))]
+pub fn restore_sigpipe() {}
+
+/// The identity of a path for comparing an output with the inputs: the file it resolves to
+/// (device and inode, when it exists) and its canonical path (the canonical directory and the
+/// name, when only the directory exists).
+struct Identity {
+    #[cfg(unix)]
+    file: Option<(u64, u64)>,
+    path: Option<PathBuf>,
+}
+
+impl Identity {
+    fn of(p: &Path) -> Identity {
+        #[cfg(unix)]
+        let file = {
+            use std::os::unix::fs::MetadataExt;
+            std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()))
+        };
+        let path = std::fs::canonicalize(p).ok().or_else(|| {
+            let (dir, name) = split(p).ok()?;
+            Some(std::fs::canonicalize(dir).ok()?.join(name))
+        });
+        Identity {
+            #[cfg(unix)]
+            file,
+            path,
+        }
+    }
+
+    fn same(&self, other: &Identity) -> bool {
+        #[cfg(unix)]
+        if let (Some(a), Some(b)) = (self.file, other.file)
+            && a == b
+        {
+            return true;
+        }
+        matches!((&self.path, &other.path), (Some(a), Some(b)) if a == b)
+    }
+}
+
+/// Refuses (an error naming both) an output that is one of the inputs — the same name, or
+/// the same file through a symbolic or hard link, or a symbolic link to it — and two outputs
+/// that are the same file. Call it first in a command's `run`, before anything is read or
+/// written.
+pub fn refuse_overwriting_inputs<I, O>(inputs: I, outputs: O) -> anyhow::Result<()>
+where
+    I: IntoIterator,
+    I::Item: AsRef<Path>,
+    O: IntoIterator,
+    O::Item: AsRef<Path>,
+{
+    let inputs: Vec<(PathBuf, Identity)> =
+        inputs.into_iter().map(|p| (p.as_ref().to_path_buf(), Identity::of(p.as_ref()))).collect();
+    let mut seen: Vec<(PathBuf, Identity)> = Vec::new();
+    for o in outputs {
+        let o = o.as_ref();
+        let id = Identity::of(o);
+        let same_name = |p: &Path| if p == o { String::new() } else { " (the same file)".to_string() };
+        if let Some((i, _)) = inputs.iter().find(|(i, iid)| i == o || id.same(iid)) {
+            anyhow::bail!(
+                "{}: refusing to write the output over the input {}{}",
+                o.display(),
+                i.display(),
+                same_name(i)
+            );
+        }
+        if let Some((p, _)) = seen.iter().find(|(p, pid)| p == o || id.same(pid)) {
+            let also = if p == o { String::new() } else { format!(" (also as {})", p.display()) };
+            anyhow::bail!("{}: given for two outputs{also}; give each output its own file", o.display());
+        }
+        seen.push((o.to_path_buf(), id));
+    }
+    Ok(())
 }

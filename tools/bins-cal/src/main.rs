@@ -13,7 +13,9 @@
 //! | `vibration` | [`cmd::vibration`] | the VE table of a conversion function in an environment |
 //!
 //! Errors are printed as one line, `bins-cal: error: …`, naming the file and the key or byte
-//! offset; the exit status is 1 (2 for a usage error).
+//! offset; the exit status is 1 (2 for a usage error). A closed standard output (`| head`)
+//! ends the process quietly by SIGPIPE; SIGINT/SIGTERM/SIGHUP remove the temporary outputs
+//! first ([`bins_cal::fsio`]).
 
 mod cmd;
 
@@ -49,6 +51,10 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    // Before any other thread exists: a closed pipe ends the process quietly, and an
+    // interrupted run leaves no temporary file (docs/output-safety.md).
+    bins_cal::fsio::restore_sigpipe();
+    bins_cal::fsio::remove_temporaries_on_signals();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Blob(args) => cmd::blob::run(args),

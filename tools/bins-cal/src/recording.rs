@@ -4,6 +4,9 @@
 //! A recording is a UTF-8 CSV file: `#` comment lines, one header row, then one row per logged
 //! sample. Columns are found by header name; their order is free and unknown columns are kept
 //! (as text) and otherwise ignored. An empty cell in an optional column is "not known".
+//! Numbers must lie within their column's physical range ([`limit_of`]); a UTF-8 byte order
+//! mark is skipped; a last line cut off (no line break, fewer cells than the header) is an
+//! error; [`Reader::require_rows`] refuses a file with a header and no row.
 //!
 //! The reader holds one line in memory at a time: [`Reader::read_row`] refills a caller-owned
 //! [`Row`] without allocating (the fast path for the 8.6-million-row day file), and the reader
@@ -14,8 +17,9 @@
 //! or writes its output atomically).
 //!
 //! The writer formats floats as the shortest decimal that parses back to the same `f64`
-//! (`ryu`), so write → read is exact; it refuses non-finite numbers and a time that does not
-//! increase, so it cannot produce a file the reader rejects.
+//! (`ryu`), so write → read is exact; it refuses non-finite numbers, numbers outside their
+//! column's range and a time that does not increase, so it cannot produce a file the reader
+//! rejects.
 
 use bins_comp::vibration::Vibration;
 use std::fmt;
@@ -59,6 +63,52 @@ pub mod col {
     pub const POS: &str = "pos";
     /// Time since power-on \[s\].
     pub const POWER_S: &str = "power_s";
+}
+
+/// The physical range of a column's values: the reader refuses a value outside it (naming
+/// file, line and column) and the writer does not write one. A value outside is a fault of
+/// the logger or of a file's edit, never a measurement: a temperature no chamber reaches, a
+/// signal no analogue front end delivers (the ADC's full scale is ±1.2 V, the supply rails
+/// ±15 V), a force or vibration no rig applies. One such value would otherwise pass through
+/// every statistic (an `f64` holds 1e308 without complaint) and cost minutes or a wrong
+/// result downstream.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Limit {
+    /// Smallest value accepted.
+    pub min: f64,
+    /// Largest value accepted.
+    pub max: f64,
+    /// The unit, for messages.
+    pub unit: &'static str,
+}
+
+impl Limit {
+    /// True when `v` lies within the range.
+    pub fn contains(&self, v: f64) -> bool {
+        (self.min..=self.max).contains(&v)
+    }
+}
+
+/// Temperatures (`temp_C`, `chamber_C`): −100 … +200 °C.
+pub const TEMP_LIMIT: Limit = Limit { min: -100.0, max: 200.0, unit: "°C" };
+/// Accelerometer signals (`ux_V`, `uy_V`, `uz_V`): ±100 V.
+pub const SIGNAL_LIMIT: Limit = Limit { min: -100.0, max: 100.0, unit: "V" };
+/// Specific forces and vibration amplitudes (`fx_g` … `fz_g`, `vib_x_g` … `vib_z_g`): ±1000 g.
+pub const ACCEL_LIMIT: Limit = Limit { min: -1000.0, max: 1000.0, unit: "g" };
+
+/// The physical range of column `name`, if the format gives it one (time, frequencies and
+/// power-on time have none beyond being finite; `t_s` must increase).
+pub fn limit_of(name: &str) -> Option<Limit> {
+    field_of(name).and_then(field_limit)
+}
+
+fn field_limit(f: Field) -> Option<Limit> {
+    match f {
+        Field::Temp | Field::Chamber => Some(TEMP_LIMIT),
+        Field::U(_) => Some(SIGNAL_LIMIT),
+        Field::F(_) | Field::Vib(_) => Some(ACCEL_LIMIT),
+        _ => None,
+    }
 }
 
 /// The five required columns.
@@ -226,6 +276,23 @@ pub enum ErrorKind {
     },
     /// A cell of a numeric column that is not a finite decimal number.
     NotANumber(String),
+    /// A number outside its column's physical range ([`limit_of`]).
+    OutOfRange {
+        /// The cell's text (reader) or the value (writer).
+        value: String,
+        /// The column's range.
+        limit: Limit,
+    },
+    /// The last line ends without a line break and has fewer cells than the header: the file
+    /// was cut off while being written or copied.
+    CutOff {
+        /// Cells in the header.
+        expected: usize,
+        /// Cells in the line.
+        got: usize,
+    },
+    /// A header and no data row where the output needs rows.
+    NoRows,
     /// An empty cell in a required column.
     EmptyRequired,
     /// `vib_kind` other than `none`, `sine`, `random`.
@@ -278,6 +345,16 @@ impl fmt::Display for Error {
             ErrorKind::EmptyColumnName => write!(f, "empty column name in the header"),
             ErrorKind::CellCount { expected, got } => write!(f, "{got} cells, the header has {expected}"),
             ErrorKind::NotANumber(s) => write!(f, "`{s}` is not a finite number"),
+            ErrorKind::OutOfRange { value, limit } => write!(
+                f,
+                "`{value}` is outside the physical range {} … {} {} (a logger fault or a bad edit)",
+                limit.min, limit.max, limit.unit
+            ),
+            ErrorKind::CutOff { expected, got } => write!(
+                f,
+                "last line cut off: {got} cells, the header has {expected}, and no line break at the end (truncated file?)"
+            ),
+            ErrorKind::NoRows => write!(f, "no data row after the header"),
             ErrorKind::EmptyRequired => write!(f, "empty cell in a required column"),
             ErrorKind::BadVibKind(s) => write!(f, "`{s}` is not a vibration kind (none, sine, random)"),
             ErrorKind::TimeNotIncreasing { previous, this } => {
@@ -391,6 +468,10 @@ pub struct Reader<R> {
     bounds: Vec<(usize, usize)>,
     prev_t: Option<f64>,
     failed: bool,
+    /// The last line read ended with a line break.
+    line_ended: bool,
+    /// Data rows read without an error.
+    rows: u64,
 }
 
 impl Reader<BufReader<File>> {
@@ -423,6 +504,8 @@ impl<R: BufRead> Reader<R> {
             bounds: Vec::new(),
             prev_t: None,
             failed: false,
+            line_ended: true,
+            rows: 0,
         };
         loop {
             if !r.next_line()? {
@@ -526,7 +609,12 @@ impl<R: BufRead> Reader<R> {
             return Ok(false);
         }
         self.line_no += 1;
-        if self.raw.last() == Some(&b'\n') {
+        // A UTF-8 byte order mark (spreadsheet exports) is not part of the first cell.
+        if self.line_no == 1 && self.raw.starts_with(b"\xEF\xBB\xBF") {
+            self.raw.drain(..3);
+        }
+        self.line_ended = self.raw.last() == Some(&b'\n');
+        if self.line_ended {
             self.raw.pop();
         }
         if self.raw.last() == Some(&b'\r') {
@@ -568,13 +656,31 @@ impl<R: BufRead> Reader<R> {
         self.cells = cells;
         self.bounds = bounds;
         result?;
+        self.rows += 1;
         Ok(true)
+    }
+
+    /// Data rows read so far without an error.
+    pub fn rows_read(&self) -> u64 {
+        self.rows
+    }
+
+    /// An error ([`ErrorKind::NoRows`], naming the file) when no data row has been read: for
+    /// the consumers whose output needs rows, called at the end of the file.
+    pub fn require_rows(&self) -> Result<(), Error> {
+        if self.rows == 0 {
+            return Err(Error { file: self.file.clone(), line: 0, column: None, kind: ErrorKind::NoRows });
+        }
+        Ok(())
     }
 
     fn fill(&mut self, row: &mut Row, cells: &str, bounds: &[(usize, usize)]) -> Result<(), Error> {
         // Trailing empty cells of optional columns may be left out (CSV writers drop them;
         // the real recording in `data/real/` does): they read as empty. Anything else with a
         // cell count other than the header's is an error.
+        if bounds.len() < self.fields.len() && !self.line_ended {
+            return Err(self.err(None, ErrorKind::CutOff { expected: self.fields.len(), got: bounds.len() }));
+        }
         let short_ok = bounds.len() < self.fields.len()
             && self.fields[bounds.len()..].iter().all(|f| flag_index(*f).is_none_or(|i| i > 4));
         if bounds.len() != self.fields.len() && !short_ok {
@@ -599,7 +705,12 @@ impl<R: BufRead> Reader<R> {
                     return if required { Err(self.err(Some(p), ErrorKind::EmptyRequired)) } else { Ok(None) };
                 }
                 match cell.parse::<f64>() {
-                    Ok(v) if v.is_finite() => Ok(Some(v)),
+                    Ok(v) if v.is_finite() => match field_limit(field) {
+                        Some(limit) if !limit.contains(v) => {
+                            Err(self.err(Some(p), ErrorKind::OutOfRange { value: cell.to_string(), limit }))
+                        }
+                        _ => Ok(Some(v)),
+                    },
                     _ => Err(self.err(Some(p), ErrorKind::NotANumber(cell.to_string()))),
                 }
             };
@@ -807,6 +918,11 @@ impl<W: Write> Writer<W> {
     fn num(&mut self, name: &'static str, v: f64) -> Result<(), Error> {
         if !v.is_finite() {
             return Err(self.err(Some(name), ErrorKind::Unwritable(format!("non-finite value {v}"))));
+        }
+        if let Some(limit) = limit_of(name)
+            && !limit.contains(v)
+        {
+            return Err(self.err(Some(name), ErrorKind::OutOfRange { value: v.to_string(), limit }));
         }
         self.line.push(b',');
         self.line.extend_from_slice(self.ryu.format_finite(v).as_bytes());

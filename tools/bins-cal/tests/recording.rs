@@ -159,22 +159,24 @@ fn open_names_a_missing_file() {
 
 fn random_row(rng: &mut ChaCha8Rng, t: f64) -> Row {
     // Values across magnitudes, signs, and with the last bits set: the exactness test.
-    let mut x = || {
+    // Columns with a physical range (signals and temperatures below 100, forces below 1000)
+    // up to their limits, the others up to 1e30.
+    let mut x = |top: i32| {
         let m: f64 = rng.random_range(-1.0..1.0);
-        let e: i32 = rng.random_range(-30..30);
+        let e: i32 = rng.random_range(-30..top);
         m * 10f64.powi(e)
     };
     let mut row = Row {
         line: 0,
         t_s: t,
-        u_v: [x(), x(), x()],
-        temp_c: x(),
-        f_g: [Some(x()), None, Some(x())],
+        u_v: [x(2), x(2), x(2)],
+        temp_c: x(2),
+        f_g: [Some(x(3)), None, Some(x(3))],
         vib_kind: Some(VibKind::Random),
-        vib_g: [Some(x()), Some(x()), Some(0.0)],
-        vib_hz: Some(x()),
+        vib_g: [Some(x(3)), Some(x(3)), Some(0.0)],
+        vib_hz: Some(x(30)),
         vib_bw_hz: None,
-        chamber_c: Some(x()),
+        chamber_c: Some(x(2)),
         pos: Some("CP3".into()),
         power_s: Some(t + 1e-7),
         extra: vec!["a, \"quoted\" cell".into(), String::new()],
@@ -260,6 +262,66 @@ fn writer_refuses_what_the_reader_would_reject() {
     assert!(Writer::new(Vec::new(), "w.csv", Columns::default(), &["two\nlines"]).is_err());
     let cols = Columns { extra: vec!["t_s".into()], ..Columns::default() };
     assert!(Writer::new(Vec::new(), "w.csv", cols, &[]).is_err());
+    // Nor a value outside its column's physical range.
+    row.u_v[1] = 0.5;
+    row.temp_c = 250.0;
+    let e = w.write_row(&row).err().unwrap();
+    assert!(matches!(e.kind, ErrorKind::OutOfRange { .. }), "{e}");
+    assert_eq!(e.column.unwrap(), (5, "temp_C".to_string()));
+}
+
+#[test]
+fn values_outside_the_physical_range_name_file_line_and_column() {
+    let e = first_error(&format!("{HEAD}0,1,2,3,20,\n1,1,2,3,1e308,\n"));
+    assert_eq!((e.line, e.column.clone()), (5, Some((5, "temp_C".to_string()))));
+    assert_eq!(
+        e.to_string(),
+        "bad.csv:5: column 5 `temp_C`: `1e308` is outside the physical range -100 … 200 °C (a logger fault or a bad edit)"
+    );
+    let e = first_error(&format!("{HEAD}0,1,-100.01,3,20,\n"));
+    assert_eq!(e.column.unwrap().1, "uy_V");
+    let e = first_error("t_s,ux_V,uy_V,uz_V,temp_C,fz_g,chamber_C\n0,1,2,3,20,1,-101\n");
+    assert_eq!(e.column.unwrap().1, "chamber_C");
+    let e = first_error("t_s,ux_V,uy_V,uz_V,temp_C,fz_g\n0,1,2,3,20,-1000.5\n");
+    assert_eq!(e.column.unwrap().1, "fz_g");
+    // The limits themselves are values.
+    let r =
+        Reader::new(Cursor::new(format!("{HEAD}0,100,-100,0,200,\n1,0,0,0,-100,\n").into_bytes()), "ok.csv").unwrap();
+    assert_eq!(r.count(), 2);
+}
+
+#[test]
+fn a_cut_off_last_line_is_an_error_a_byte_order_mark_is_skipped() {
+    // No line break at the end and fewer cells than the header: cut off.
+    let e = first_error(&format!("{HEAD}0,1,2,3,20,TP1\n1,1,2,3"));
+    assert_eq!((e.kind.clone(), e.line), (ErrorKind::CutOff { expected: 6, got: 4 }, 5));
+    assert!(e.to_string().starts_with("bad.csv:5: last line cut off: 4 cells, the header has 6"), "{e}");
+    // Also when only optional cells are missing (a complete short row has its line break).
+    let e = first_error(&format!("{HEAD}0,1,2,3,20"));
+    assert_eq!(e.kind, ErrorKind::CutOff { expected: 6, got: 5 });
+    // A complete last row without a line break is a row.
+    let r = Reader::new(Cursor::new(format!("{HEAD}0,1,2,3,20,TP1").into_bytes()), "ok.csv").unwrap();
+    assert_eq!(r.count(), 1);
+    // The byte order mark of a spreadsheet export, before a comment or before the header.
+    for text in [format!("\u{feff}{HEAD}0,1,2,3,20,TP1\n"), "\u{feff}t_s,ux_V,uy_V,uz_V,temp_C\n0,1,2,3,20\n".into()] {
+        let mut r = Reader::new(Cursor::new(text.into_bytes()), "bom.csv").unwrap();
+        assert_eq!(r.header()[0], "t_s");
+        let mut row = Row::default();
+        assert!(r.read_row(&mut row).unwrap());
+        assert_eq!(row.temp_c, 20.0);
+    }
+}
+
+#[test]
+fn require_rows_refuses_a_header_only_recording() {
+    let mut r = Reader::new(Cursor::new(HEAD.as_bytes().to_vec()), "head.csv").unwrap();
+    assert!(r.next().is_none());
+    let e = r.require_rows().err().unwrap();
+    assert_eq!(e.to_string(), "head.csv: no data row after the header");
+    let mut r = Reader::new(Cursor::new(format!("{HEAD}0,1,2,3,20,\n").into_bytes()), "one.csv").unwrap();
+    assert_eq!(r.by_ref().count(), 1);
+    assert_eq!(r.rows_read(), 1);
+    r.require_rows().unwrap();
 }
 
 #[test]

@@ -60,6 +60,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 fn encode(input: &Path, output: &Path, hex: Option<&Path>, memory_x: Option<&Path>) -> anyhow::Result<()> {
+    fsio::refuse_overwriting_inputs([input].into_iter().chain(memory_x), [output].into_iter().chain(hex))?;
     let file = CalibrationFile::read(input)?;
     let bytes = file.to_blob().map_err(|e| anyhow!("{}: {e}", input.display()))?;
     let hex_text = match hex {
@@ -92,6 +93,7 @@ fn read_blob(path: &Path) -> anyhow::Result<Vec<u8>> {
 }
 
 fn decode(input: &Path, output: Option<&Path>) -> anyhow::Result<()> {
+    fsio::refuse_overwriting_inputs([input], output)?;
     let bytes = read_blob(input)?;
     let file = CalibrationFile::from_blob(&bytes).map_err(|e| anyhow!("{}: {e}", input.display()))?;
     let text = file.to_toml();

@@ -210,6 +210,10 @@ fn rms(v: &[[f64; 3]]) -> f64 {
 
 /// Runs `bins-cal calibrate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    fsio::refuse_overwriting_inputs(
+        args.tilter.iter().chain(&args.shaker).chain(&args.memory_x),
+        [&args.output].into_iter().chain(&args.blob).chain(&args.ihex),
+    )?;
     let model_arg = parse_model(&args.model)?;
     let method = parse_method(args.method, &args.form)?;
     let ve_variant = match args.ve_variant.as_str() {

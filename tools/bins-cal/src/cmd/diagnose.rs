@@ -33,6 +33,10 @@ pub struct Args {
 
 /// Runs `bins-cal diagnose`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    fsio::refuse_overwriting_inputs(
+        [&args.sim, &args.real],
+        [Some(&args.report), args.model.as_ref()].into_iter().flatten(),
+    )?;
     let t0 = std::time::Instant::now();
     let opt = Options { random_walk_mg_per_sqrt_h: args.random_walk };
     let d = diagnose_files(&args.sim, &args.real, &opt).map_err(|e| anyhow!("{e}"))?;

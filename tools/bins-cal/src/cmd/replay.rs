@@ -9,10 +9,10 @@
 
 use anyhow::{Context, bail};
 use bins_cal::calfile::{CalibrationFile, describe};
-use bins_cal::fsio::AtomicFile;
+use bins_cal::fsio::{self, AtomicFile};
 use bins_cal::recording::{Reader, Row};
 use bins_comp::replay::{self, Input, OUTPUT_BYTES, Tick, WINDOW};
-use bins_comp::{Calibration, Pipeline, Sample, Status, VibrationConfig, VibrationSource};
+use bins_comp::{Pipeline, Sample, Status, VibrationSource};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -48,6 +48,10 @@ fn parse_source(name: &str) -> Result<VibrationSource, String> {
 
 /// Runs `bins-cal replay …`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    fsio::refuse_overwriting_inputs(
+        [Some(&args.rec), args.calib.as_ref(), args.read_stream.as_ref()].into_iter().flatten(),
+        args.output.iter().chain(&args.write_stream),
+    )?;
     let mut reader = Reader::open(&args.rec)?;
     let mut row = Row::default();
     if let Some(path) = &args.write_stream {
@@ -56,6 +60,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let input = input_of(&row);
             out.writer().write_all(&input.encode()).with_context(|| path.display().to_string())?;
         }
+        reader.require_rows()?;
         return out.commit();
     }
     let Some(output) = &args.output else { bail!("--output is required") };
@@ -73,7 +78,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 bail!("{}: {} results, the recording has more rows", stream.display(), rows)
             };
             let r: &[u8; OUTPUT_BYTES] = r.try_into()?;
-            write_row(csv.writer(), row.t_s, &replay::decode_output(r))?;
+            let sample = replay::decode_output(r);
+            check_result(&sample).map_err(|e| {
+                anyhow::anyhow!("{}: result {} (byte {}): {e}", stream.display(), rows + 1, rows * OUTPUT_BYTES as u64)
+            })?;
+            write_row(csv.writer(), row.t_s, &sample)?;
             rows += 1;
         }
         if results.next().is_some() {
@@ -86,7 +95,37 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             write_row(csv.writer(), row.t_s, &tick.step(&input_of(&row), args.ve))?;
         }
     }
+    reader.require_rows()?;
     csv.commit()
+}
+
+/// Every status bit the firmware defines.
+const DEFINED_STATUS: Status = Status(
+    Status::TEMP_CLAMPED.0
+        | Status::NONFINITE_INPUT.0
+        | Status::INVALID_CALIBRATION.0
+        | Status::SINGULAR_AT_TEMP.0
+        | Status::VIBRATION_ESTIMATE_NOT_READY.0
+        | Status::VIBRATION_OUT_OF_RANGE.0
+        | Status::OVERRUN.0
+        | Status::SENSOR_FAULT.0,
+);
+
+/// What the firmware can write as one result: finite accelerations (it writes zero, flagged,
+/// for a result that is not) and only the status bits it defines. Anything else is not its
+/// output stream (another file, or a corrupted one).
+fn check_result(s: &Sample<f32>) -> Result<(), String> {
+    let undefined = s.status.0 & !DEFINED_STATUS.0;
+    if undefined != 0 {
+        return Err(format!(
+            "status 0x{:08x} has bits the firmware does not define (0x{undefined:08x}): not a replay output stream",
+            s.status.0
+        ));
+    }
+    if let Some(a) = s.accel_g.iter().find(|a| !a.is_finite()) {
+        return Err(format!("acceleration {a} is not finite: not a replay output stream"));
+    }
+    Ok(())
 }
 
 /// The `f32` input of one row, as the firmware receives it.
@@ -104,20 +143,16 @@ fn write_row(w: &mut impl Write, t_s: f64, s: &Sample<f32>) -> std::io::Result<(
 }
 
 /// The `f32` calibration and vibration-error model of a blob or (by its `.toml` extension) a
-/// calibration file: the pipeline the firmware builds from the same blob.
+/// calibration file: the pipeline the firmware builds from the same blob. A calibration file
+/// is encoded into its blob first ([`CalibrationFile::read_checked`]), so both containers
+/// pass the same checks and the firmware's parser.
 pub fn load_pipeline(path: &Path) -> anyhow::Result<Pipeline<f32>> {
     let err = |e: String| anyhow::anyhow!("{}: {e}", path.display());
-    if path.extension().is_some_and(|e| e == "toml") {
-        let file = CalibrationFile::read(path)?;
-        let (params, _) = file.to_params().map_err(|e| err(e.to_string()))?;
-        let cal = Calibration::new(&params).map_err(|e| err(e.to_string()))?;
-        let vib = match file.to_vibration().map_err(|e| err(e.to_string()))? {
-            Some(p) => VibrationConfig::new(&p).map_err(|e| err(e.to_string()))?,
-            None => VibrationConfig::none(),
-        };
-        return Ok(Pipeline::new(cal, vib));
-    }
-    let bytes = std::fs::read(path).with_context(|| path.display().to_string())?;
+    let bytes = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml")) {
+        CalibrationFile::read_checked(path)?.1
+    } else {
+        std::fs::read(path).with_context(|| path.display().to_string())?
+    };
     let parsed = bins_comp::blob::parse(&bytes).map_err(|e| err(describe(&e)))?;
     let (cal, vib) = parsed.configs::<f32>().map_err(|e| err(describe(&e)))?;
     Ok(Pipeline::new(cal, vib))

@@ -24,6 +24,7 @@ pub struct Args {
 
 /// Runs `bins-cal simulate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    bins_cal::fsio::refuse_overwriting_inputs([&args.scenario], [&args.output])?;
     let sim = scenario::load(&args.scenario)?;
     let name =
         args.scenario.file_name().map_or_else(|| args.scenario.display().to_string(), |n| n.to_string_lossy().into());

@@ -129,6 +129,7 @@ pub fn tempco_json(points: &[(f64, bins_comp::Constants<f64>)], t0_c: f64, spec:
 
 /// Runs `bins-cal tempco`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    fsio::refuse_overwriting_inputs([&args.constants], &args.json)?;
     let spec: ModelSpec = args.model.parse()?;
     let points = constants_table::read(&args.constants)?;
     let out = tempco_json(&points, args.t0, spec).with_context(|| format!("{}", args.constants.display()))?;

@@ -144,7 +144,11 @@ impl Replayed {
 
 /// Runs `bins-cal verify`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let file = CalibrationFile::read(&args.calib)?;
+    fsio::refuse_overwriting_inputs(
+        args.check.iter().chain(&args.replayed).chain([&args.calib]),
+        ["verify.csv", "verify.png"].map(|f| args.output.join(f)),
+    )?;
+    let (file, _) = CalibrationFile::read_checked(&args.calib)?;
     let (params, _) = file.to_params().map_err(|e| anyhow!("{}: {e}", args.calib.display()))?;
     let cals: Vec<Calibration<f64>> = METHODS
         .iter()
