@@ -390,7 +390,8 @@ impl Xtask {
     /// `cargo xtask bench`: instructions per sample of each method/model case, the worst
     /// single step and the step's stack high-water mark (the `bench` firmware in QEMU,
     /// `-icount shift=0`), flash and static RAM of the replay firmware, the link-check image
-    /// and the flight image (`llvm-size`), and the host's samples per second (criterion).
+    /// and the flight image (`llvm-size`), the host's samples per second (criterion), and the
+    /// diagnosis's wall time on 30 000- and 260 000-row pairs against its budgets.
     fn bench(&mut self) -> bool {
         let started = Instant::now();
         let ok = self.step(1, "toolchain", Xtask::setup_toolchain)
@@ -421,6 +422,9 @@ impl Xtask {
             })
             && self.step(5, "host samples per second (criterion)", |x| {
                 x.run(x.host_cargo(["bench", "-p", "host-tests", "--bench", "throughput"]))
+            })
+            && self.step(6, "bins-cal diagnose: 30 000 rows < 2 s, 260 000 rows < 10 s (release, one thread)", |x| {
+                x.run(x.host_cargo(["run", "--release", "-q", "-p", "bins-cal", "--example", "diagnose_speed"]))
             });
         self.summary(started);
         ok

@@ -196,9 +196,62 @@ proptest! {
             _ => lines.insert(li, text.clone()),
         }
         std::fs::write(&rp, lines.join("\n") + "\n").unwrap();
-        if let Err(e) = diagnose_files(&sp, &rp) {
+        if let Err(e) = diagnose_files(&sp, &rp, &Default::default()) {
             prop_assert!(!e.0.contains('\n'), "{}", e.0);
             prop_assert!(!e.0.is_empty());
         }
     }
+}
+
+/// `simulate --follow` writes the twin's prediction of a recording; `diagnose --calib` runs
+/// against what a calibration file predicts; `--sim` and `--calib` exclude each other and one
+/// is required.
+#[test]
+fn follow_and_calib_give_a_sim_for_a_real_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, rp) = pair(dir.path(), "thermal_lag", 3_000);
+    let scen = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/test-tilter-3t.toml");
+    let followed = dir.path().join("followed.csv");
+    let out = bins_cal().arg("simulate").arg("--follow").arg(&rp).arg(&scen).arg("-o").arg(&followed).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (_, real) = bins_cal::recording::read_all(&rp).unwrap();
+    let (_, sim) = bins_cal::recording::read_all(&followed).unwrap();
+    assert_eq!(real.len(), sim.len());
+    assert!(sim.iter().zip(&real).all(|(s, r)| s.t_s == r.t_s && s.f_g == r.f_g && s.temp_c == r.temp_c));
+    assert!(sim.iter().zip(&real).any(|(s, r)| s.u_v != r.u_v), "signals predicted, not copied");
+
+    let cal = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../calibrations/paper-two-range.toml");
+    let rep = dir.path().join("r.json");
+    let out = bins_cal()
+        .args(["diagnose", "--calib"])
+        .arg(&cal)
+        .arg("--real")
+        .arg(&rp)
+        .arg("--report")
+        .arg(&rep)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    assert!(report["sim"].as_str().unwrap().contains("predicted by"), "{}", report["sim"]);
+
+    let both = bins_cal()
+        .args(["diagnose", "--calib"])
+        .arg(&cal)
+        .arg("--sim")
+        .arg(&followed)
+        .arg("--real")
+        .arg(&rp)
+        .arg("--report")
+        .arg(&rep)
+        .output()
+        .unwrap();
+    assert!(!both.status.success());
+    let neither = bins_cal().args(["diagnose", "--real"]).arg(&rp).arg("--report").arg(&rep).output().unwrap();
+    assert!(!neither.status.success());
+    assert!(
+        String::from_utf8_lossy(&neither.stderr).contains("--calib"),
+        "{}",
+        String::from_utf8_lossy(&neither.stderr)
+    );
 }

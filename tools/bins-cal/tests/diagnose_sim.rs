@@ -77,3 +77,30 @@ fn simulator_die_lag_is_found_and_noise_alone_is_not() {
     assert!(d0.report.effects.is_empty(), "{:?}", d0.report.effects);
     assert!(d0.report.ambiguous.is_empty(), "{:?}", d0.report.ambiguous);
 }
+
+/// SIM for a real recording: the twin without die lag follows REAL (its reference,
+/// thermistor reading and power-on time, row for row: `bins-cal simulate --follow`), and the
+/// diagnosis of REAL against it finds the die lag the twin does not have, and nothing else.
+#[test]
+fn the_twin_following_a_recording_reveals_its_die_lag() {
+    let text = scenario(0.0, false);
+    let twin = ScenarioFile::parse(&text, Path::new("test.toml")).unwrap().build(Path::new("test.toml")).unwrap();
+    let real = rows(&scenario(150.0, true), 2);
+    let sim = twin.follow(&real);
+    assert_eq!(sim.len(), real.len());
+    assert!(sim.iter().zip(&real).all(|(s, r)| s.t_s == r.t_s && s.temp_c == r.temp_c && s.f_g == r.f_g));
+    let d = diagnose(&sim, &real, Path::new("sim"), Path::new("real")).unwrap();
+    let r = &d.report;
+    println!(
+        "followed pair: effects {:?}, ambiguous {:?}",
+        r.effects.iter().map(|e| (&e.id, &e.axes, &e.params)).collect::<Vec<_>>(),
+        r.ambiguous.iter().map(|a| (&a.ids, &a.axes)).collect::<Vec<_>>()
+    );
+    let named: Vec<&str> = r.effects.iter().map(|e| e.id.as_str()).collect();
+    assert_eq!(named, ["thermal_lag"], "{:?}", r.effects);
+    assert_eq!(r.effects[0].axes, ["x", "y", "z"]);
+    for ax in ["x", "y", "z"] {
+        let tau = r.effects[0].params[ax]["tau_s"];
+        assert!((tau / 150.0 - 1.0).abs() < 0.25, "{ax}: τ = {tau}");
+    }
+}

@@ -3,7 +3,8 @@
 //! scored; the scorecard is printed (`cargo test -p bins-cal --release --test diagnose_suite
 //! -- --nocapture`). Asserts: every case identified exactly (no missing, no extra mechanism,
 //! ambiguous groups as expected), no discovery on the null cases, held-out RMS down to the
-//! noise floor (within 25 %) or at least 3× smaller, parameters within 20 %.
+//! noise model's level (within 25 % of the white floor and the drift combined) or at least 3×
+//! smaller, parameters within 20 %.
 
 use bins_cal::diagnose::{cases, diagnose};
 use std::path::Path;

@@ -3,7 +3,7 @@
 //! method is in `docs/diagnosis.md`.
 
 use anyhow::{Context, anyhow};
-use bins_cal::diagnose::{Options, diagnose_files, plot};
+use bins_cal::diagnose::{DiagnoseError, Options, diagnose_against_calibration, diagnose_files, plot};
 use bins_cal::fsio;
 use std::path::PathBuf;
 
@@ -11,8 +11,12 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// The simulated recording (format v1).
-    #[arg(long, value_name = "SIM.csv")]
-    sim: PathBuf,
+    #[arg(long, value_name = "SIM.csv", required_unless_present = "calib", conflicts_with = "calib")]
+    sim: Option<PathBuf>,
+    /// Instead of SIM: the unit's calibration file; SIM is what it predicts for REAL's
+    /// reference, temperature and time, row for row.
+    #[arg(long, value_name = "CAL.toml")]
+    calib: Option<PathBuf>,
     /// The real recording of the same test, row for row.
     #[arg(long, value_name = "REAL.csv")]
     real: PathBuf,
@@ -34,12 +38,17 @@ pub struct Args {
 /// Runs `bins-cal diagnose`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     fsio::refuse_overwriting_inputs(
-        [&args.sim, &args.real],
+        [args.sim.as_ref(), args.calib.as_ref(), Some(&args.real)].into_iter().flatten(),
         [Some(&args.report), args.model.as_ref()].into_iter().flatten(),
     )?;
     let t0 = std::time::Instant::now();
     let opt = Options { random_walk_mg_per_sqrt_h: args.random_walk };
-    let d = diagnose_files(&args.sim, &args.real, &opt).map_err(|e| anyhow!("{e}"))?;
+    let d = match (&args.sim, &args.calib) {
+        (Some(sim), _) => diagnose_files(sim, &args.real, &opt),
+        (None, Some(calib)) => diagnose_against_calibration(&args.real, calib, &opt),
+        (None, None) => Err(DiagnoseError("give --sim SIM.csv or --calib CAL.toml".into())),
+    }
+    .map_err(|e| anyhow!("{e}"))?;
     let r = &d.report;
     let json = serde_json::to_string_pretty(r).context("report")?;
     fsio::write_atomic(&args.report, json.as_bytes())?;
@@ -98,13 +107,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             g(&r.random_walk_mg_per_sqrt_h),
         );
     }
-    for (title, strata) in [("mismatch located", &r.located), ("unexplained structure located", &r.unexplained_located)] {
+    for (title, strata) in [("mismatch located", &r.located), ("unexplained structure located", &r.unexplained_located)]
+    {
         let shown: Vec<_> = strata
             .iter()
             .filter(|s| r.verdict.get(&s.axis).is_some_and(|v| v != "at the noise" && v != "explained"))
             .take(6)
             .collect();
-        if shown.is_empty() || (title.starts_with("unexplained") && r.verdict.values().all(|v| v != "unexplained" && v != "partly explained")) {
+        if shown.is_empty()
+            || (title.starts_with("unexplained")
+                && r.verdict.values().all(|v| v != "unexplained" && v != "partly explained"))
+        {
             continue;
         }
         println!("{title} (strongest {} of {}):", shown.len(), strata.len());

@@ -2,6 +2,10 @@
 //! ([`bins_cal::sim`]) on a scenario file and writes the recording (format v1) in a stream,
 //! to a temporary file renamed into place at the end, with a progress bar on standard error.
 //! The same scenario and seed give the same file, bit for bit.
+//!
+//! `bins-cal simulate --follow REAL.csv SCENARIO.toml -o SIM.csv`: instead of the scenario's
+//! rig program, the scenario's unit follows a real recording row for row
+//! ([`Simulation::follow`](bins_cal::sim::Simulation::follow)): a SIM for `bins-cal diagnose`.
 
 use bins_cal::sim::scenario;
 use std::path::PathBuf;
@@ -20,12 +24,33 @@ pub struct Args {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+    /// Predict this real recording row for row (its reference, temp_C and power_s) with the
+    /// scenario's unit, instead of running the scenario's rig program.
+    #[arg(long, value_name = "REAL.csv")]
+    follow: Option<PathBuf>,
 }
 
 /// Runs `bins-cal simulate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    bins_cal::fsio::refuse_overwriting_inputs([&args.scenario], [&args.output])?;
+    bins_cal::fsio::refuse_overwriting_inputs(
+        [Some(&args.scenario), args.follow.as_ref()].into_iter().flatten(),
+        [&args.output],
+    )?;
     let sim = scenario::load(&args.scenario)?;
+    if let Some(real) = &args.follow {
+        let (_, rows) = bins_cal::recording::read_all(real)?;
+        if rows.is_empty() {
+            anyhow::bail!("{}: no data row to follow", real.display());
+        }
+        let n = sim.write_follow(&rows, &real.display().to_string(), &args.output)?;
+        eprintln!(
+            "{}: {n} rows predicted for {} by the unit of {}",
+            args.output.display(),
+            real.display(),
+            args.scenario.display()
+        );
+        return Ok(());
+    }
     let name =
         args.scenario.file_name().map_or_else(|| args.scenario.display().to_string(), |n| n.to_string_lossy().into());
     let rows = sim.write(&name, args.seed, &args.output, !args.quiet)?;

@@ -10,11 +10,13 @@
 //!    mechanisms the data cannot separate.
 //! 5. [`report`]: the JSON report and the augmented model; [`plot`]: PNGs.
 //!
-//! [`cases`] generates the concealed-effect cases of the proof suite. The method is described
+//! [`follow`] predicts SIM for a real recording from a calibration. [`cases`] generates the
+//! concealed-effect cases of the proof suite. The method is described
 //! in `docs/diagnosis.md`.
 
 pub mod cases;
 pub mod fit;
+pub mod follow;
 pub mod locate;
 pub mod mech;
 pub mod noise;
@@ -101,6 +103,17 @@ pub fn diagnose_with(
     let input = report::Inputs { sim: sim_name, real: real_name, opt, nuisance: &nuisance };
     let report = report::build(&p, &axes, &sensitivity, floor, located, unexplained_located, &input);
     Ok(Diagnosis { prepared: p, sensitivity, axes, report })
+}
+
+/// Reads REAL and diagnoses it against what the calibration `calib` predicts for it
+/// ([`follow::predict`]); the calibration is checked as the firmware checks it.
+pub fn diagnose_against_calibration(real: &Path, calib: &Path, opt: &Options) -> Result<Diagnosis, DiagnoseError> {
+    let (file, _) = crate::calfile::CalibrationFile::read_checked(calib).map_err(|e| DiagnoseError(e.to_string()))?;
+    let (params, _) = file.to_params().map_err(|e| DiagnoseError(format!("{}: {e}", calib.display())))?;
+    let (_, r) = read_all(real).map_err(|e| DiagnoseError(e.to_string()))?;
+    let s = follow::predict(&r, &params);
+    let sim_name = format!("{} (predicted by {})", real.display(), calib.display());
+    diagnose_with(&s, &r, Path::new(&sim_name), real, opt)
 }
 
 /// Reads both recordings (errors name file, line and column) and diagnoses them.

@@ -191,7 +191,8 @@ fn ls_fit(y: &[f64], xs: &[Vec<f64>]) -> (f64, Vec<f64>, f64, usize) {
         beta[c] = sol.0[u] / norms[c];
         fit += sol.0[u] * dot(&xs[c], y) / norms[c];
     }
-    let log_det = chol_logdet(&gram, keep.len()).unwrap_or(0.0) + keep.iter().map(|&c| 2.0 * norms[c].ln()).sum::<f64>();
+    let log_det =
+        chol_logdet(&gram, keep.len()).unwrap_or(0.0) + keep.iter().map(|&c| 2.0 * norms[c].ln()).sum::<f64>();
     ((yy - fit).max(0.0), beta, log_det, keep.len())
 }
 
@@ -243,7 +244,7 @@ pub fn short_tau_q(segs: &[&[f64]], dt: f64) -> Option<(f64, f64)> {
         .into_iter()
         .filter_map(|(m, h, n)| {
             let n_indep = n as f64 / m as f64;
-            (n_indep >= 8.0 && h > 0.0).then(|| (m as f64 * dt, h, n_indep))
+            (n_indep >= 8.0 && h > 0.0).then_some((m as f64 * dt, h, n_indep))
         })
         .collect();
     if pts.len() < 3 {

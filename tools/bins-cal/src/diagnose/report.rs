@@ -3,8 +3,8 @@
 use super::fit::AxisFit;
 use super::locate::Stratum;
 use super::mech::{Mech, Sensitivity, separating_test};
-use super::prep::{AXES, Prepared};
 use super::noise::short_tau_q;
+use super::prep::{AXES, Prepared};
 use super::stats::allan_dev;
 use serde::Serialize;
 use std::collections::BTreeMap;

@@ -76,6 +76,58 @@ impl Simulation {
         RowGen::new(self, seed)
     }
 
+    /// Writes [`follow`](Self::follow)'s rows to `output` (atomically), with REAL's columns
+    /// (columns the format does not define are dropped).
+    pub fn write_follow(&self, real: &[Row], real_name: &str, output: &Path) -> anyhow::Result<u64> {
+        let comments = [
+            format!("recording format v1 -- predicted by {}", crate::TOOL_VERSION),
+            format!("the scenario's unit following {real_name} row for row (reference, temp_C, power_s; no noise)"),
+        ];
+        let refs: Vec<&str> = comments.iter().map(String::as_str).collect();
+        let columns = Columns {
+            reference: true,
+            chamber: real.iter().any(|r| r.chamber_c.is_some()),
+            pos: real.iter().any(|r| r.pos.is_some()),
+            power: real.iter().any(|r| r.power_s.is_some()),
+            extra: Vec::new(),
+        };
+        let mut file = AtomicFile::create(output)?;
+        let mut w = Writer::new(file.writer(), output, columns, &refs)?;
+        let mut k = 0u64;
+        for mut row in self.follow(real) {
+            row.extra.clear();
+            w.write_row(&row)?;
+            k += 1;
+        }
+        w.finish()?;
+        file.commit()?;
+        Ok(k)
+    }
+
+    /// The twin's prediction of a real recording, row for row (`bins-cal simulate --follow`):
+    /// the unit at REAL's `temp_C` (the thermistor's reading taken as the constants'
+    /// temperature: no lag, no self-heating), REAL's reference specific force and vibration
+    /// (rectified through the unit's V(2)), and REAL's `power_s` (or the scenario's power-on
+    /// time plus `t_s`) for the warm-up; no noise. REAL's other cells are kept, so the pair
+    /// matches row for row; rows whose reference is not known keep REAL's signals (the
+    /// diagnosis skips them). The scenario's rig program and thermal chain are not used.
+    pub fn follow(&self, real: &[Row]) -> Vec<Row> {
+        real.iter()
+            .map(|r| {
+                let mut row = r.clone();
+                let vib = if r.vib_kind.is_none() { Some(Vibration::None) } else { r.vibration() };
+                let (Some(f), Some(vib)) = (r.reference_f_g(), vib) else { return row };
+                if !r.temp_c.is_finite() {
+                    return row;
+                }
+                let rect_g = rectify::rectified_g(&self.unit.cf, &f, &vib);
+                let power_s = r.power_s.unwrap_or(self.power_on_s + r.t_s);
+                row.u_v = self.unit.signals_v(r.temp_c, &f, &[0.0; 3], &rect_g, power_s);
+                row
+            })
+            .collect()
+    }
+
     /// Writes the recording of `sim` for `seed` to `output` atomically; returns the row count.
     pub fn write(&self, scenario_name: &str, seed: u64, output: &Path, progress: bool) -> anyhow::Result<u64> {
         let mut comments = vec![

@@ -1,0 +1,44 @@
+//! Speed of `bins-cal diagnose` (run by `cargo xtask bench`): wall time of the diagnosis of
+//! pairs of 30 000 and 260 000 rows, in release, on one core, against the budgets of 2 s and
+//! 10 s. The pairs are the proof suite's cases (`warmup`: all four θ-mechanisms searched on
+//! three axes; `lag_plus_asymmetry`: the thermal and V(2) terms, vibration on) lengthened;
+//! generating them is not timed. Exits non-zero when a budget is missed.
+//!
+//! `cargo run --release -p bins-cal --example diagnose_speed`
+
+use bins_cal::diagnose::{cases, diagnose};
+use std::path::Path;
+use std::time::Instant;
+
+fn main() {
+    let mut missed = false;
+    for (rows, budget_s) in [(30_000usize, 2.0), (260_000, 10.0)] {
+        for name in ["warmup", "lag_plus_asymmetry"] {
+            let Some(mut case) = cases::suite().into_iter().find(|c| c.name == name) else {
+                eprintln!("no suite case {name}");
+                std::process::exit(2);
+            };
+            case.plan.rows = rows;
+            let (sim, real) = cases::generate(&case);
+            let t0 = Instant::now();
+            let d = match diagnose(&sim, &real, Path::new("sim"), Path::new("real")) {
+                Ok(d) => d,
+                Err(e) => {
+                    eprintln!("{name}: {e}");
+                    std::process::exit(2);
+                }
+            };
+            let secs = t0.elapsed().as_secs_f64();
+            let ok = secs < budget_s;
+            missed |= !ok;
+            let named: Vec<&str> = d.report.effects.iter().map(|e| e.id.as_str()).collect();
+            println!(
+                "diagnosis of {rows:>7} rows ({name:<18}): {secs:6.2} s (budget {budget_s} s: {}); named {named:?}",
+                if ok { "met" } else { "MISSED" }
+            );
+        }
+    }
+    if missed {
+        std::process::exit(1);
+    }
+}
