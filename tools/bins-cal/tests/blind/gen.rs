@@ -265,6 +265,15 @@ pub struct Case {
     pub rate_hz: f64,
     /// Dwell per position \[s\].
     pub dwell_s: f64,
+    /// Temperature at which the concealed tempco terms (`scale_temp`, `cross_coupling_temp`,
+    /// `bias_temp_order`) vanish [°C]: SIM's calibration temperature [`T_REF_C`] unless
+    /// `BLIND_ANCHOR_C` says otherwise (20 °C = the library's own reference).
+    pub anchor_c: f64,
+}
+
+/// The anchor of the concealed tempco terms: `BLIND_ANCHOR_C` or [`T_REF_C`].
+pub fn anchor_c() -> f64 {
+    std::env::var("BLIND_ANCHOR_C").ok().and_then(|v| v.parse().ok()).unwrap_or(T_REF_C)
 }
 
 fn log_uniform(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
@@ -398,6 +407,7 @@ impl Case {
             rows,
             rate_hz,
             dwell_s,
+            anchor_c: anchor_c(),
         }
     }
 }
@@ -691,7 +701,7 @@ pub fn generate(c: &Case) -> (Vec<Row>, Vec<Row>, Truth) {
     // The mechanism's contribution per accelerometer, in V, before scaling.
     let kd = [unit.k[0][0], unit.k[1][1], unit.k[2][2]];
     let mut contrib = vec![[0.0f64; 3]; n];
-    let d: Vec<f64> = temp.iter().map(|x| x - T_REF_C).collect();
+    let d: Vec<f64> = temp.iter().map(|x| x - c.anchor_c).collect();
     let mut per_axis = [[0.0f64; 3]; 3]; // per-axis random coefficient shapes
     for row in per_axis.iter_mut() {
         for v in row.iter_mut() {

@@ -310,7 +310,8 @@ pub fn summarize(res: &[CaseResult]) -> Summary {
         s.secs = (times[times.len() / 2], times[times.len() - 1]);
     }
     let mut w = String::new();
-    let _ = writeln!(w, "blind scorecard ({} cases)", res.len());
+    let anchor = res.first().map_or(f64::NAN, |r| r.case.anchor_c);
+    let _ = writeln!(w, "blind scorecard ({} cases; concealed tempcos anchored at {anchor} °C)", res.len());
     let _ = writeln!(
         w,
         "{:<20} {:>5} {:>12} {:>12} {:>10}  outcomes; false names",
@@ -459,13 +460,14 @@ pub fn plot(res: &[CaseResult], dir: &Path) -> Result<PathBuf, String> {
             .margin(12)
             .x_label_area_size(44)
             .y_label_area_size(60)
-            .right_y_label_area_size(10)
             .build_cartesian_2d((0.5f64..20.0).log_scale(), -0.02f64..1.02)
             .map_err(|e| e.to_string())?;
         chart
             .configure_mesh()
             .x_desc("effect size: RMS of the concealed contribution / white noise σ")
             .y_desc("probability named exactly")
+            .light_line_style(RGBColor(238, 238, 238))
+            .x_label_formatter(&|x| if *x < 1.0 { format!("{x:.1}") } else { format!("{x:.0}") })
             .label_style(("sans-serif", 14))
             .draw()
             .map_err(|e| e.to_string())?;
