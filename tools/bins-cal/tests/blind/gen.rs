@@ -1,0 +1,888 @@
+//! Blind case generator: SIM/REAL recording pairs with at most one concealed mechanism,
+//! written from `physics.md` without any of the library's code (no `bins_cal::diagnose`, no
+//! `bins_cal::sim`, no core formulas): its own 12-constant unit, its own temperature model,
+//! its own forms of every mechanism, deliberately different in detail from the regressors the
+//! diagnosis fits (second-order thermal lag, a two-exponential warm-up, quartic or exponential
+//! bias terms, quadratic cross-coupling tempcos, a rotation of the input, …).
+//!
+//! SIM is the ideal temperature model evaluated at the thermistor reading; REAL is the same unit
+//! at the true temperature, plus one mechanism (or none), plus white noise and optionally a
+//! random walk of the bias. Every draw comes from one ChaCha8 stream seeded by the case seed.
+
+use bins_cal::recording::{Row, VibKind};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+/// Reference temperature of the unit's temperature model [°C] (not the library's 20 °C).
+pub const T_REF_C: f64 = 25.0;
+
+/// Thermistor white noise [°C].
+pub const THERMISTOR_SIGMA_C: f64 = 0.003;
+
+/// Mechanism ids the generator can conceal (the library's ids).
+pub const MECH_IDS: [&str; 13] = [
+    "thermal_lag",
+    "thermal_hysteresis",
+    "bias_hysteresis",
+    "self_heating",
+    "warmup",
+    "bias_temp_order",
+    "scale_temp",
+    "cross_coupling_temp",
+    "cross_axis",
+    "scale_factor",
+    "sf_asymmetry",
+    "nonlinearity_k2",
+    "nonlinearity_k3",
+];
+
+/// The concealed mechanism and its physical parameters (before scaling to the drawn size).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Mech {
+    /// Nothing concealed.
+    None,
+    /// The sensing element follows the thermistor through two cascaded first-order stages.
+    ThermalLag {
+        /// First (case) stage time constant \[s\].
+        tau1_s: f64,
+        /// Second (die) stage time constant \[s\].
+        tau2_s: f64,
+    },
+    /// The temperature reaching the sensitivity goes through a play (backlash).
+    ThermalHysteresis {
+        /// Play width [°C].
+        width_c: f64,
+    },
+    /// An additive bias play: `a_i·(play_w(T) − T)/(w/2)`, not through the sensitivity.
+    BiasHysteresis {
+        /// Play width [°C].
+        width_c: f64,
+    },
+    /// The die heats after power-on: `T + rise·(1 − 0.8 e^(−P/τ) − 0.2 e^(−4P/τ))`.
+    SelfHeating {
+        /// Main time constant \[s\].
+        tau_s: f64,
+    },
+    /// Turn-on bias transient: `A_i·(0.65 e^(−P/τ) + 0.35 e^(−6P/τ))`.
+    Warmup {
+        /// Main time constant \[s\].
+        tau_s: f64,
+    },
+    /// A bias temperature term of a shape SIM lacks.
+    BiasTempOrder {
+        /// 0: quadratic, 1: cubic, 2: quartic, 3: `e^(ΔT/θ)`.
+        shape: u8,
+        /// θ of the exponential [°C].
+        theta_c: f64,
+    },
+    /// Scale-factor tempco `f_i·(s1 ΔT + s2 ΔT²)` with a random mix of the two.
+    ScaleTemp {
+        /// Weight of the quadratic term (0 = linear only).
+        quad_mix: f64,
+    },
+    /// Cross-sensitivity tempco `f_j·ΔT` (linear) or `f_j·ΔT²` (quadratic).
+    CrossCouplingTemp {
+        /// Quadratic in ΔT.
+        quadratic: bool,
+    },
+    /// Misalignment: the input is rotated and skewed, `f' = (I + E) f`, E off-diagonal.
+    CrossAxis,
+    /// Scale factor error `ε f_i`.
+    ScaleFactor,
+    /// Scale-factor asymmetry, static part `0.5 δ |f_i|`.
+    SfAsymmetry,
+    /// Second-order nonlinearity `k2 f_i²`.
+    K2,
+    /// Third-order nonlinearity `k3 f_i³`.
+    K3,
+}
+
+impl Mech {
+    /// The library id, or `none`.
+    pub fn id(&self) -> &'static str {
+        match self {
+            Mech::None => "none",
+            Mech::ThermalLag { .. } => "thermal_lag",
+            Mech::ThermalHysteresis { .. } => "thermal_hysteresis",
+            Mech::BiasHysteresis { .. } => "bias_hysteresis",
+            Mech::SelfHeating { .. } => "self_heating",
+            Mech::Warmup { .. } => "warmup",
+            Mech::BiasTempOrder { .. } => "bias_temp_order",
+            Mech::ScaleTemp { .. } => "scale_temp",
+            Mech::CrossCouplingTemp { .. } => "cross_coupling_temp",
+            Mech::CrossAxis => "cross_axis",
+            Mech::ScaleFactor => "scale_factor",
+            Mech::SfAsymmetry => "sf_asymmetry",
+            Mech::K2 => "nonlinearity_k2",
+            Mech::K3 => "nonlinearity_k3",
+        }
+    }
+
+    /// Parameters as text (units in the names).
+    pub fn params(&self) -> String {
+        match self {
+            Mech::ThermalLag { tau1_s, tau2_s } => format!("tau1_s={tau1_s:.0} tau2_s={tau2_s:.0}"),
+            Mech::ThermalHysteresis { width_c } | Mech::BiasHysteresis { width_c } => {
+                format!("width_c={width_c:.2}")
+            }
+            Mech::SelfHeating { tau_s } | Mech::Warmup { tau_s } => format!("tau_s={tau_s:.0}"),
+            Mech::BiasTempOrder { shape, theta_c } => match *shape {
+                0 => "shape=dT2".into(),
+                1 => "shape=dT3".into(),
+                2 => "shape=dT4".into(),
+                _ => format!("shape=exp theta_c={theta_c:.1}"),
+            },
+            Mech::ScaleTemp { quad_mix } => format!("quad_mix={quad_mix:.2}"),
+            Mech::CrossCouplingTemp { quadratic } => {
+                if *quadratic {
+                    "quadratic".into()
+                } else {
+                    "linear".into()
+                }
+            }
+            _ => String::new(),
+        }
+    }
+
+    fn needs_temperature_change(&self) -> bool {
+        matches!(
+            self,
+            Mech::ThermalLag { .. }
+                | Mech::ThermalHysteresis { .. }
+                | Mech::BiasHysteresis { .. }
+                | Mech::BiasTempOrder { .. }
+                | Mech::ScaleTemp { .. }
+                | Mech::CrossCouplingTemp { .. }
+        )
+    }
+
+    fn needs_positions(&self) -> bool {
+        matches!(
+            self,
+            Mech::ScaleTemp { .. }
+                | Mech::CrossCouplingTemp { .. }
+                | Mech::CrossAxis
+                | Mech::ScaleFactor
+                | Mech::SfAsymmetry
+                | Mech::K2
+                | Mech::K3
+        )
+    }
+
+    fn needs_power_on(&self) -> bool {
+        matches!(self, Mech::SelfHeating { .. } | Mech::Warmup { .. })
+    }
+
+    /// One scale for the three accelerometers (the mechanism acts through the common
+    /// temperature), rather than an amplitude per accelerometer.
+    fn common(&self) -> bool {
+        matches!(self, Mech::ThermalLag { .. } | Mech::ThermalHysteresis { .. } | Mech::SelfHeating { .. })
+    }
+}
+
+/// Thermal profile of the unit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Profile {
+    /// Constant temperature (chamber regulation wander of ±0.05 °C).
+    Constant,
+    /// Ramps between two levels with holds, at 1–3 rates.
+    RampsHolds {
+        /// Number of rates.
+        rates: u8,
+    },
+    /// Triangle(s) without holds.
+    Triangle,
+    /// Chamber sweep ~50 → −20 → 70 → 35 °C, unit lagging the chamber.
+    Sweep,
+}
+
+impl Profile {
+    /// Name for the tables.
+    pub fn name(&self) -> String {
+        match self {
+            Profile::Constant => "constant".into(),
+            Profile::RampsHolds { rates } => format!("ramps{rates}"),
+            Profile::Triangle => "triangle".into(),
+            Profile::Sweep => "sweep".into(),
+        }
+    }
+}
+
+/// Rig positions.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Positions {
+    /// One orientation for the whole record.
+    One,
+    /// The six tilter positions TP1..TP6, cycled.
+    Six,
+    /// TP1..TP6 and six tilted check positions, cycled.
+    Tilted,
+}
+
+impl Positions {
+    /// Name for the tables.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Positions::One => "one",
+            Positions::Six => "six",
+            Positions::Tilted => "tilted",
+        }
+    }
+}
+
+/// One blind case: every draw.
+#[derive(Clone, Debug)]
+pub struct Case {
+    /// Seed (the case is a function of it alone).
+    pub seed: u64,
+    /// Concealed mechanism.
+    pub mech: Mech,
+    /// Drawn effect size: RMS (about its mean) of the contribution on the strongest
+    /// accelerometer, in units of the white noise σ.
+    pub size_sigma: f64,
+    /// Relative size on each accelerometer (max 1; 0 = not applied).
+    pub axis_weight: [f64; 3],
+    /// White noise σ \[µg\].
+    pub sigma_ug: f64,
+    /// Random walk of the bias: its standard deviation at the end of the record in units of σ
+    /// (0 = off).
+    pub rw_ratio: f64,
+    /// Thermal profile.
+    pub profile: Profile,
+    /// Positions.
+    pub positions: Positions,
+    /// Whether the recordings carry `power_s`.
+    pub power_column: bool,
+    /// Power-on times \[s\] (the record starts `power_offset_s` after the first power-on when it
+    /// is not 0).
+    pub power_on_s: Vec<f64>,
+    /// `power_s` at the first row \[s\].
+    pub power_offset_s: f64,
+    /// Rows.
+    pub rows: usize,
+    /// Sample rate \[Hz\].
+    pub rate_hz: f64,
+    /// Dwell per position \[s\].
+    pub dwell_s: f64,
+    /// Temperature at which the concealed tempco terms (`scale_temp`, `cross_coupling_temp`,
+    /// `bias_temp_order`) vanish [°C]: SIM's calibration temperature [`T_REF_C`] unless
+    /// `BLIND_ANCHOR_C` says otherwise (20 °C = the library's own reference).
+    pub anchor_c: f64,
+}
+
+/// The anchor of the concealed tempco terms: `BLIND_ANCHOR_C` or [`T_REF_C`].
+pub fn anchor_c() -> f64 {
+    std::env::var("BLIND_ANCHOR_C").ok().and_then(|v| v.parse().ok()).unwrap_or(T_REF_C)
+}
+
+fn log_uniform(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
+    (lo.ln() + rng.random::<f64>() * (hi.ln() - lo.ln())).exp()
+}
+
+fn mech_of(id: &str, rng: &mut ChaCha8Rng) -> Mech {
+    match id {
+        "thermal_lag" => {
+            let tau1_s = log_uniform(rng, 30.0, 600.0);
+            Mech::ThermalLag { tau1_s, tau2_s: tau1_s * rng.random_range(0.1..0.4) }
+        }
+        "thermal_hysteresis" => Mech::ThermalHysteresis { width_c: rng.random_range(0.5..6.0) },
+        "bias_hysteresis" => Mech::BiasHysteresis { width_c: rng.random_range(0.5..6.0) },
+        "self_heating" => Mech::SelfHeating { tau_s: log_uniform(rng, 120.0, 1500.0) },
+        "warmup" => Mech::Warmup { tau_s: log_uniform(rng, 120.0, 1500.0) },
+        "bias_temp_order" => {
+            Mech::BiasTempOrder { shape: rng.random_range(0..4), theta_c: rng.random_range(15.0..40.0) }
+        }
+        "scale_temp" => Mech::ScaleTemp { quad_mix: if rng.random_bool(0.5) { 0.0 } else { rng.random::<f64>() } },
+        "cross_coupling_temp" => Mech::CrossCouplingTemp { quadratic: rng.random_bool(0.5) },
+        "cross_axis" => Mech::CrossAxis,
+        "scale_factor" => Mech::ScaleFactor,
+        "sf_asymmetry" => Mech::SfAsymmetry,
+        "nonlinearity_k2" => Mech::K2,
+        "nonlinearity_k3" => Mech::K3,
+        _ => Mech::None,
+    }
+}
+
+impl Case {
+    /// Draws a case from its seed: mechanism or none (27 %), size 0.5–20 σ (log-uniform), a
+    /// thermal profile and positions the mechanism can be seen in, random walk on or off, σ
+    /// 5–500 µg, 3 000–12 000 rows at 0.5–2 Hz.
+    pub fn draw(seed: u64) -> Case {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5EED_B11D);
+        let mech = if rng.random_bool(0.27) {
+            Mech::None
+        } else {
+            let id = MECH_IDS[rng.random_range(0..MECH_IDS.len())];
+            mech_of(id, &mut rng)
+        };
+        Self::draw_rest(seed, mech, &mut rng)
+    }
+
+    /// Draws a case with a given mechanism id (`none` for a null).
+    pub fn draw_with(seed: u64, id: &str) -> Case {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5EED_B11D);
+        let mech = mech_of(id, &mut rng);
+        Self::draw_rest(seed, mech, &mut rng)
+    }
+
+    fn draw_rest(seed: u64, mech: Mech, rng: &mut ChaCha8Rng) -> Case {
+        let size_sigma = log_uniform(rng, 0.5, 20.0);
+        let profile = if mech.needs_temperature_change() || rng.random_bool(0.8) {
+            match rng.random_range(0..3) {
+                0 => Profile::RampsHolds { rates: rng.random_range(1..=3) },
+                1 => Profile::Triangle,
+                _ => Profile::Sweep,
+            }
+        } else {
+            Profile::Constant
+        };
+        let positions = match mech {
+            Mech::K3 => Positions::Tilted,
+            ref m if m.needs_positions() => {
+                if rng.random_bool(0.5) {
+                    Positions::Six
+                } else {
+                    Positions::Tilted
+                }
+            }
+            _ => match rng.random_range(0..3) {
+                0 => Positions::One,
+                1 => Positions::Six,
+                _ => Positions::Tilted,
+            },
+        };
+        let rows: usize = rng.random_range(3000..=12000);
+        let rate_hz = [0.5, 1.0, 2.0][rng.random_range(0..3)];
+        let dur = rows as f64 / rate_hz;
+        let dwell_s = rng.random_range(30.0..240.0_f64).min(dur / 24.0);
+        // Power: turn-on mechanisms get 2–3 power-ons; otherwise half the cases carry a
+        // `power_s` column (a third of those with power-ons inside the record).
+        let (power_column, power_on_s, power_offset_s) = if mech.needs_power_on() {
+            let n = rng.random_range(2..=3);
+            (true, power_ons(rng, dur, n), 0.0)
+        } else if rng.random_bool(0.5) {
+            if rng.random_bool(1.0 / 3.0) {
+                let n = rng.random_range(2..=3);
+                (true, power_ons(rng, dur, n), 0.0)
+            } else {
+                let off = if rng.random_bool(0.3) { 0.0 } else { rng.random_range(600.0..7200.0) };
+                (true, vec![0.0], off)
+            }
+        } else {
+            (false, vec![0.0], 0.0)
+        };
+        let rw_ratio = if rng.random_bool(0.4) { log_uniform(rng, 0.5, 3.0) } else { 0.0 };
+        let sigma_ug = log_uniform(rng, 5.0, 500.0);
+        let mut axis_weight = [0.0; 3];
+        if mech.common() {
+            axis_weight = [1.0; 3];
+        } else if mech != Mech::None {
+            // One accelerometer at full size, each other one applied with probability 1/3 at
+            // 0.3–1 of it.
+            let main = rng.random_range(0..3);
+            for i in 0..3 {
+                axis_weight[i] = if i == main {
+                    1.0
+                } else if rng.random_bool(1.0 / 3.0) {
+                    rng.random_range(0.3..1.0)
+                } else {
+                    0.0
+                };
+            }
+        }
+        let size_sigma = if mech == Mech::None { 0.0 } else { size_sigma };
+        Case {
+            seed,
+            mech,
+            size_sigma,
+            axis_weight,
+            sigma_ug,
+            rw_ratio,
+            profile,
+            positions,
+            power_column,
+            power_on_s,
+            power_offset_s,
+            rows,
+            rate_hz,
+            dwell_s,
+            anchor_c: anchor_c(),
+        }
+    }
+}
+
+fn power_ons(rng: &mut ChaCha8Rng, dur: f64, n: usize) -> Vec<f64> {
+    // First at 0, the others spread so each run lasts at least a fifth of the record.
+    let mut v = vec![0.0];
+    let span = dur / n as f64;
+    for k in 1..n {
+        v.push(span * (k as f64 + rng.random_range(-0.2..0.2)));
+    }
+    v
+}
+
+/// The unit's constants and temperature model (SIM's "passport" and tempcos).
+#[derive(Clone, Debug)]
+struct Unit {
+    /// K [V/g] (rows: accelerometer, columns: input axis).
+    k: [[f64; 3]; 3],
+    /// U0 \[V\].
+    u0: [f64; 3],
+    /// Bias tempco in g: `b1 ΔT + b2 ΔT² + b3 ΔT³` per accelerometer.
+    bias: [[f64; 3]; 3],
+    /// Relative scale tempco `s1 ΔT + s2 ΔT²`.
+    scale: [[f64; 2]; 3],
+    /// Relative cross-sensitivity tempco (linear).
+    cross: [[f64; 3]; 3],
+}
+
+fn sym(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
+    let v = log_uniform(rng, lo, hi);
+    if rng.random_bool(0.5) { v } else { -v }
+}
+
+impl Unit {
+    fn draw(rng: &mut ChaCha8Rng) -> Unit {
+        let mut k = [[0.0; 3]; 3];
+        let mut u0 = [0.0; 3];
+        let mut bias = [[0.0; 3]; 3];
+        let mut scale = [[0.0; 2]; 3];
+        let mut cross = [[0.0; 3]; 3];
+        for i in 0..3 {
+            k[i][i] = sym(rng, 0.4, 1.5);
+            u0[i] = rng.random_range(-0.01..0.01);
+            bias[i] = [sym(rng, 10e-6, 200e-6), sym(rng, 0.05e-6, 2e-6), sym(rng, 2e-9, 30e-9)];
+            scale[i] = [sym(rng, 2e-6, 50e-6), sym(rng, 0.02e-6, 0.5e-6)];
+            for j in 0..3 {
+                if j != i {
+                    k[i][j] = k[i][i] * sym(rng, 1e-4, 2e-2);
+                    cross[i][j] = sym(rng, 1e-5, 3e-3);
+                }
+            }
+        }
+        Unit { k, u0, bias, scale, cross }
+    }
+
+    /// Signals \[V\] at temperature `temp_c` for the specific force `f` \[g\] (T(1), T(3)).
+    fn signals(&self, temp_c: f64, f: &[f64; 3]) -> [f64; 3] {
+        let d = temp_c - T_REF_C;
+        let mut u = [0.0; 3];
+        for i in 0..3 {
+            let b = &self.bias[i];
+            let bias_g = d * (b[0] + d * (b[1] + d * b[2]));
+            u[i] = self.u0[i] + self.k[i][i] * bias_g;
+            for j in 0..3 {
+                let kij = if i == j {
+                    self.k[i][i] * (1.0 + d * (self.scale[i][0] + d * self.scale[i][1]))
+                } else {
+                    self.k[i][j] * (1.0 + self.cross[i][j] * d)
+                };
+                u[i] += kij * f[j];
+            }
+        }
+        u
+    }
+}
+
+/// Piecewise-linear waveform through `(t, T)` knots.
+fn interp(knots: &[(f64, f64)], t: f64) -> f64 {
+    if t <= knots[0].0 {
+        return knots[0].1;
+    }
+    for w in knots.windows(2) {
+        if t <= w[1].0 {
+            let a = (t - w[0].0) / (w[1].0 - w[0].0).max(1e-9);
+            return w[0].1 + a * (w[1].1 - w[0].1);
+        }
+    }
+    knots[knots.len() - 1].1
+}
+
+/// True temperature of the unit at the row times.
+fn temperature(profile: Profile, t: &[f64], rng: &mut ChaCha8Rng) -> Vec<f64> {
+    let dur = t[t.len() - 1];
+    let lo = rng.random_range(-30.0..10.0);
+    let hi = rng.random_range(40.0..70.0);
+    match profile {
+        Profile::Constant => {
+            let c = rng.random_range(-10.0..50.0);
+            let p = rng.random_range(600.0..1800.0);
+            t.iter().map(|&x| c + 0.05 * (std::f64::consts::TAU * x / p).sin()).collect()
+        }
+        Profile::Triangle => {
+            let cycles = rng.random_range(1..=2);
+            let mut knots = vec![(0.0, lo)];
+            let leg = dur / (2 * cycles) as f64;
+            for c in 0..cycles {
+                knots.push((leg * (2 * c + 1) as f64, hi));
+                knots.push((leg * (2 * c + 2) as f64, lo));
+            }
+            t.iter().map(|&x| interp(&knots, x)).collect()
+        }
+        Profile::RampsHolds { rates } => {
+            // Rates in ratio 1 : 2 : 4 (scaled to fit the record); holds of equal length.
+            let span = hi - lo;
+            let mut legs = Vec::new();
+            for r in 0..rates {
+                let rate = f64::from(1u32 << r);
+                legs.push((span / rate, hi));
+                legs.push((span / rate, lo));
+            }
+            let ramp_sum: f64 = legs.iter().map(|l| l.0).sum();
+            let hold_frac = rng.random_range(0.2..0.5);
+            let hold_total = dur * hold_frac;
+            let hold_s = hold_total / (legs.len() + 1) as f64;
+            let ramp_scale = (dur - hold_total) / ramp_sum;
+            let mut knots = vec![(0.0, lo), (hold_s, lo)];
+            let mut now = hold_s;
+            for (len, to) in legs {
+                now += len * ramp_scale;
+                knots.push((now, to));
+                now += hold_s;
+                knots.push((now, to));
+            }
+            t.iter().map(|&x| interp(&knots, x)).collect()
+        }
+        Profile::Sweep => {
+            let w: [f64; 4] = [
+                50.0 + rng.random_range(-5.0..5.0),
+                -20.0 + rng.random_range(-5.0..5.0),
+                70.0 + rng.random_range(-5.0..5.0),
+                35.0 + rng.random_range(-5.0..5.0),
+            ];
+            let legs = [(w[0] - w[1]).abs(), (w[2] - w[1]).abs(), (w[2] - w[3]).abs()];
+            let total: f64 = legs.iter().sum();
+            let ramp = dur * 0.85;
+            let mut knots = vec![(0.0, w[0])];
+            let mut now = 0.0;
+            for (k, l) in legs.iter().enumerate() {
+                now += ramp * l / total;
+                knots.push((now, w[k + 1]));
+            }
+            // The unit follows the chamber through a first-order lag of τ = record / 40.
+            let tau = dur / 40.0;
+            let mut y = w[0];
+            let mut out = Vec::with_capacity(t.len());
+            let mut prev = 0.0;
+            for &x in t {
+                let h = x - prev;
+                let steps = 8;
+                for s in 0..steps {
+                    let tm = prev + h * (s as f64 + 0.5) / steps as f64;
+                    y += (1.0 - (-(h / steps as f64) / tau).exp()) * (interp(&knots, tm) - y);
+                }
+                prev = x;
+                out.push(y);
+            }
+            out
+        }
+    }
+}
+
+/// Unit vector.
+fn unit_vec(v: [f64; 3]) -> [f64; 3] {
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    [v[0] / n, v[1] / n, v[2] / n]
+}
+
+/// Position labels and specific-force vectors of the programme.
+fn position_set(pos: Positions, rng: &mut ChaCha8Rng) -> Vec<(String, [f64; 3])> {
+    let tp = [[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
+    match pos {
+        Positions::One => {
+            if rng.random_bool(0.5) {
+                vec![("TP1".into(), tp[0])]
+            } else {
+                let v = unit_vec([rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), 1.0]);
+                vec![("CP1".into(), v)]
+            }
+        }
+        Positions::Six => tp.iter().enumerate().map(|(k, f)| (format!("TP{}", k + 1), *f)).collect(),
+        Positions::Tilted => {
+            let mut v: Vec<(String, [f64; 3])> =
+                tp.iter().enumerate().map(|(k, f)| (format!("TP{}", k + 1), *f)).collect();
+            for k in 0..6 {
+                // Tilted ~15–40° off each principal axis.
+                let base = tp[k];
+                let a = rng.random_range(15f64..40.0).to_radians();
+                let az = rng.random_range(0.0..std::f64::consts::TAU);
+                let mut w = [0.0; 3];
+                let (p, q) = match k {
+                    0 | 2 => (0, 1),
+                    1 | 3 => (0, 2),
+                    _ => (1, 2),
+                };
+                for c in 0..3 {
+                    w[c] = base[c] * a.cos();
+                }
+                w[p] += a.sin() * az.cos();
+                w[q] += a.sin() * az.sin();
+                v.push((format!("CP{}", k + 1), unit_vec(w)));
+            }
+            v
+        }
+    }
+}
+
+/// Play (backlash) of width `w` on the series `x`: the output moves only when the input is
+/// more than `w/2` away, starting at the input.
+fn backlash(x: &[f64], w: f64) -> Vec<f64> {
+    let mut y = x[0];
+    x.iter()
+        .map(|&v| {
+            if v > y + 0.5 * w {
+                y = v - 0.5 * w;
+            } else if v < y - 0.5 * w {
+                y = v + 0.5 * w;
+            }
+            y
+        })
+        .collect()
+}
+
+/// Two cascaded first-order stages, integrated exactly over 16 sub-steps per sample with the
+/// input interpolated linearly.
+fn second_order_lag(t: &[f64], x: &[f64], tau1: f64, tau2: f64) -> Vec<f64> {
+    let (mut a, mut b) = (x[0], x[0]);
+    let mut out = Vec::with_capacity(x.len());
+    out.push(b);
+    for k in 1..x.len() {
+        let h = (t[k] - t[k - 1]) / 16.0;
+        let (e1, e2) = (1.0 - (-h / tau1).exp(), 1.0 - (-h / tau2).exp());
+        for s in 0..16 {
+            let xin = x[k - 1] + (x[k] - x[k - 1]) * (s as f64 + 0.5) / 16.0;
+            a += e1 * (xin - a);
+            b += e2 * (a - b);
+        }
+        out.push(b);
+    }
+    out
+}
+
+fn gauss(rng: &mut ChaCha8Rng) -> f64 {
+    StandardNormal.sample(rng)
+}
+
+fn std_about_mean(v: &[f64]) -> f64 {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / n).sqrt()
+}
+
+/// What the generator knows about a generated pair.
+#[derive(Clone, Debug)]
+pub struct Truth {
+    /// Achieved effect size per accelerometer (RMS about the mean / σ).
+    pub axis_size_sigma: [f64; 3],
+}
+
+/// Generates the SIM and REAL rows of a case.
+pub fn generate(c: &Case) -> (Vec<Row>, Vec<Row>, Truth) {
+    let mut rng = ChaCha8Rng::seed_from_u64(c.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xB11D);
+    let unit = Unit::draw(&mut rng);
+    let n = c.rows;
+    let dt = 1.0 / c.rate_hz;
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+    let temp = temperature(c.profile, &t, &mut rng);
+    let read: Vec<f64> = temp.iter().map(|x| x + THERMISTOR_SIGMA_C * gauss(&mut rng)).collect();
+    let set = position_set(c.positions, &mut rng);
+    let dwell_rows = ((c.dwell_s * c.rate_hz).round() as usize).max(2);
+    let pos_of: Vec<usize> = (0..n).map(|k| (k / dwell_rows) % set.len()).collect();
+    let f: Vec<[f64; 3]> = pos_of.iter().map(|&p| set[p].1).collect();
+    let power: Vec<f64> = t
+        .iter()
+        .map(|&x| {
+            let on = c.power_on_s.iter().copied().filter(|&p| p <= x).fold(0.0, f64::max);
+            x - on + if on == 0.0 { c.power_offset_s } else { 0.0 }
+        })
+        .collect();
+
+    // The mechanism's contribution per accelerometer, in V, before scaling.
+    let kd = [unit.k[0][0], unit.k[1][1], unit.k[2][2]];
+    let mut contrib = vec![[0.0f64; 3]; n];
+    let d: Vec<f64> = temp.iter().map(|x| x - c.anchor_c).collect();
+    let mut per_axis = [[0.0f64; 3]; 3]; // per-axis random coefficient shapes
+    for row in per_axis.iter_mut() {
+        for v in row.iter_mut() {
+            *v = if rng.random_bool(0.5) { 1.0 } else { -1.0 } * rng.random_range(0.5..1.0);
+        }
+    }
+    let through_temp = |te: &[f64], contrib: &mut [[f64; 3]]| {
+        for k in 0..n {
+            let a = unit.signals(te[k], &f[k]);
+            let b = unit.signals(temp[k], &f[k]);
+            for i in 0..3 {
+                contrib[k][i] = a[i] - b[i];
+            }
+        }
+    };
+    match &c.mech {
+        Mech::None => {}
+        Mech::ThermalLag { tau1_s, tau2_s } => {
+            let te = second_order_lag(&t, &temp, *tau1_s, *tau2_s);
+            through_temp(&te, &mut contrib);
+        }
+        Mech::ThermalHysteresis { width_c } => {
+            let te = backlash(&temp, *width_c);
+            through_temp(&te, &mut contrib);
+        }
+        Mech::SelfHeating { tau_s } => {
+            let te: Vec<f64> = temp
+                .iter()
+                .zip(&power)
+                .map(|(x, p)| x + 1.0 - 0.8 * (-p / tau_s).exp() - 0.2 * (-4.0 * p / tau_s).exp())
+                .collect();
+            through_temp(&te, &mut contrib);
+        }
+        Mech::BiasHysteresis { width_c } => {
+            let pl = backlash(&temp, *width_c);
+            for k in 0..n {
+                let h = (pl[k] - temp[k]) / (0.5 * width_c);
+                for i in 0..3 {
+                    contrib[k][i] = kd[i] * h;
+                }
+            }
+        }
+        Mech::Warmup { tau_s } => {
+            for k in 0..n {
+                let p = power[k];
+                let w = 0.65 * (-p / tau_s).exp() + 0.35 * (-6.0 * p / tau_s).exp();
+                for i in 0..3 {
+                    contrib[k][i] = kd[i] * w;
+                }
+            }
+        }
+        Mech::BiasTempOrder { shape, theta_c } => {
+            for k in 0..n {
+                let x = d[k];
+                let g = match *shape {
+                    0 => x * x,
+                    1 => x * x * x,
+                    2 => x * x * x * x,
+                    _ => (x / theta_c).exp(),
+                };
+                for i in 0..3 {
+                    contrib[k][i] = kd[i] * g;
+                }
+            }
+        }
+        Mech::ScaleTemp { quad_mix } => {
+            for k in 0..n {
+                let x = d[k] / 40.0;
+                for i in 0..3 {
+                    let s = (1.0 - quad_mix) * x + quad_mix * per_axis[i][0] * x * x;
+                    contrib[k][i] = kd[i] * f[k][i] * s;
+                }
+            }
+        }
+        Mech::CrossCouplingTemp { quadratic } => {
+            for k in 0..n {
+                let x = d[k] / 40.0;
+                let s = if *quadratic { x * x } else { x };
+                for i in 0..3 {
+                    let (j1, j2) = ((i + 1) % 3, (i + 2) % 3);
+                    // One partner at full weight, the other at a random share (may be 0).
+                    let w2 = if per_axis[i][1] > 0.0 { per_axis[i][2] } else { 0.0 };
+                    contrib[k][i] = kd[i] * s * (f[k][j1] + w2 * f[k][j2]);
+                }
+            }
+        }
+        Mech::CrossAxis => {
+            // E: a rotation (skew part) plus a non-orthogonality (symmetric part).
+            for k in 0..n {
+                for i in 0..3 {
+                    let (j1, j2) = ((i + 1) % 3, (i + 2) % 3);
+                    contrib[k][i] = kd[i] * (per_axis[i][1] * f[k][j1] + per_axis[i][2] * f[k][j2]);
+                }
+            }
+        }
+        Mech::ScaleFactor => {
+            for k in 0..n {
+                for i in 0..3 {
+                    contrib[k][i] = kd[i] * f[k][i];
+                }
+            }
+        }
+        Mech::SfAsymmetry => {
+            for k in 0..n {
+                for i in 0..3 {
+                    contrib[k][i] = kd[i] * 0.5 * f[k][i].abs();
+                }
+            }
+        }
+        Mech::K2 => {
+            for k in 0..n {
+                for i in 0..3 {
+                    contrib[k][i] = kd[i] * f[k][i] * f[k][i];
+                }
+            }
+        }
+        Mech::K3 => {
+            for k in 0..n {
+                for i in 0..3 {
+                    contrib[k][i] = kd[i] * f[k][i].powi(3);
+                }
+            }
+        }
+    }
+
+    // Scale: RMS about the mean of the contribution in g on each applied accelerometer.
+    let sigma_g = c.sigma_ug * 1e-6;
+    let mut raw = [0.0; 3];
+    for i in 0..3 {
+        let v: Vec<f64> = contrib.iter().map(|r| r[i] / kd[i]).collect();
+        raw[i] = std_about_mean(&v);
+    }
+    let mut gain = [0.0; 3];
+    if c.mech.common() {
+        let m = raw.iter().copied().fold(0.0, f64::max);
+        if m > 0.0 {
+            gain = [c.size_sigma * sigma_g / m; 3];
+        }
+    } else {
+        for i in 0..3 {
+            if c.axis_weight[i] > 0.0 && raw[i] > 1e-15 {
+                let sign = if per_axis[i][0] > 0.0 { 1.0 } else { -1.0 };
+                gain[i] = sign * c.axis_weight[i] * c.size_sigma * sigma_g / raw[i];
+            }
+        }
+    }
+    let mut truth = Truth { axis_size_sigma: [0.0; 3] };
+    for i in 0..3 {
+        truth.axis_size_sigma[i] = gain[i].abs() * raw[i] / sigma_g;
+    }
+
+    // Noise: white σ, and a random walk reaching `rw_ratio·σ` (1 standard deviation) at the end.
+    let dur = t[n - 1].max(dt);
+    let q = c.rw_ratio * sigma_g / dur.sqrt();
+    let mut rw = [0.0; 3];
+    let mut sim = Vec::with_capacity(n);
+    let mut real = Vec::with_capacity(n);
+    for k in 0..n {
+        let mut row = Row {
+            line: k as u64 + 2,
+            t_s: t[k],
+            temp_c: read[k],
+            f_g: f[k].map(Some),
+            vib_kind: Some(VibKind::None),
+            vib_g: [Some(0.0); 3],
+            pos: Some(set[pos_of[k]].0.clone()),
+            power_s: if c.power_column { Some(power[k]) } else { None },
+            ..Row::default()
+        };
+        row.u_v = unit.signals(read[k], &f[k]);
+        let mut r = row.clone();
+        let base = unit.signals(temp[k], &f[k]);
+        for i in 0..3 {
+            if k > 0 {
+                rw[i] += q * dt.sqrt() * gauss(&mut rng);
+            }
+            let noise_g: f64 = sigma_g * gauss(&mut rng) + rw[i];
+            r.u_v[i] = base[i] + gain[i] * contrib[k][i] + kd[i] * noise_g;
+        }
+        sim.push(row);
+        real.push(r);
+    }
+    (sim, real, truth)
+}
