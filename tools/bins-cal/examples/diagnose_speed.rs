@@ -14,6 +14,11 @@ fn main() {
     let mut missed = false;
     for (rows, budget_s) in [(30_000usize, 2.0), (260_000, 10.0)] {
         for name in ["warmup", "lag_plus_asymmetry"] {
+            if std::env::var("DIAG_SPEED_CASE").is_ok_and(|c| c != name)
+                || (rows > 30_000 && std::env::var("DIAG_SPEED_SHORT").is_ok())
+            {
+                continue;
+            }
             let Some(mut case) = cases::suite().into_iter().find(|c| c.name == name) else {
                 eprintln!("no suite case {name}");
                 std::process::exit(2);

@@ -155,17 +155,13 @@ fn unusable_inputs_are_one_line_errors() {
     assert!(e.contains("bad.csv:") && e.contains("column"), "{e}");
 }
 
+/// A 30 000-row pair (its time is measured by `cargo xtask bench`, not here).
 #[test]
-fn a_30000_row_pair_in_under_10_s() {
+fn a_30000_row_pair_is_diagnosed() {
     let (s, r) = cases::generate(&case("warmup", 30_000));
-    let t0 = std::time::Instant::now();
     let d = diagnose(&s, &r, Path::new("sim"), Path::new("real")).unwrap();
-    let secs = t0.elapsed().as_secs_f64();
-    println!("30 000-row pair (warm-up case, 4 θ-mechanisms on 3 axes) diagnosed in {secs:.2} s");
     assert_eq!(d.report.effects.len(), 1);
-    if !cfg!(debug_assertions) {
-        assert!(secs < 10.0, "{secs} s");
-    }
+    assert_eq!(d.report.effects[0].id, "warmup");
 }
 
 proptest! {

@@ -104,17 +104,34 @@ struct Grams {
     n_all: usize,
 }
 
+/// Rows per block of the Gram products: the block of every column stays in cache while all
+/// pairs are multiplied (the columns themselves are far larger than the cache).
+const GRAM_BLOCK: usize = 256;
+
+/// `Σ w_a·w_b` over the rows of `rows` (all rows when `None`), every pair `a ≤ b`, computed
+/// block by block of rows; the full symmetric matrix.
 fn gram_of(w: &[Vec<f64>], rows: Option<&[(usize, usize)]>) -> Vec<f64> {
     let p = w.len();
+    let n = w.first().map_or(0, Vec::len);
+    let all = [(0, n)];
+    let rows = rows.unwrap_or(&all);
     let mut g = vec![0.0; p * p];
+    for &(s, e) in rows {
+        let mut c0 = s;
+        while c0 < e {
+            let c1 = (c0 + GRAM_BLOCK).min(e);
+            for a in 0..p {
+                let wa = &w[a][c0..c1];
+                for b in a..p {
+                    g[a * p + b] += dot(wa, &w[b][c0..c1]);
+                }
+            }
+            c0 = c1;
+        }
+    }
     for a in 0..p {
-        for b in a..p {
-            let v = match rows {
-                None => dot(&w[a], &w[b]),
-                Some(rs) => rs.iter().map(|&(s, e)| dot(&w[a][s..e], &w[b][s..e])).sum(),
-            };
-            g[a * p + b] = v;
-            g[b * p + a] = v;
+        for b in 0..a {
+            g[a * p + b] = g[b * p + a];
         }
     }
     g
@@ -159,15 +176,11 @@ impl Grams {
                 *a += b;
             }
         }
-        let mut train = Vec::new();
-        for k in 0..FOLDS {
-            let fk = Filter::new(t, r, q, |i| fold[i] != k);
-            for (c, out) in bank.cols.iter().zip(w.iter_mut()) {
-                fk.whiten(c, out);
-            }
-            fk.whiten(y, &mut w[p - 1]);
-            train.push(gram_of(&w, None));
-        }
+        // The training rows of fold k are every row but its own: their Gram is the whole
+        // one less the fold's (the innovations of the one whitening of all rows, so a
+        // training row just after a held-out block still saw that block's level: a small
+        // leak that five separate whitenings, six times the work, would avoid).
+        let train: Vec<Vec<f64>> = test.iter().map(|g| all.iter().zip(g).map(|(a, b)| a - b).collect()).collect();
         Grams { p, all, test, train, n_all: f0.n_used }
     }
 
@@ -625,6 +638,66 @@ fn ambiguity(bank: &Bank, model: &[usize], grams: &Grams, infl: f64) -> Vec<(Mec
     ambiguous
 }
 
+/// Least squares of a whitened `y` on fixed whitened columns plus a few that change (one
+/// member's θ searched while the rest of the model stays): the fixed part's products are
+/// computed once.
+struct PartialLs {
+    w: Vec<Vec<f64>>,
+    g: Vec<f64>,
+    gy: Vec<f64>,
+    wy: Vec<f64>,
+    yy: f64,
+}
+
+impl PartialLs {
+    fn new(filt: &Filter, y: &[f64], fixed: &[Vec<f64>]) -> Self {
+        let w: Vec<Vec<f64>> = fixed.iter().map(|c| filt.whitened(c)).collect();
+        let wy = filt.whitened(y);
+        let p = w.len();
+        let mut g = vec![0.0; p * p];
+        for a in 0..p {
+            for b in a..p {
+                g[a * p + b] = dot(&w[a], &w[b]);
+                g[b * p + a] = g[a * p + b];
+            }
+        }
+        let gy = w.iter().map(|c| dot(c, &wy)).collect();
+        let yy = dot(&wy, &wy);
+        PartialLs { w, g, gy, wy, yy }
+    }
+
+    /// SSE with the raw columns `extra` added (infinite when they are collinear).
+    fn sse_plus(&self, filt: &Filter, extra: &[Vec<f64>]) -> f64 {
+        let we: Vec<Vec<f64>> = extra.iter().map(|c| filt.whitened(c)).collect();
+        let (pf, m) = (self.w.len(), self.w.len() + we.len());
+        let col = |i: usize| if i < pf { &self.w[i] } else { &we[i - pf] };
+        let mut a = vec![0.0; m * m];
+        let mut b = vec![0.0; m];
+        for u in 0..m {
+            b[u] = if u < pf { self.gy[u] } else { dot(col(u), &self.wy) };
+            for v in u..m {
+                let g = if v < pf { self.g[u * pf + v] } else { dot(col(u), col(v)) };
+                a[u * m + v] = g;
+                a[v * m + u] = g;
+            }
+        }
+        let d: Vec<f64> = (0..m).map(|u| a[u * m + u].sqrt()).collect();
+        if d.iter().any(|v| !(*v > 0.0)) {
+            return f64::INFINITY;
+        }
+        for u in 0..m {
+            b[u] /= d[u];
+            for v in 0..m {
+                a[u * m + v] /= d[u] * d[v];
+            }
+        }
+        match chol_solve(&a, &b, m, 1e-10) {
+            Some((x, _)) => (self.yy - x.iter().zip(&b).map(|(x, b)| x * b).sum::<f64>()).max(0.0),
+            None => f64::INFINITY,
+        }
+    }
+}
+
 fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -> AxisFit {
     let p = ctx.p;
     let axis = ctx.axis;
@@ -651,14 +724,13 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
             let step = if grid.len() > 1 { (grid[1] / grid[0]).ln() } else { 0.3 };
             let (mut a, mut b) = (th0.ln() - step, th0.ln() + step);
             let phi = 0.618_033_988_749_894_9;
-            let eval = |lt: f64| {
-                let mut ms = members.clone();
-                ms[k].1 = Some(lt.exp());
-                sse_of(&ms)
-            };
+            let mut rest = members.clone();
+            rest.remove(k);
+            let part = PartialLs::new(&filt, y, &cols_of(&rest));
+            let eval = |lt: f64| part.sse_plus(&filt, &ctx.columns(m, lt.exp()));
             let (mut c, mut d) = (b - phi * (b - a), a + phi * (b - a));
             let (mut fc, mut fd) = (eval(c), eval(d));
-            for _ in 0..24 {
+            for _ in 0..16 {
                 if fc < fd {
                     b = d;
                     d = c;
@@ -720,11 +792,10 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
         let theta_ci = th.map(|th| {
             let grid = ctx.grid(*m);
             let (gmin, gmax) = (grid.first().copied().unwrap_or(th) / 10.0, grid.last().copied().unwrap_or(th) * 10.0);
-            let dev = |x: f64| {
-                let mut ms = members.clone();
-                ms[k].1 = Some(x);
-                nu * (sse_of(&ms) / sse.max(1e-300)).ln() / infl
-            };
+            let mut others = members.clone();
+            others.remove(k);
+            let part = PartialLs::new(&filt, y, &cols_of(&others));
+            let dev = |x: f64| nu * (part.sse_plus(&filt, &ctx.columns(*m, x)) / sse.max(1e-300)).ln() / infl;
             let bound = |dir: f64| {
                 let mut inside = th;
                 let mut x = th;

@@ -18,6 +18,9 @@ use super::noise::ls_sse;
 use super::prep::Prepared;
 use bins_comp::vibration::{Axis, ConversionFunction, Variant, Vibration, ve_terms};
 
+/// Points a decade of the θ grids (refined off the grid by golden section in the fit).
+pub const GRID_PER_DECADE: f64 = 4.0;
+
 /// Reference temperature of the polynomial terms [°C] (the paper's normal conditions).
 pub const T0_C: f64 = 20.0;
 
@@ -450,8 +453,8 @@ impl<'a> Context<'a> {
         }
     }
 
-    /// The grid of θ for a nonlinear mechanism (empty for linear ones), log-spaced, eight points
-    /// a decade.
+    /// The grid of θ for a nonlinear mechanism (empty for linear ones), log-spaced,
+    /// [`GRID_PER_DECADE`] points a decade.
     pub fn grid(&self, m: Mech) -> Vec<f64> {
         let p = self.p;
         let dur = p.t.last().copied().unwrap_or(0.0) - p.t.first().copied().unwrap_or(0.0);
@@ -467,7 +470,7 @@ impl<'a> Context<'a> {
         if !(hi > lo) {
             return Vec::new();
         }
-        let n = ((hi / lo).log10() * 8.0).ceil().max(1.0) as usize;
+        let n = ((hi / lo).log10() * GRID_PER_DECADE).ceil().max(1.0) as usize;
         (0..=n).map(|k| lo * (hi / lo).powf(k as f64 / n as f64)).collect()
     }
 

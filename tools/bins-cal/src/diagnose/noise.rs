@@ -159,8 +159,24 @@ fn ls_fit(y: &[f64], xs: &[Vec<f64>]) -> (f64, Vec<f64>, f64, usize) {
     if p == 0 {
         return (yy, Vec::new(), 0.0, 0);
     }
-    // Greedy: keep the columns that are not collinear with those kept.
+    // Greedy: keep the columns that are not collinear with those kept, on the Gram matrix of
+    // the normalised columns (computed once).
     let norms: Vec<f64> = xs.iter().map(|x| dot(x, x).sqrt()).collect();
+    let mut full = vec![0.0; p * p];
+    let mut xy = vec![0.0; p];
+    for u in 0..p {
+        if !(norms[u] > 0.0) {
+            continue;
+        }
+        xy[u] = dot(&xs[u], y) / norms[u];
+        for v in u..p {
+            if norms[v] > 0.0 {
+                let g = dot(&xs[u], &xs[v]) / (norms[u] * norms[v]);
+                full[u * p + v] = g;
+                full[v * p + u] = g;
+            }
+        }
+    }
     let mut keep: Vec<usize> = Vec::new();
     let mut sol = (Vec::new(), Vec::new());
     let mut gram = Vec::new();
@@ -171,14 +187,9 @@ fn ls_fit(y: &[f64], xs: &[Vec<f64>]) -> (f64, Vec<f64>, f64, usize) {
         let mut trial = keep.clone();
         trial.push(j);
         let m = trial.len();
-        let mut a = vec![0.0; m * m];
-        let mut b = vec![0.0; m];
-        for (u, &cu) in trial.iter().enumerate() {
-            b[u] = dot(&xs[cu], y) / norms[cu];
-            for (v, &cv) in trial.iter().enumerate() {
-                a[u * m + v] = dot(&xs[cu], &xs[cv]) / (norms[cu] * norms[cv]);
-            }
-        }
+        let a: Vec<f64> =
+            trial.iter().flat_map(|&cu| trial.iter().map(move |&cv| (cu, cv))).map(|(u, v)| full[u * p + v]).collect();
+        let b: Vec<f64> = trial.iter().map(|&c| xy[c]).collect();
         if let Some(s) = chol_solve(&a, &b, m, 1e-10) {
             keep = trial;
             sol = s;
@@ -189,7 +200,7 @@ fn ls_fit(y: &[f64], xs: &[Vec<f64>]) -> (f64, Vec<f64>, f64, usize) {
     let mut fit = 0.0;
     for (u, &c) in keep.iter().enumerate() {
         beta[c] = sol.0[u] / norms[c];
-        fit += sol.0[u] * dot(&xs[c], y) / norms[c];
+        fit += sol.0[u] * xy[c];
     }
     let log_det =
         chol_logdet(&gram, keep.len()).unwrap_or(0.0) + keep.iter().map(|&c| 2.0 * norms[c].ln()).sum::<f64>();
@@ -197,34 +208,40 @@ fn ls_fit(y: &[f64], xs: &[Vec<f64>]) -> (f64, Vec<f64>, f64, usize) {
 }
 
 /// Restricted-maximum-likelihood random-walk intensity `q` [g²/s] with the columns `xs` in
-/// the model, on a log grid relative to the median white variance per second (1e-9 … 10, four
-/// points a decade, and 0), refined by a parabola through the best three.
+/// the model: a scan one point a decade relative to the median white variance per second
+/// (1e-9 … 10, and 0), the best point refined by steps of ½ and ¼ decade, and a parabola
+/// through the last three (16 likelihood evaluations).
 pub fn estimate_q(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> f64 {
     let rmed = super::stats::median(r).max(1e-300);
-    let mut best = (f64::NEG_INFINITY, 0.0, 0usize);
-    let grid: Vec<f64> = (-36..=4).map(|k| rmed * 10f64.powf(k as f64 / 4.0)).collect();
-    let lls: Vec<f64> = grid.iter().map(|&q| profile_ll(t, r, q, y, xs).0).collect();
-    for (i, &ll) in lls.iter().enumerate() {
-        if ll > best.0 {
-            best = (ll, grid[i], i);
+    let ll = |lq: f64| profile_ll(t, r, rmed * 10f64.powf(lq), y, xs).0;
+    let (mut best_lq, mut best_ll) = (f64::NAN, f64::NEG_INFINITY);
+    for k in -9..=1 {
+        let v = ll(k as f64);
+        if v > best_ll {
+            (best_lq, best_ll) = (k as f64, v);
         }
     }
-    let ll0 = profile_ll(t, r, 0.0, y, xs).0;
-    if ll0 >= best.0 {
+    if profile_ll(t, r, 0.0, y, xs).0 >= best_ll {
         return 0.0;
     }
-    let i = best.2;
-    if i == 0 || i + 1 >= grid.len() {
-        return best.1;
+    let mut around = (f64::NEG_INFINITY, best_ll, f64::NEG_INFINITY);
+    for step in [0.5, 0.25] {
+        let (lo, hi) = (ll(best_lq - step), ll(best_lq + step));
+        if lo > best_ll && lo >= hi {
+            (best_lq, best_ll) = (best_lq - step, lo);
+            around = (f64::NEG_INFINITY, lo, f64::NEG_INFINITY);
+        } else if hi > best_ll {
+            (best_lq, best_ll) = (best_lq + step, hi);
+            around = (f64::NEG_INFINITY, hi, f64::NEG_INFINITY);
+        } else {
+            around = (lo, best_ll, hi);
+        }
     }
-    // Parabola in log q.
-    let (a, b, c) = (lls[i - 1], lls[i], lls[i + 1]);
+    // Parabola in log q through the last step's three points.
+    let (a, b, c) = around;
     let den = a - 2.0 * b + c;
-    if !(den < 0.0) {
-        return best.1;
-    }
-    let off = 0.5 * (a - c) / den; // in grid steps
-    grid[i] * 10f64.powf(off.clamp(-1.0, 1.0) / 4.0)
+    let off = if den < 0.0 && a.is_finite() && c.is_finite() { (0.5 * (a - c) / den).clamp(-1.0, 1.0) } else { 0.0 };
+    rmed * 10f64.powf(best_lq + 0.25 * off)
 }
 
 /// The random walk [g²/s] seen at short averaging times, up to a minute, where the

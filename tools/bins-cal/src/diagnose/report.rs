@@ -259,6 +259,20 @@ pub fn coef_names(m: Mech, s: &Sensitivity, axis: usize) -> Vec<(String, f64)> {
     }
 }
 
+/// The static term a tempco folds in when both are found on an accelerometer.
+fn folds(m: Mech) -> Option<Mech> {
+    match m {
+        Mech::ScaleTemp => Some(Mech::ScaleFactor),
+        Mech::CrossCouplingTemp => Some(Mech::CrossAxis),
+        _ => None,
+    }
+}
+
+/// The tempco a static term is folded into ([`folds`]).
+fn folded_into(m: Mech) -> Option<Mech> {
+    Mech::ALL.into_iter().find(|&t| folds(t) == Some(m))
+}
+
 /// A held-out RMS within this factor of the noise floor is "at the noise".
 pub const AT_NOISE: f64 = 1.2;
 
@@ -340,7 +354,7 @@ pub fn build(
         };
         for fit in axes {
             for t in fit.terms.iter().filter(|t| t.mech == m) {
-                let (params, ci) = term_params(t, &sens[fit.axis], fit.axis);
+                let (mut params, mut ci) = term_params(t, &sens[fit.axis], fit.axis);
                 let amb = ambiguous_member[fit.axis].contains(&m);
                 terms.push(ModelTerm {
                     id: m.id().into(),
@@ -350,6 +364,26 @@ pub fn build(
                 });
                 if amb {
                     continue;
+                }
+                // A tempco and the static term it reduces to at the reference temperature are
+                // one finding: the temperature SIM was calibrated at is not known, and a
+                // tempco about another temperature is exactly the two together.
+                if let Some(into) = folded_into(m)
+                    && fit.terms.iter().any(|u| u.mech == into && !ambiguous_member[fit.axis].contains(&into))
+                {
+                    continue;
+                }
+                if let Some(part) = folds(m)
+                    && let Some(u) = fit.terms.iter().find(|u| u.mech == part)
+                    && !ambiguous_member[fit.axis].contains(&part)
+                {
+                    let (pp, pc) = term_params(u, &sens[fit.axis], fit.axis);
+                    for (k, v) in pp {
+                        params.insert(format!("{k} (at T0)"), v);
+                    }
+                    for (k, v) in pc {
+                        ci.insert(format!("{k} (at T0)"), v);
+                    }
                 }
                 let ax = AXES[fit.axis].to_string();
                 e.axes.push(ax.clone());
