@@ -1,6 +1,6 @@
 //! `bins-cal calibrate`: a calibration file (and blob, Intel HEX) from tilter recordings.
 //!
-//! 1. The dwells of every position and temperature ([`segments`](super::segments)).
+//! 1. The dwells of every position and temperature ([`segments`](bins_cal::calib::segments)).
 //! 2. Per temperature, the 12 constants: T(10) when the dwells are exactly TP1…TP6 at the
 //!    ideal positions, otherwise the least squares fit over the dwell means and their
 //!    reference specific forces (`ident::fit_constants`).
@@ -10,18 +10,19 @@
 //!    written (`--model none`, or `auto`), and the file says so.
 //!
 //! 4. With `--shaker`: the vibration-error coefficients from shake-table recordings
-//!    ([`shaker`](super::shaker)), written as the file's `[vibration]` table and the blob's
+//!    ([`shaker`](bins_cal::calib::shaker)), written as the file's `[vibration]` table and the blob's
 //!    vibration section.
 //!
-//! Every fit's residual and the dwells it used are printed as a table.
+//! Every fit's residual and the dwells it used are printed as a table. The fits are in
+//! [`bins_cal::calib`]; this module parses the arguments and prints.
 
-use super::segments::{self, Segment};
 use anyhow::{anyhow, bail};
 use bins_cal::calfile::CalibrationFile;
+use bins_cal::calib::segments::{self, Segment};
+use bins_cal::calib::tilter::{ModelRequest, fit_temperature, parse_model};
 use bins_cal::{fsio, ihex, memmap};
 use bins_comp::blob::Meta;
-use bins_comp::ident::{self, FitError, TILTER_POSITIONS_G};
-use bins_comp::{CalibrationParams, CoefDelta, Constants, Form, Method, TempModel};
+use bins_comp::{Constants, Form, Method};
 use std::path::PathBuf;
 
 /// Arguments of `bins-cal calibrate`.
@@ -76,28 +77,6 @@ pub struct Args {
     seg: segments::Options,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum ModelArg {
-    Auto,
-    None,
-    Pwl,
-    Poly(usize),
-}
-
-fn parse_model(s: &str) -> anyhow::Result<ModelArg> {
-    Ok(match s {
-        "auto" => ModelArg::Auto,
-        "none" => ModelArg::None,
-        "pwl" => ModelArg::Pwl,
-        _ => ModelArg::Poly(
-            s.strip_prefix("poly:")
-                .and_then(|n| n.parse::<usize>().ok())
-                .filter(|n| (1..=4).contains(n))
-                .ok_or_else(|| anyhow!("--model `{s}`: expected auto, none, pwl or poly:N with N in 1..=4"))?,
-        ),
-    })
-}
-
 /// The method requested on the command line.
 pub fn parse_method(method: u8, form: &str) -> anyhow::Result<Method> {
     let form = match form {
@@ -111,72 +90,6 @@ pub fn parse_method(method: u8, form: &str) -> anyhow::Result<Method> {
         2 => Ok(Method::OutputCorrection(form)),
         _ => bail!("--method {method}: expected 1 or 2"),
     }
-}
-
-/// The constants identified at one temperature.
-pub struct TempFit<'a> {
-    /// Mean temperature of its dwells [°C].
-    pub temp_c: f64,
-    /// The dwells used.
-    pub segments: Vec<&'a Segment>,
-    /// The constants.
-    pub constants: Constants<f64>,
-    /// `T(10)` or `LS`.
-    pub how: &'static str,
-    /// Residual of each dwell, `U − (K·f + U0)` in g (divided by K_ii), per axis.
-    pub residual_g: Vec<[f64; 3]>,
-}
-
-/// The constants at one temperature from its dwells.
-pub fn fit_temperature<'a>(temp_c: f64, segs: Vec<&'a Segment>, files: &str) -> anyhow::Result<TempFit<'a>> {
-    let f: Vec<[f64; 3]> = segs.iter().map(|s| s.f_g).collect();
-    let u: Vec<[f64; 3]> = segs.iter().map(|s| s.mean_u_v).collect();
-    let labels: Vec<&str> = segs.iter().map(|s| s.pos.as_str()).collect();
-    let six: Option<[[f64; 3]; 6]> = (segs.len() == 6)
-        .then(|| {
-            let mut out = [[0.0; 3]; 6];
-            for (k, ideal) in TILTER_POSITIONS_G.iter().enumerate() {
-                let s = segs.iter().find(|s| s.pos == format!("TP{}", k + 1) && s.f_g == *ideal)?;
-                out[k] = s.mean_u_v;
-            }
-            Some(out)
-        })
-        .flatten();
-    let (constants, how) = match six {
-        Some(u6) => (ident::six_position(&u6), "T(10)"),
-        None => {
-            let c = ident::fit_constants(&f, &u).map_err(|e| match e {
-                FitError::TooFewPoints { got, .. } => {
-                    let missing: Vec<String> =
-                        (1..=6).map(|k| format!("TP{k}")).filter(|p| !labels.contains(&p.as_str())).collect();
-                    anyhow!(
-                        "{files}: at {temp_c:.2} °C only {got} stationary dwell(s) ({}); the 12 constants need at least 4 positions (missing: {})",
-                        labels.join(", "),
-                        missing.join(", ")
-                    )
-                }
-                FitError::Singular => anyhow!(
-                    "{files}: at {temp_c:.2} °C the dwells ({}) do not determine the constants (singular fit: positions coplanar)",
-                    labels.join(", ")
-                ),
-                e => anyhow!("{files}: at {temp_c:.2} °C: {e}"),
-            })?;
-            (c, "LS")
-        }
-    };
-    let k = &constants.k_v_per_g;
-    let residual_g = segs
-        .iter()
-        .map(|s| {
-            let mut r = [0.0; 3];
-            for i in 0..3 {
-                let model = k[i][0] * s.f_g[0] + k[i][1] * s.f_g[1] + k[i][2] * s.f_g[2] + constants.u0_v[i];
-                r[i] = (s.mean_u_v[i] - model) / k[i][i];
-            }
-            r
-        })
-        .collect();
-    Ok(TempFit { temp_c, segments: segs, constants, how, residual_g })
 }
 
 /// Prints the dwells (used and rejected).
@@ -243,101 +156,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             names.join(" ")
         );
     }
-    // T0: the temperature nearest to --t0.
-    let i0 = (0..fits.len())
-        .min_by(|&a, &b| (fits[a].temp_c - args.t0).abs().total_cmp(&(fits[b].temp_c - args.t0).abs()))
-        .unwrap_or(0);
-    if (fits[i0].temp_c - args.t0).abs() > args.seg.temp_tol_c {
-        let temps: Vec<String> = fits.iter().map(|f| format!("{:.2}", f.temp_c)).collect();
-        bail!(
-            "{files}: no dwells at T0 = {} °C (within {} °C); the recordings have {} °C",
-            args.t0,
-            args.seg.temp_tol_c,
-            temps.join(", ")
-        );
-    }
-    let t0 = fits[i0].temp_c;
-    let c0 = fits[i0].constants;
-    let others: Vec<(f64, Constants<f64>)> =
-        fits.iter().enumerate().filter(|(i, _)| *i != i0).map(|(_, f)| (f.temp_c, f.constants)).collect();
-    let model_arg = match model_arg {
-        ModelArg::Auto if others.is_empty() => ModelArg::None,
-        ModelArg::Auto => ModelArg::Pwl,
-        m => m,
+    let points: Vec<(f64, Constants<f64>)> = fits.iter().map(|f| (f.temp_c, f.constants)).collect();
+    let kept: Vec<f64> = all.iter().filter(|s| s.rejected.is_none()).map(|s| s.temp_c).collect();
+    let req = ModelRequest {
+        t0_c: args.t0,
+        model: model_arg,
+        knots: args.knots.clone(),
+        temp_tol_c: args.seg.temp_tol_c,
+        method,
     };
-    let mut notes: Vec<String> =
-        vec![format!("T0 = {t0:.2} °C: the measured mean temperature of the dwells nearest to --t0 {}", args.t0)];
-    let (model, method, range) = match model_arg {
-        ModelArg::None | ModelArg::Auto => {
-            notes.push(format!(
-                "one temperature only ({t0:.2} °C): T0 constants only, no temperature model (method: uncorrected)"
-            ));
-            let lo = all.iter().filter(|s| s.rejected.is_none()).map(|s| s.temp_c).fold(t0, f64::min);
-            let hi = all.iter().filter(|s| s.rejected.is_none()).map(|s| s.temp_c).fold(t0, f64::max);
-            let zero = TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] };
-            (zero, Method::Uncorrected, ((lo - 1.0).floor(), (hi + 1.0).ceil()))
-        }
-        ModelArg::Pwl => {
-            if others.is_empty() {
-                bail!(
-                    "{files}: only one temperature ({t0:.2} °C): the piecewise-linear model needs at least one more (use --model none for T0 constants only)"
-                );
-            }
-            let chosen: Vec<(f64, Constants<f64>)> = if args.knots.is_empty() {
-                others.clone()
-            } else {
-                let mut v: Vec<(f64, Constants<f64>)> = Vec::new();
-                for k in &args.knots {
-                    if (k - args.t0).abs() <= args.seg.temp_tol_c {
-                        continue;
-                    }
-                    let best = others
-                        .iter()
-                        .min_by(|a, b| (a.0 - k).abs().total_cmp(&(b.0 - k).abs()))
-                        .filter(|p| (p.0 - k).abs() <= args.seg.temp_tol_c)
-                        .ok_or_else(|| {
-                            anyhow!(
-                                "{files}: --knots {k}: no calibration temperature within {} °C",
-                                args.seg.temp_tol_c
-                            )
-                        })?;
-                    if !v.iter().any(|p| p.0 == best.0) {
-                        v.push(*best);
-                    }
-                }
-                v
-            };
-            let m = ident::pwl_from_constants(t0, &c0, &chosen)
-                .map_err(|e| anyhow!("{files}: piecewise-linear model: {e}"))?;
-            let lo = chosen.iter().map(|p| p.0).fold(t0, f64::min);
-            let hi = chosen.iter().map(|p| p.0).fold(t0, f64::max);
-            (m, method, (lo, hi))
-        }
-        ModelArg::Poly(order) => {
-            let m = ident::poly_from_constants(t0, &c0, &others, order).map_err(|e| match e {
-                FitError::TooFewPoints { needed, got } => anyhow!(
-                    "{files}: a polynomial of order {order} needs at least {needed} temperature(s) besides T0 = {t0:.2} °C, the recordings have {got}"
-                ),
-                e => anyhow!("{files}: polynomial model: {e}"),
-            })?;
-            let lo = others.iter().map(|p| p.0).fold(t0, f64::min);
-            let hi = others.iter().map(|p| p.0).fold(t0, f64::max);
-            (m, method, (lo, hi))
-        }
-    };
-    let params = CalibrationParams { constants: c0, t0_c: t0, model, method, temp_range_c: range };
+    let (params, mut notes) = bins_cal::calib::tilter::calibration_params(&points, &kept, &req, &files)?;
+    let method = params.method;
     // Model residual: the constants the model gives at each temperature vs the measured ones.
     println!("\ntemperature model residual (model − measured at each calibration temperature):");
     println!("  {:>9} {:>12} {:>14}", "temp_C", "max|dU0| mg", "max|dK/K| ppm");
     for f in &fits {
-        let m = params.constants_at(f.temp_c);
-        let (mut du, mut dk) = (0.0f64, 0.0f64);
-        for i in 0..3 {
-            du = du.max(((m.u0_v[i] - f.constants.u0_v[i]) / f.constants.k_v_per_g[i][i]).abs());
-            for j in 0..3 {
-                dk = dk.max(((m.k_v_per_g[i][j] - f.constants.k_v_per_g[i][j]) / f.constants.k_v_per_g[i][i]).abs());
-            }
-        }
+        let (du, dk) = bins_cal::calib::tilter::model_residual(&params, f.temp_c, &f.constants);
         println!("  {:>9.2} {:>12.4} {:>14.2}", f.temp_c, du * 1e3, dk * 1e6);
     }
     let vibration = if args.shaker.is_empty() {

@@ -1,4 +1,5 @@
-//! Dwell segments of rig recordings, shared by `calibrate` and `verify`.
+//! Dwell segments of rig recordings, shared by `calibrate` and `verify`: finding the dwells,
+//! their means and stationarity, grouping them by temperature.
 //!
 //! A segment is a maximal run of consecutive rows with the same `pos` label and the same known
 //! reference (fx/fy/fz). Its first `settle_s` seconds (at most a quarter of the run) are
@@ -8,8 +9,8 @@
 //! seconds at the logger's rate is enough. Kept segments are grouped by temperature: sorted
 //! by mean temperature and split where two neighbours differ by more than `temp_tol_c`.
 
+use crate::recording::{Reader, Row};
 use anyhow::{anyhow, bail};
-use bins_cal::recording::{Reader, Row};
 use std::path::{Path, PathBuf};
 
 /// How segments are found.
@@ -61,10 +62,10 @@ struct Run {
 }
 
 /// One row of a run: `t_s`, `u_v`, `temp_c`.
-pub(super) type RunRow = (f64, [f64; 3], f64);
+pub type RunRow = (f64, [f64; 3], f64);
 
 /// The rows of a run after the settling margin (`settle_s`, at most a quarter of the run).
-pub(super) fn after_settling(rows: &[RunRow], opt: &Options) -> Vec<RunRow> {
+pub fn after_settling(rows: &[RunRow], opt: &Options) -> Vec<RunRow> {
     let (Some(first), Some(last)) = (rows.first(), rows.last()) else { return Vec::new() };
     let margin = opt.settle_s.min(0.25 * (last.0 - first.0));
     rows.iter().filter(|r| r.0 >= first.0 + margin).copied().collect()
@@ -72,7 +73,7 @@ pub(super) fn after_settling(rows: &[RunRow], opt: &Options) -> Vec<RunRow> {
 
 /// The temperature's least-squares rate over `rows` [°C/min], about their mean time and the
 /// mean temperature `temp_c`; 0 when the rows span no time.
-pub(super) fn temp_rate_c_per_min(rows: &[RunRow], temp_c: f64) -> f64 {
+pub fn temp_rate_c_per_min(rows: &[RunRow], temp_c: f64) -> f64 {
     let n = rows.len() as f64;
     let t_mean: f64 = rows.iter().map(|r| r.0 / n).sum();
     let (mut stt, mut sty) = (0.0, 0.0);

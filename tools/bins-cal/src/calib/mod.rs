@@ -1,0 +1,12 @@
+//! The calibration algorithms behind `bins-cal calibrate` and `verify`; the commands parse
+//! the arguments, call these and print.
+//!
+//! | module | owns |
+//! |---|---|
+//! | [`segments`] | dwells of labelled rig recordings: means, stationarity, grouping by temperature |
+//! | [`tilter`] | the 12 constants per temperature from labelled dwells (T(10), least squares); the temperature model T(11)/T(12) |
+//! | [`shaker`] | shake-table holds and the vibration-error fits (physics §8) |
+
+pub mod segments;
+pub mod shaker;
+pub mod tilter;
