@@ -84,6 +84,31 @@ pub fn temp_rate_c_per_min(rows: &[RunRow], temp_c: f64) -> f64 {
     if stt > 0.0 { sty / stt * 60.0 } else { 0.0 }
 }
 
+/// Whether a recording says what specific force the unit was held at.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reference {
+    /// No `fx_g`, `fy_g`, `fz_g` columns.
+    Absent,
+    /// The columns are there, every row's cells are empty.
+    Empty,
+    /// This many rows have a reference.
+    Rows(usize),
+}
+
+/// The [`Reference`] of a recording (reads it through). Errors name the file.
+pub fn reference(path: &Path) -> anyhow::Result<Reference> {
+    let mut reader = Reader::open(path).map_err(|e| anyhow!("{e}"))?;
+    if !reader.has_reference() {
+        return Ok(Reference::Absent);
+    }
+    let mut row = Row::default();
+    let mut n = 0;
+    while reader.read_row(&mut row).map_err(|e| anyhow!("{e}"))? {
+        n += usize::from(row.reference_f_g().is_some());
+    }
+    Ok(if n == 0 { Reference::Empty } else { Reference::Rows(n) })
+}
+
 /// All dwells of a recording (kept and rejected). Errors name the file: unreadable, no `pos`
 /// column, no reference columns, no row with a known reference and a position label.
 pub fn find(path: &Path, opt: &Options) -> anyhow::Result<Vec<Segment>> {
@@ -92,12 +117,17 @@ pub fn find(path: &Path, opt: &Options) -> anyhow::Result<Vec<Segment>> {
         bail!("{}: missing column `pos` (the rig position label): cannot find the dwells", path.display());
     }
     if !reader.has_reference() {
-        bail!("{}: missing reference columns `fx_g`, `fy_g`, `fz_g`: cannot find the dwells", path.display());
+        bail!(
+            "{}: no reference columns `fx_g`, `fy_g`, `fz_g` in the header: the dwells' specific force is not known (calibrate --free finds static intervals without it)",
+            path.display()
+        );
     }
     let mut runs: Vec<Run> = Vec::new();
     let mut cur: Option<Run> = None;
     let mut row = Row::default();
+    let mut n_reference = 0usize;
     while reader.read_row(&mut row).map_err(|e| anyhow!("{e}"))? {
+        n_reference += usize::from(row.reference_f_g().is_some());
         let key = match (&row.pos, row.reference_f_g()) {
             (Some(p), Some(f)) if !p.is_empty() => Some((p.as_str(), f)),
             _ => None,
@@ -118,7 +148,16 @@ pub fn find(path: &Path, opt: &Options) -> anyhow::Result<Vec<Segment>> {
     }
     runs.extend(cur.take());
     if runs.is_empty() {
-        bail!("{}: no row with both a `pos` label and a known reference (fx_g, fy_g, fz_g)", path.display());
+        if n_reference == 0 {
+            bail!(
+                "{}: the reference columns `fx_g`, `fy_g`, `fz_g` are present but empty in every row: the dwells' specific force is not known (calibrate --free finds static intervals without it)",
+                path.display()
+            );
+        }
+        bail!(
+            "{}: no row with both a `pos` label and a known reference (fx_g, fy_g, fz_g): {n_reference} row(s) have a reference, none a `pos` label",
+            path.display()
+        );
     }
     Ok(runs.into_iter().map(|r| segment(path, r, opt)).collect())
 }

@@ -13,13 +13,20 @@
 //!    ([`shaker`](bins_cal::calib::shaker)), written as the file's `[vibration]` table and the blob's
 //!    vibration section.
 //!
+//! Without a tilter (`--free`, or when no recording has a reference): the static intervals
+//! are found in the signals, the 9 frame-independent constants fitted per temperature to
+//! `|f| = 1 g` (`calib::free`), then the temperature model as above. With `--tilt`, the
+//! labelled path fits each dwell's tilt from its label jointly with the constants and says
+//! how far each dwell was from its label.
+//!
 //! Every fit's residual and the dwells it used are printed as a table. The fits are in
 //! [`bins_cal::calib`]; this module parses the arguments and prints.
 
 use anyhow::{anyhow, bail};
 use bins_cal::calfile::CalibrationFile;
-use bins_cal::calib::segments::{self, Segment};
-use bins_cal::calib::tilter::{ModelRequest, fit_temperature, parse_model};
+use bins_cal::calib::free::{self, FrameFree, FreeParams, StaticOptions};
+use bins_cal::calib::segments::{self, Reference, Segment};
+use bins_cal::calib::tilter::{ModelArg, ModelRequest, TempFit, fit_temperature, parse_model};
 use bins_cal::{fsio, ihex, memmap};
 use bins_comp::blob::Meta;
 use bins_comp::{Constants, Form, Method};
@@ -75,6 +82,22 @@ pub struct Args {
     ve_variant: String,
     #[command(flatten)]
     seg: segments::Options,
+    /// Calibrate without a tilter: static intervals found in the signals, the constants fitted
+    /// to |f| = 1 g (automatic when no recording has a reference).
+    #[arg(long)]
+    free: bool,
+    /// Free fit: `full` (biases, scale factors, non-orthogonality) or `bias-scale` (axes taken
+    /// as orthogonal: for holds near the axes only).
+    #[arg(long, value_enum, default_value = "full")]
+    free_params: FreeParams,
+    #[command(flatten)]
+    stat: StaticOptions,
+    /// Labelled dwells: fit each dwell's tilt from its label with the constants, and report it.
+    #[arg(long, conflicts_with = "free")]
+    tilt: bool,
+    /// The rig's tilt tolerance [mrad]: the prior of `--tilt`, and a dwell beyond it is warned of.
+    #[arg(long, default_value_t = 10.0)]
+    tilt_tol_mrad: f64,
 }
 
 /// The method requested on the command line.
@@ -130,16 +153,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "paper" => bins_comp::Variant::Paper,
         v => bail!("--ve-variant `{v}`: expected exact or paper"),
     };
-    let (all, files) = segments::find_all(&args.tilter, &args.seg)?;
-    let all: Vec<Segment> = all.into_iter().filter(|s| s.pos.starts_with(&args.pos_prefix)).collect();
+    let mut notes: Vec<String> = Vec::new();
+    let free = args.free || no_reference(&args.tilter, &mut notes)?;
+    let (all, files) = if free {
+        free_intervals(&args.tilter, &args.stat, &args.seg)?
+    } else {
+        let (all, files) = segments::find_all(&args.tilter, &args.seg)?;
+        (all.into_iter().filter(|s| s.pos.starts_with(&args.pos_prefix)).collect(), files)
+    };
     print_segments(&all);
     let groups = segments::by_temperature(&all, args.seg.temp_tol_c);
     if groups.is_empty() {
         bail!("{files}: no stationary dwell with a settled temperature (see the table above)");
     }
+    if free {
+        return run_free(&args, groups, &all, &files, notes, (model_arg, method, ve_variant));
+    }
     let mut fits = Vec::new();
     for (t, segs) in groups {
-        fits.push(fit_temperature(t, segs, &files)?);
+        let mut fit = fit_temperature(t, segs, &files)?;
+        if args.tilt {
+            refine_tilt(&mut fit, args.tilt_tol_mrad, &files)?;
+        }
+        fits.push(fit);
     }
     println!("\nconstants per temperature (residual = U − (K·f + U0), in mg of the axis):");
     println!("  {:>9} {:>4} {:<6} {:>10} {:>10}  dwells", "temp_C", "n", "fit", "rms_mg", "max_mg");
@@ -158,6 +194,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let points: Vec<(f64, Constants<f64>)> = fits.iter().map(|f| (f.temp_c, f.constants)).collect();
     let kept: Vec<f64> = all.iter().filter(|s| s.rejected.is_none()).map(|s| s.temp_c).collect();
+    finish(&args, &points, &kept, &files, notes, (model_arg, method, ve_variant))
+}
+
+/// The temperature model, the vibration model and the outputs from the constants at each
+/// temperature (`points`); `kept_temps_c`: the temperatures of the used dwells.
+fn finish(
+    args: &Args,
+    points: &[(f64, Constants<f64>)],
+    kept_temps_c: &[f64],
+    files: &str,
+    mut notes: Vec<String>,
+    (model_arg, method, ve_variant): (ModelArg, Method, bins_comp::Variant),
+) -> anyhow::Result<()> {
     let req = ModelRequest {
         t0_c: args.t0,
         model: model_arg,
@@ -165,14 +214,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         temp_tol_c: args.seg.temp_tol_c,
         method,
     };
-    let (params, mut notes) = bins_cal::calib::tilter::calibration_params(&points, &kept, &req, &files)?;
+    let (params, model_notes) = bins_cal::calib::tilter::calibration_params(points, kept_temps_c, &req, files)?;
+    notes.splice(0..0, model_notes);
     let method = params.method;
     // Model residual: the constants the model gives at each temperature vs the measured ones.
     println!("\ntemperature model residual (model − measured at each calibration temperature):");
     println!("  {:>9} {:>12} {:>14}", "temp_C", "max|dU0| mg", "max|dK/K| ppm");
-    for f in &fits {
-        let (du, dk) = bins_cal::calib::tilter::model_residual(&params, f.temp_c, &f.constants);
-        println!("  {:>9.2} {:>12.4} {:>14.2}", f.temp_c, du * 1e3, dk * 1e6);
+    for (t, c) in points {
+        let (du, dk) = bins_cal::calib::tilter::model_residual(&params, *t, c);
+        println!("  {:>9.2} {:>12.4} {:>14.2}", t, du * 1e3, dk * 1e6);
     }
     let vibration = if args.shaker.is_empty() {
         None
@@ -193,7 +243,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => None,
     };
     let mut header = String::from("# bins-cal calibrate from: ");
-    header.push_str(&files);
+    header.push_str(files);
     header.push('\n');
     if !args.shaker.is_empty() {
         header.push_str("# shake table: ");
@@ -225,5 +275,126 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         fsio::write_atomic(p, h.as_bytes())?;
         println!("wrote {}", p.display());
     }
+    Ok(())
+}
+
+/// True when no recording has a reference (absent or empty columns): the free fit is then
+/// automatic, and `notes` says why.
+fn no_reference(paths: &[PathBuf], notes: &mut Vec<String>) -> anyhow::Result<bool> {
+    let mut why = Vec::new();
+    for p in paths {
+        match segments::reference(p)? {
+            Reference::Rows(_) => return Ok(false),
+            Reference::Absent => why.push(format!("{} has no reference columns", p.display())),
+            Reference::Empty => why.push(format!("{}: the reference columns are empty in every row", p.display())),
+        }
+    }
+    notes.push(format!("{}: calibrated from static intervals alone (as with --free)", why.join("; ")));
+    Ok(true)
+}
+
+/// The static intervals of every recording; the names of the files.
+fn free_intervals(
+    paths: &[PathBuf],
+    opt: &StaticOptions,
+    seg: &segments::Options,
+) -> anyhow::Result<(Vec<Segment>, String)> {
+    let mut all = Vec::new();
+    for p in paths {
+        all.extend(free::find_static(p, opt, seg)?);
+    }
+    let names = paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ");
+    Ok((all, names))
+}
+
+/// Prints the frame-independent parameters with their standard errors; `fixed` marks the
+/// non-orthogonality as assumed zero.
+fn print_frame_free(p: &FrameFree, se: &FrameFree, fixed: bool) {
+    println!("  {:<20} {:>14} {:>12}", "parameter", "value", "std_error");
+    let (v, e) = (p.to_array(), se.to_array());
+    for (k, name) in FrameFree::names().iter().enumerate() {
+        let scale = if (3..6).contains(&k) { 1.0 } else { 1e3 };
+        if k >= 6 && fixed {
+            println!("  {:<20} {:>14} {:>12}  assumed (--free-params bias-scale)", name, "0", "-");
+        } else if (3..6).contains(&k) {
+            println!("  {:<20} {:>14.7} {:>12.2e}", name, v[k], e[k]);
+        } else {
+            println!("  {:<20} {:>+14.4} {:>12.4}", name, v[k] * scale, e[k] * scale);
+        }
+    }
+}
+
+/// The free path: per temperature the free fit of its static intervals, then [`finish`].
+fn run_free(
+    args: &Args,
+    groups: Vec<(f64, Vec<&Segment>)>,
+    all: &[Segment],
+    files: &str,
+    notes: Vec<String>,
+    model: (ModelArg, Method, bins_comp::Variant),
+) -> anyhow::Result<()> {
+    let mut points = Vec::new();
+    for (t, segs) in groups {
+        let u: Vec<[f64; 3]> = segs.iter().map(|s| s.mean_u_v).collect();
+        let fit = free::fit_free(&u, args.free_params).map_err(|e| anyhow!("{files}: at {t:.2} °C: {e}"))?;
+        println!(
+            "\nfree fit at {t:.2} °C over {} static intervals (|f| = 1 g; K upper triangular: the z input axis is the frame's z, the y input axis lies in its y–z plane):",
+            segs.len()
+        );
+        print_frame_free(&fit.params, &fit.se, fit.which == FreeParams::BiasScale);
+        println!("  residual σ {:.4} mg; per interval, |f| − 1 g [mg]:", fit.sigma_g * 1e3);
+        for (s, r) in segs.iter().zip(&fit.residual_g) {
+            println!("    {:<5} {:>8.1} … {:<8.1} s {:>+9.4}", s.pos, s.t_s.0, s.t_s.1, r * 1e3);
+        }
+        points.push((t, fit.constants));
+    }
+    let kept: Vec<f64> = all.iter().filter(|s| s.rejected.is_none()).map(|s| s.temp_c).collect();
+    finish(args, &points, &kept, files, notes, model)
+}
+
+/// `--tilt`: fits each dwell's tilt from its label jointly with the constants (replacing
+/// them and their residual in `fit`), prints how far each dwell was from its label and warns
+/// of those beyond the rig's tolerance.
+fn refine_tilt(fit: &mut TempFit<'_>, tol_mrad: f64, files: &str) -> anyhow::Result<()> {
+    let labels: Vec<[f64; 3]> = fit.segments.iter().map(|s| s.f_g).collect();
+    let u: Vec<[f64; 3]> = fit.segments.iter().map(|s| s.mean_u_v).collect();
+    let se: Vec<[f64; 3]> =
+        fit.segments.iter().map(|s| s.std_u_v.map(|x| x / (s.rows.len().max(1) as f64).sqrt())).collect();
+    let t = fit.temp_c;
+    let tf = free::fit_tilted(&labels, &u, &se, &fit.constants, tol_mrad * 1e-3)
+        .map_err(|e| anyhow!("{files}: at {t:.2} °C: tilt fit: {e}"))?;
+    println!(
+        "\ndwells against their labels at {t:.2} °C (tilt fitted with the constants; rig tolerance {tol_mrad} mrad):"
+    );
+    println!("  {:<5} {:>10} {:>9} {:>9} {:>9} {:>9}  status", "pos", "tilt_mrad", "tilt_deg", "fx_g", "fy_g", "fz_g");
+    for (k, s) in fit.segments.iter().enumerate() {
+        let tilt = tf.tilt_rad[k];
+        let beyond = tilt * 1e3 > tol_mrad;
+        let f = tf.f_g[k];
+        println!(
+            "  {:<5} {:>10.3} {:>9.4} {:>+9.5} {:>+9.5} {:>+9.5}  {}",
+            s.pos,
+            tilt * 1e3,
+            tilt.to_degrees(),
+            f[0],
+            f[1],
+            f[2],
+            if beyond { "beyond the rig tolerance" } else { "ok" }
+        );
+        if beyond {
+            eprintln!(
+                "bins-cal: warning: {}: {} at {t:.2} °C was {:.1} mrad ({:.2}°) from its label, beyond the rig tolerance {tol_mrad} mrad",
+                s.file.display(),
+                s.pos,
+                tilt * 1e3,
+                tilt.to_degrees()
+            );
+        }
+    }
+    println!("  constants with the tilts (frame: the one that makes the tilts smallest):");
+    print_frame_free(&tf.params, &tf.se, false);
+    fit.constants = tf.constants;
+    fit.residual_g = tf.residual_g;
+    fit.how = "tilt";
     Ok(())
 }
