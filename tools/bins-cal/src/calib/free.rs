@@ -20,9 +20,14 @@
 //! errors are `σ·√diag((JᵀJ)⁻¹)` with `σ` the residual standard error.
 //!
 //! The results are given as the 9 frame-independent parameters ([`FrameFree`]): per axis the
-//! bias `U0_i/|K_i|` \[g\] and the scale factor `|K_i|` \[V/g\] (`K_i` the i-th row of K,
-//! the accelerometer's input axis times its scale factor), and per pair the
-//! non-orthogonality: 90° minus the angle between the input axes \[rad\]. Their standard
+//! scale factor `s_i = ±|K_i|` \[V/g\] (`K_i` the i-th row of K, the accelerometer's input
+//! axis times its scale factor; the sign of `K_ii`) and the bias `U0_i/s_i` \[g\], and per
+//! pair the non-orthogonality: 90° minus the angle between the input axes `K_i/s_i`
+//! \[rad\].
+//!
+//! `|f|` cannot tell the sign of an axis: the signs of `K_ii` are an input (`--free-signs`,
+//! `+++` by default; the paper's unit, whose signals fall as the specific force rises, takes
+//! `---`). They also fix the frame's handedness, which no rotation changes. Their standard
 //! errors come from the parameters' covariance through the derivatives of these functions.
 //!
 //! **Labelled holds that are not level** ([`fit_tilted`]): each hold `k` with label `l_k`
@@ -32,7 +37,7 @@
 //! rig's tolerance (a prior `θ ~ N(0, tol²)`), which fixes the rotation gauge (the frame that
 //! makes the tilts smallest) and the directions the holds do not determine.
 
-use super::segments::{Options, Segment, temp_rate_c_per_min};
+use super::segments::{Options, RunRow, Segment, temp_rate_c_per_min};
 use crate::recording::{Reader, Row};
 use anyhow::{anyhow, bail};
 use bins_comp::Constants;
@@ -71,7 +76,7 @@ impl Default for StaticOptions {
 /// initial period without variance.
 pub fn find_static(path: &Path, opt: &StaticOptions, seg: &Options) -> anyhow::Result<Vec<Segment>> {
     let mut reader = Reader::open(path).map_err(|e| anyhow!("{e}"))?;
-    let mut rows: Vec<(f64, [f64; 3], f64)> = Vec::new();
+    let mut rows: Vec<RunRow> = Vec::new();
     let mut row = Row::default();
     while reader.read_row(&mut row).map_err(|e| anyhow!("{e}"))? {
         rows.push((row.t_s, row.u_v, row.temp_c));
@@ -82,7 +87,7 @@ pub fn find_static(path: &Path, opt: &StaticOptions, seg: &Options) -> anyhow::R
 /// [`find_static`] on rows already read: (`t_s`, `u_v`, `temp_c`).
 pub fn static_intervals(
     path: &Path,
-    rows: &[(f64, [f64; 3], f64)],
+    rows: &[RunRow],
     opt: &StaticOptions,
     seg: &Options,
 ) -> anyhow::Result<Vec<Segment>> {
@@ -147,7 +152,7 @@ pub fn static_intervals(
     Ok(out)
 }
 
-fn interval(path: &Path, number: usize, run: &[(f64, [f64; 3], f64)], seg: &Options) -> Segment {
+fn interval(path: &Path, number: usize, run: &[RunRow], seg: &Options) -> Segment {
     let n = run.len() as f64;
     let mut mean = [0.0; 3];
     let mut temp = 0.0;
@@ -185,7 +190,7 @@ fn interval(path: &Path, number: usize, run: &[(f64, [f64; 3], f64)], seg: &Opti
 pub struct FrameFree {
     /// Bias `U0_i/|K_i|` \[g\] (x, y, z).
     pub bias_g: [f64; 3],
-    /// Scale factor `|K_i|` \[V/g\] (x, y, z).
+    /// Scale factor `|K_i|` with the sign of `K_ii` \[V/g\] (x, y, z).
     pub scale_v_per_g: [f64; 3],
     /// Non-orthogonality, 90° minus the angle between input axes \[rad\] (xy, xz, yz).
     pub nonorth_rad: [f64; 3],
@@ -199,7 +204,10 @@ impl FrameFree {
     /// The parameters of constants `c` (any rotation gauge).
     pub fn of(c: &Constants<f64>) -> Self {
         let k = &c.k_v_per_g;
-        let norm = |i: usize| (k[i][0] * k[i][0] + k[i][1] * k[i][1] + k[i][2] * k[i][2]).sqrt();
+        let norm = |i: usize| {
+            let n = (k[i][0] * k[i][0] + k[i][1] * k[i][1] + k[i][2] * k[i][2]).sqrt();
+            if k[i][i] < 0.0 { -n } else { n }
+        };
         let s = [norm(0), norm(1), norm(2)];
         let mut out = FrameFree { scale_v_per_g: s, ..Default::default() };
         for i in 0..3 {
@@ -253,6 +261,10 @@ pub enum FreeParams {
 /// A parameter's standard error above which the intervals do not determine it: bias 1 mg,
 /// scale factor 1000 ppm (relative), non-orthogonality 2 mrad.
 pub const NOT_DETERMINED_SE: [f64; 3] = [1e-3, 1e-3, 2e-3];
+
+/// The smallest residual standard error the free fit's standard errors assume \[g\]: no
+/// session measures `|f|` better than 1 µg.
+pub const SIGMA_FLOOR_G: f64 = 1e-6;
 
 /// The result of the free fit.
 #[derive(Clone, Debug)]
@@ -371,8 +383,13 @@ pub enum FreeError {
     Solver(String),
 }
 
-/// The free fit over the intervals' mean signals `u_v` \[V\] (see the module doc).
-pub fn fit_free(u_v: &[[f64; 3]], which: FreeParams) -> Result<FreeFit, FreeError> {
+/// The free fit over the intervals' mean signals `u_v` \[V\] (see the module doc); `signs`:
+/// the signs of `K_ii` (±1).
+pub fn fit_free(u_v: &[[f64; 3]], which: FreeParams, signs: [f64; 3]) -> Result<FreeFit, FreeError> {
+    fit_inner(u_v, which, signs, true)
+}
+
+fn fit_inner(u_v: &[[f64; 3]], which: FreeParams, signs: [f64; 3], check: bool) -> Result<FreeFit, FreeError> {
     let n_par = match which {
         FreeParams::Full => 9,
         FreeParams::BiasScale => 6,
@@ -407,10 +424,9 @@ pub fn fit_free(u_v: &[[f64; 3]], which: FreeParams) -> Result<FreeFit, FreeErro
         step[c] = 1e-6 * a0;
     }
     if which == FreeParams::Full {
-        // Start from the biases and scale factors, and first check there that the intervals
-        // determine the non-orthogonality (a solver wandering along an undetermined direction
-        // would otherwise end anywhere).
-        let bs = fit_free(u_v, FreeParams::BiasScale)?;
+        // Start from the biases and scale factors (not checked: their standard errors include
+        // the non-orthogonality they leave out).
+        let bs = fit_inner(u_v, FreeParams::BiasScale, [1.0; 3], false)?;
         let a = &bs.constants.k_v_per_g;
         x0 = DVector::from_row_slice(&[
             bs.constants.u0_v[0],
@@ -423,26 +439,44 @@ pub fn fit_free(u_v: &[[f64; 3]], which: FreeParams) -> Result<FreeFit, FreeErro
             0.0,
             1.0 / a[2][2],
         ]);
-        let j = jacobian(&resid, &x0, &step);
-        let sigma = bs.sigma_g.max(f64::MIN_POSITIVE);
-        let se = match (j.transpose() * &j).try_inverse() {
-            Some(cov) => derived_se(&x0, &step, &(cov * sigma * sigma), |x| {
-                let (b, a) = expand(x);
-                FrameFree::of(&constants_of(&a, &b))
-            }),
-            None => FrameFree::from_array(&[f64::INFINITY; 9]),
-        };
-        check_determined(&FrameFree::of(&bs.constants), &se, which)?;
     }
     let (x, cov, failed) = solve(resid, x0, step.clone());
     let r = resid(&x);
     let dof = (u_v.len() - n_par) as f64;
     let sigma = (r.norm_squared() / dof).sqrt();
-    let (b, a) = expand(&x);
+    // A perfect fit would give zero standard errors even to undetermined parameters.
+    let sigma_se = sigma.max(SIGMA_FLOOR_G);
+    // The signs: flip K's columns (a reflection of the frame, K upper triangular still) so
+    // that K_ii has the sign asked for; |f| is unchanged.
+    let (b, mut a) = expand(&x);
+    let mut x = x;
+    let flip: Vec<bool> = (0..3).map(|i| [a[0], a[3], a[5]][i] * signs[i] < 0.0).collect();
+    // A = K⁻¹: flipping K's column j flips A's row j.
+    let rows: [&[usize]; 3] = [&[0, 1, 2], &[3, 4], &[5]];
+    for j in 0..3 {
+        if flip[j] {
+            for &e in rows[j] {
+                a[e] = -a[e];
+            }
+        }
+    }
+    let slots: [usize; 6] = [3, 4, 5, 6, 7, 8];
+    match which {
+        FreeParams::Full => {
+            for (e, &slot) in slots.iter().enumerate() {
+                x[slot] = a[e];
+            }
+        }
+        FreeParams::BiasScale => {
+            x[3] = a[0];
+            x[4] = a[3];
+            x[5] = a[5];
+        }
+    }
     let constants = constants_of(&a, &b);
     let params = FrameFree::of(&constants);
     let se = match cov {
-        Some(cov) => derived_se(&x, &step, &(cov * sigma * sigma), |x| {
+        Some(cov) => derived_se(&x, &step, &(cov * sigma_se * sigma_se), |x| {
             let (b, a) = expand(x);
             FrameFree::of(&constants_of(&a, &b))
         }),
@@ -453,8 +487,10 @@ pub fn fit_free(u_v: &[[f64; 3]], which: FreeParams) -> Result<FreeFit, FreeErro
         se.nonorth_rad = [0.0; 3];
     }
     // An undetermined parameter also stops the solver: name it first.
-    check_determined(&params, &se, which)?;
-    if let Some(e) = failed {
+    if check {
+        check_determined(&params, &se, which)?;
+    }
+    if let Some(e) = failed.filter(|_| check) {
         return Err(FreeError::Solver(e));
     }
     Ok(FreeFit { constants, params, se, residual_g: r.iter().copied().collect(), sigma_g: sigma, which })
@@ -639,7 +675,7 @@ mod tests {
                 signals(&c, &[r * phi.cos(), r * phi.sin(), z])
             })
             .collect();
-        let fit = fit_free(&u, FreeParams::Full).expect("fit");
+        let fit = fit_free(&u, FreeParams::Full, [1.0; 3]).expect("fit");
         let (t, e) = (FrameFree::of(&c).to_array(), fit.params.to_array());
         for p in 0..9 {
             assert!((t[p] - e[p]).abs() < 1e-9, "{}: {} vs {}", FrameFree::names()[p], e[p], t[p]);
@@ -649,15 +685,44 @@ mod tests {
     }
 
     #[test]
+    fn the_signs_asked_for_give_the_truth_of_a_unit_with_negative_scale_factors() {
+        let mut c = truth();
+        for row in c.k_v_per_g.iter_mut() {
+            for v in row.iter_mut() {
+                *v = -*v;
+            }
+        }
+        let u: Vec<[f64; 3]> = (0..20)
+            .map(|k| {
+                let z = -1.0 + (2.0 * k as f64 + 1.0) / 20.0;
+                let phi = k as f64 * 2.399963;
+                let r = (1.0 - z * z).sqrt();
+                signals(&c, &[r * phi.cos(), r * phi.sin(), z])
+            })
+            .collect();
+        let fit = fit_free(&u, FreeParams::Full, [-1.0; 3]).expect("fit");
+        let (t, e) = (FrameFree::of(&c).to_array(), fit.params.to_array());
+        for p in 0..9 {
+            assert!((t[p] - e[p]).abs() < 1e-9, "{}: {} vs {}", FrameFree::names()[p], e[p], t[p]);
+        }
+        // The fitted constants give back unit specific forces.
+        let k = nalgebra::Matrix3::from_fn(|i, j| fit.constants.k_v_per_g[i][j]).try_inverse().expect("K");
+        for uk in &u {
+            let v = nalgebra::Vector3::from_fn(|i, _| uk[i] - fit.constants.u0_v[i]);
+            assert!(((k * v).norm() - 1.0).abs() < 1e-9);
+        }
+    }
+
+    #[test]
     fn six_axis_positions_do_not_determine_the_non_orthogonality() {
         let c = truth();
         let dirs = bins_comp::ident::TILTER_POSITIONS_G;
         let u: Vec<[f64; 3]> =
             (0..12).map(|k| signals(&c, &dirs[k % 6]).map(|x| x + 1e-5 * ((k * 7 % 5) as f64 - 2.0))).collect();
-        let e = fit_free(&u, FreeParams::Full).expect_err("undetermined");
+        let e = fit_free(&u, FreeParams::Full, [1.0; 3]).expect_err("undetermined");
         let msg = e.to_string();
         assert!(msg.contains("nonorth_xy_mrad") && msg.contains("--free-params bias-scale"), "{msg}");
-        let fit = fit_free(&u, FreeParams::BiasScale).expect("bias and scale");
+        let fit = fit_free(&u, FreeParams::BiasScale, [1.0; 3]).expect("bias and scale");
         assert!((fit.params.bias_g[0] - FrameFree::of(&c).bias_g[0]).abs() < 1e-4);
     }
 }

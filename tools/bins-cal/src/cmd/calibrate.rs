@@ -90,6 +90,9 @@ pub struct Args {
     /// as orthogonal: for holds near the axes only).
     #[arg(long, value_enum, default_value = "full")]
     free_params: FreeParams,
+    /// Free fit: the signs of K_xx, K_yy, K_zz (`+++`, `---`, …), which |f| = 1 g cannot tell.
+    #[arg(long, default_value = "+++")]
+    free_signs: String,
     #[command(flatten)]
     stat: StaticOptions,
     /// Labelled dwells: fit each dwell's tilt from its label with the constants, and report it.
@@ -324,6 +327,20 @@ fn print_frame_free(p: &FrameFree, se: &FrameFree, fixed: bool) {
     }
 }
 
+/// `--free-signs`: three of `+` and `-`.
+fn parse_signs(s: &str) -> anyhow::Result<[f64; 3]> {
+    let v: Vec<f64> = s
+        .chars()
+        .map(|c| match c {
+            '+' => Ok(1.0),
+            '-' => Ok(-1.0),
+            _ => Err(anyhow!("--free-signs `{s}`: expected three of + and - (the signs of K_xx, K_yy, K_zz)")),
+        })
+        .collect::<anyhow::Result<_>>()?;
+    <[f64; 3]>::try_from(v)
+        .map_err(|_| anyhow!("--free-signs `{s}`: expected three of + and - (the signs of K_xx, K_yy, K_zz)"))
+}
+
 /// The free path: per temperature the free fit of its static intervals, then [`finish`].
 fn run_free(
     args: &Args,
@@ -333,10 +350,11 @@ fn run_free(
     notes: Vec<String>,
     model: (ModelArg, Method, bins_comp::Variant),
 ) -> anyhow::Result<()> {
+    let signs = parse_signs(&args.free_signs)?;
     let mut points = Vec::new();
     for (t, segs) in groups {
         let u: Vec<[f64; 3]> = segs.iter().map(|s| s.mean_u_v).collect();
-        let fit = free::fit_free(&u, args.free_params).map_err(|e| anyhow!("{files}: at {t:.2} °C: {e}"))?;
+        let fit = free::fit_free(&u, args.free_params, signs).map_err(|e| anyhow!("{files}: at {t:.2} °C: {e}"))?;
         println!(
             "\nfree fit at {t:.2} °C over {} static intervals (|f| = 1 g; K upper triangular: the z input axis is the frame's z, the y input axis lies in its y–z plane):",
             segs.len()
