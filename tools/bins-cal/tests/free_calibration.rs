@@ -8,6 +8,7 @@ use bins_cal::calib::free::{self, FrameFree, FreeParams, StaticOptions};
 use bins_cal::calib::segments::{self, Options};
 use bins_cal::calib::tilter::fit_temperature;
 use bins_cal::recording::Row;
+use bins_cal::sim::rig::{Motion, Written};
 use bins_cal::sim::scenario::ScenarioFile;
 use bins_comp::Constants;
 use std::path::Path;
@@ -253,4 +254,166 @@ fn calibrate_reports_the_unlevel_holds_and_calibrates_empty_references_freely() 
         dir.path().join("v.csv").to_str().unwrap(),
     ]);
     assert!(e.contains("present but empty"), "{e}");
+}
+
+#[test]
+fn hand_sessions_at_three_temperatures_give_the_temperature_model() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let scen = dir.path().join("hand-3t.toml");
+    std::fs::write(
+        &scen,
+        r#"
+[recording]
+rate_Hz = 20.0
+
+[unit]
+preset = "paper"
+fit = "poly"
+order = 2
+
+[thermal]
+start_C = 20.0
+rate_C_per_min = 30.0
+case_tau_s = 4.0
+die_tau_s = 2.0
+thermistor_at = 0.5
+thermistor_tau_s = 1.0
+
+[noise]
+white_V = 3.0e-5
+bias_instability_V = 1.0e-6
+bias_tau_s = 300.0
+adc_lsb_V = 1.0e-7
+temp_noise_C = 0.005
+temp_resolution_C = 0.01
+
+[[step]]
+kind = "hand"
+holds = 20
+init_s = 5.0
+dwell_s = 3.0
+move_s = 2.0
+seed = 1
+
+[[step]]
+kind = "hand"
+chamber_C = -40.0
+holds = 20
+init_s = 180.0
+dwell_s = 3.0
+move_s = 2.0
+seed = 2
+
+[[step]]
+kind = "hand"
+chamber_C = 70.0
+holds = 20
+init_s = 300.0
+dwell_s = 3.0
+move_s = 2.0
+seed = 3
+"#,
+    )
+    .expect("write");
+    let rec = dir.path().join("hand-3t.csv");
+    let cal = dir.path().join("hand-3t-cal.toml");
+    let (rec_s, cal_s) = (rec.to_str().unwrap(), cal.to_str().unwrap());
+    common::ok(&["simulate", scen.to_str().unwrap(), "-o", rec_s, "--seed", "4"]);
+    let out = common::ok(&["calibrate", "--tilter", rec_s, "--free-signs=---", "--model", "poly:2", "-o", cal_s]);
+    assert_eq!(out.matches("free fit at").count(), 3, "{out}");
+    let (params, _) = bins_cal::calfile::CalibrationFile::read(&cal).unwrap().to_params().unwrap();
+    let names = FrameFree::names();
+    // The model through the three temperatures against the unit's true constants there.
+    for (k, t) in bins_comp::paper::TABLE_TEMPS_C.iter().enumerate() {
+        let got = FrameFree::of(&params.constants_at(*t)).to_array();
+        let want = FrameFree::of(&bins_comp::paper::TABLE_CONSTANTS[k]).to_array();
+        for p in 0..9 {
+            let tol = match p {
+                0..3 => 1e-4,
+                3..6 => 1e-4 * want[p].abs(),
+                _ => 2e-4,
+            };
+            assert!((got[p] - want[p]).abs() <= tol, "{} at {t} °C: {} vs {}", names[p], got[p], want[p]);
+        }
+    }
+}
+
+/// A tilter run of the paper's unit with its holds tilted by up to `tilt_deg` from their
+/// labels (which the reference cells say): the true tilts, the T(10) and the tilt fits, and
+/// the truth's frame-free parameters.
+fn tilter_run(tilt_deg: f64) -> (Vec<f64>, FrameFree, free::TiltFit, FrameFree) {
+    let dir = tempfile::tempdir().expect("tmp");
+    let text = format!(
+        r#"
+[recording]
+rate_Hz = 20.0
+
+[unit]
+preset = "paper"
+fit = "poly"
+order = 2
+
+[noise]
+white_V = 3.0e-5
+adc_lsb_V = 1.0e-7
+
+[[step]]
+kind = "tilter"
+dwell_s = 10.0
+move_s = 2.0
+tilt_deg = {tilt_deg}
+tilt_seed = 7
+"#
+    );
+    let file = dir.path().join("unlevel.toml");
+    std::fs::write(&file, text).expect("write");
+    let sim = bins_cal::sim::scenario::load(&file).expect("scenario");
+    let truth_tilt: Vec<f64> = sim
+        .segments
+        .iter()
+        .filter(|s| s.label.is_some())
+        .map(|s| match (s.motion, s.written) {
+            (Motion::Hold(f), Written::Nominal(l)) => (f[0] * l[0] + f[1] * l[1] + f[2] * l[2]).clamp(-1.0, 1.0).acos(),
+            _ => 0.0,
+        })
+        .collect();
+    assert_eq!(truth_tilt.len(), 6);
+    let rec = dir.path().join("unlevel.csv");
+    sim.write("unlevel.toml", 1, &rec, false).expect("simulate");
+    let opt = seg_options();
+    let all = segments::find(&rec, &opt).expect("holds");
+    let (t, segs) = segments::by_temperature(&all, opt.temp_tol_c).into_iter().next().expect("one temperature");
+    let labelled = fit_temperature(t, segs, "unlevel").expect("T(10)");
+    // The reference cells say the labels.
+    assert!(labelled.segments.iter().all(|s| bins_comp::ident::TILTER_POSITIONS_G.contains(&s.f_g)));
+    let labels: Vec<[f64; 3]> = labelled.segments.iter().map(|s| s.f_g).collect();
+    let means: Vec<[f64; 3]> = labelled.segments.iter().map(|s| s.mean_u_v).collect();
+    let se: Vec<[f64; 3]> =
+        labelled.segments.iter().map(|s| s.std_u_v.map(|x| x / (s.rows.len() as f64).sqrt())).collect();
+    let tilt = free::fit_tilted(&labels, &means, &se, &labelled.constants, 10e-3).expect("tilt fit");
+    let truth = FrameFree::of(&sim.unit.params.constants_at(t));
+    (truth_tilt, FrameFree::of(&labelled.constants), tilt, truth)
+}
+
+#[test]
+fn unlevel_tilter_holds_are_found_and_their_tilt_fitted() {
+    let rss = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    // Level holds: the fit finds no tilt.
+    let (true_tilt, _, tilt, _) = tilter_run(0.0);
+    assert!(rss(&true_tilt) == 0.0);
+    assert!(tilt.tilt_rad.iter().all(|t| *t < 0.1e-3), "{:?}", tilt.tilt_rad);
+    // Holds up to 0.5° off: T(10) turns the tilts into bias errors, the tilt fit does not.
+    let (true_tilt, t10, tilt, truth) = tilter_run(0.5);
+    let names = FrameFree::names();
+    let (t10, fit, truth) = (t10.to_array(), tilt.params.to_array(), truth.to_array());
+    for p in 0..3 {
+        println!("{} truth {:+.6} T(10) {:+.6} tilt {:+.6}", names[p], truth[p], t10[p], fit[p]);
+        assert!((fit[p] - truth[p]).abs() < 0.05e-3, "{}: {} vs {}", names[p], fit[p], truth[p]);
+    }
+    assert!((0..3).any(|p| (t10[p] - truth[p]).abs() > 0.2e-3), "T(10) {t10:?} truth {truth:?}");
+    // The fitted tilts are the smallest that explain the holds: never more than the true
+    // ones (with the noise), and they show that the holds were not level.
+    println!("true tilts {true_tilt:?}, fitted {:?}", tilt.tilt_rad);
+    assert!(rss(&tilt.tilt_rad) <= rss(&true_tilt) * 1.02 + 0.05e-3);
+    assert!(tilt.tilt_rad.iter().any(|t| *t > 1e-3), "{:?}", tilt.tilt_rad);
 }

@@ -332,6 +332,9 @@ pub enum StepSpec {
     },
     /// A calibration by hand: a still start, then random orientations (no reference).
     Hand {
+        /// New chamber set point from the still start on [°C] (which is then the soak).
+        #[serde(default, rename = "chamber_C")]
+        chamber_c: Option<f64>,
         /// Number of orientations.
         holds: usize,
         /// The still start where the unit is \[s\].
@@ -691,9 +694,12 @@ fn build_step(tl: &mut Timeline, s: &StepSpec, key: &str) -> Check<()> {
                 tl.tilter(&which, dwell, mv);
             }
         }
-        StepSpec::Hand { holds, init_s, dwell_s, move_s, seed } => {
+        StepSpec::Hand { chamber_c, holds, init_s, dwell_s, move_s, seed } => {
             if *holds == 0 {
                 return Err(kerr(k("holds"), "at least one orientation"));
+            }
+            if let Some(c) = chamber_c {
+                tl.set_chamber(temp_c(&k("chamber_C"), *c)?);
             }
             tl.hand(
                 *holds,
