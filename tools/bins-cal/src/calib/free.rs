@@ -123,7 +123,7 @@ pub fn static_intervals(
         );
     }
     let limit = opt.static_threshold * v_init;
-    // Centred window of ±half rows (by time: the median sample period).
+    // Centred window of ±half rows (by time: the mean sample period).
     let dt = (rows[n - 1].0 - first.0) / (n - 1).max(1) as f64;
     let half = ((0.5 * opt.static_window_s / dt).round() as usize).max(1);
     let is_static: Vec<bool> = (0..n)
@@ -344,8 +344,8 @@ fn solve(f: impl Fn(&DVector<f64>) -> DVector<f64>, x0: DVector<f64>, step: DVec
     (p.x, cov, failed)
 }
 
-/// The intervals' mean signals \[V\]: `|K⁻¹(ū − U0)|` for the upper-triangular `A = K⁻¹`
-/// given as `[a_xx, a_xy, a_xz, a_yy, a_yz, a_zz]`.
+/// `|A(u − b)|` \[g\], T(1) solved for `f`: `A = K⁻¹` upper triangular, given as
+/// `[a_xx, a_xy, a_xz, a_yy, a_yz, a_zz]`, `b = U0` \[V\].
 fn magnitude_g(a: &[f64], b: &[f64], u: &[f64; 3]) -> f64 {
     let v = [u[0] - b[0], u[1] - b[1], u[2] - b[2]];
     let f = [a[0] * v[0] + a[1] * v[1] + a[2] * v[2], a[3] * v[1] + a[4] * v[2], a[5] * v[2]];
@@ -460,19 +460,19 @@ fn fit_inner(u_v: &[[f64; 3]], which: FreeParams, signs: [f64; 3], check: bool) 
             }
         }
     }
-    let slots: [usize; 6] = [3, 4, 5, 6, 7, 8];
-    match which {
-        FreeParams::Full => {
-            for (e, &slot) in slots.iter().enumerate() {
-                x[slot] = a[e];
-            }
+    // The parameter vector and its covariance follow: `d` = −1 where an element flipped.
+    let slots: &[(usize, usize)] = match which {
+        FreeParams::Full => &[(0, 3), (1, 4), (2, 5), (3, 6), (4, 7), (5, 8)],
+        FreeParams::BiasScale => &[(0, 3), (3, 4), (5, 5)],
+    };
+    let mut d = DVector::from_element(n_par, 1.0);
+    for &(e, slot) in slots {
+        if x[slot] != a[e] {
+            d[slot] = -1.0;
         }
-        FreeParams::BiasScale => {
-            x[3] = a[0];
-            x[4] = a[3];
-            x[5] = a[5];
-        }
+        x[slot] = a[e];
     }
+    let cov = cov.map(|c| DMatrix::from_diagonal(&d) * c * DMatrix::from_diagonal(&d));
     let constants = constants_of(&a, &b);
     let params = FrameFree::of(&constants);
     let se = match cov {

@@ -35,7 +35,8 @@ use std::path::PathBuf;
 /// Arguments of `bins-cal calibrate`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Tilter recordings (format v1 with `pos` and fx/fy/fz), one or several.
+    /// Tilter recordings (format v1 with `pos` and fx/fy/fz), one or several; with `--free`
+    /// (or without any reference) recordings of holds placed by hand.
     #[arg(long, num_args = 1.., required = true)]
     tilter: Vec<PathBuf>,
     /// Reference temperature T0 [°C]: the dwells nearest to it give the T0 constants, and
