@@ -177,7 +177,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for (t, segs) in groups {
         let mut fit = fit_temperature(t, segs, &files)?;
         if args.tilt {
-            refine_tilt(&mut fit, args.tilt_tol_mrad, &files)?;
+            notes.push(refine_tilt(&mut fit, args.tilt_tol_mrad, &files)?);
         }
         fits.push(fit);
     }
@@ -352,6 +352,11 @@ fn run_free(
     model: (ModelArg, Method, bins_comp::Variant),
 ) -> anyhow::Result<()> {
     let signs = parse_signs(&args.free_signs)?;
+    let mut notes = notes;
+    notes.push(format!(
+        "free fit (|f| = 1 g): K upper triangular (imu_tk's gauge: the z input axis is the frame's z, the y input axis lies in its y-z plane), signs of K_xx, K_yy, K_zz {}",
+        args.free_signs
+    ));
     let mut points = Vec::new();
     for (t, segs) in groups {
         let u: Vec<[f64; 3]> = segs.iter().map(|s| s.mean_u_v).collect();
@@ -365,6 +370,11 @@ fn run_free(
         for (s, r) in segs.iter().zip(&fit.residual_g) {
             println!("    {:<5} {:>8.1} … {:<8.1} s {:>+9.4}", s.pos, s.t_s.0, s.t_s.1, r * 1e3);
         }
+        notes.push(format!(
+            "free fit at {t:.2} °C: {} static intervals, residual σ {:.4} mg",
+            segs.len(),
+            fit.sigma_g * 1e3
+        ));
         points.push((t, fit.constants));
     }
     let kept: Vec<f64> = all.iter().filter(|s| s.rejected.is_none()).map(|s| s.temp_c).collect();
@@ -373,8 +383,8 @@ fn run_free(
 
 /// `--tilt`: fits each dwell's tilt from its label jointly with the constants (replacing
 /// them and their residual in `fit`), prints how far each dwell was from its label and warns
-/// of those beyond the rig's tolerance.
-fn refine_tilt(fit: &mut TempFit<'_>, tol_mrad: f64, files: &str) -> anyhow::Result<()> {
+/// of those beyond the rig's tolerance. Returns the note for the file's header.
+fn refine_tilt(fit: &mut TempFit<'_>, tol_mrad: f64, files: &str) -> anyhow::Result<String> {
     let labels: Vec<[f64; 3]> = fit.segments.iter().map(|s| s.f_g).collect();
     let u: Vec<[f64; 3]> = fit.segments.iter().map(|s| s.mean_u_v).collect();
     let se: Vec<[f64; 3]> =
@@ -412,8 +422,14 @@ fn refine_tilt(fit: &mut TempFit<'_>, tol_mrad: f64, files: &str) -> anyhow::Res
     }
     println!("  constants with the tilts (frame: the one that makes the tilts smallest):");
     print_frame_free(&tf.params, &tf.se, false);
+    let (k, worst) = tf.tilt_rad.iter().enumerate().fold((0, 0.0f64), |a, (k, t)| if *t > a.1 { (k, *t) } else { a });
+    let note = format!(
+        "at {t:.2} °C the dwells' tilts from their labels were fitted with the constants (rig tolerance {tol_mrad} mrad): largest {:.2} mrad ({})",
+        worst * 1e3,
+        fit.segments.get(k).map_or("", |s| s.pos.as_str())
+    );
     fit.constants = tf.constants;
     fit.residual_g = tf.residual_g;
     fit.how = "tilt";
-    Ok(())
+    Ok(note)
 }
