@@ -1,5 +1,5 @@
 //! Calibration without a tilter (`calib::free`, `calibrate --free`/`--tilt`): against the
-//! simulator's truth on hand-placed sessions, and on the real imucal six-position session
+//! simulator's truth on hand-placed recordings, and on the real imucal six-position recording
 //! against its independent reference and between the two fits.
 
 mod common;
@@ -17,9 +17,9 @@ fn seg_options() -> Options {
     Options { settle_s: 1.0, max_std_v: 0.01, max_rate_c_per_min: 0.5, temp_tol_c: 3.0 }
 }
 
-/// A hand session (`holds` random orientations drawn from `seed`, noise from `seed`) of the
+/// A hand-placed recording (`holds` random orientations drawn from `seed`, noise from `seed`) of the
 /// paper's unit at 100 Hz: its rows and the truth at the recording's temperature.
-fn hand_session(seed: u64, holds: usize) -> (Vec<segments::RunRow>, Constants<f64>) {
+fn hand_recording(seed: u64, holds: usize) -> (Vec<segments::RunRow>, Constants<f64>) {
     let text = std::fs::read_to_string(common::repo("scenarios/hand-40.toml")).expect("scenario");
     let text = text.replace("holds = 40", &format!("holds = {holds}")).replace("seed = 1", &format!("seed = {seed}"));
     let file = Path::new("hand.toml");
@@ -28,7 +28,7 @@ fn hand_session(seed: u64, holds: usize) -> (Vec<segments::RunRow>, Constants<f6
     let mut row = Row::default();
     let mut rows = Vec::new();
     while rowgen.next_row(&mut row) {
-        assert!(row.reference_f_g().is_none() && row.pos.is_none(), "a hand session writes no reference");
+        assert!(row.reference_f_g().is_none() && row.pos.is_none(), "a hand-placed recording has no reference");
         rows.push((row.t_s, row.u_v, row.temp_c));
     }
     let temp = rows.iter().map(|r| r.2).sum::<f64>() / rows.len() as f64;
@@ -36,10 +36,10 @@ fn hand_session(seed: u64, holds: usize) -> (Vec<segments::RunRow>, Constants<f6
 }
 
 #[test]
-fn free_fit_recovers_the_truth_of_simulated_hand_sessions() {
+fn free_fit_recovers_the_truth_of_simulated_hand_placements() {
     let names = FrameFree::names();
     for seed in 1..=5 {
-        let (rows, truth) = hand_session(seed, 36);
+        let (rows, truth) = hand_recording(seed, 36);
         let intervals = free::static_intervals(Path::new("hand.csv"), &rows, &StaticOptions::default(), &seg_options())
             .expect("intervals");
         // The still start and every orientation.
@@ -59,8 +59,8 @@ fn free_fit_recovers_the_truth_of_simulated_hand_sessions() {
             line += &format!(" ({:+.1}σ)", err / se[p]);
             assert!(err.abs() <= tol, "seed {seed}: {} off by {shown:+.4} (mg, ppm or mrad)", names[p]);
             // The standard errors are those of the intervals' scatter; the simulated bias
-            // instability (3 µV, τ = 300 s) is a near-constant offset over the 3-minute session
-            // that no fit of one session can tell from U0: it is added to the bias's.
+            // instability (3 µV, τ = 300 s) is a near-constant offset over the 3-minute recording
+            // that no fit of one recording can tell from U0: it is added to the bias's.
             let drift = if p < 3 { 3e-6 / t[p + 3].abs() } else { 0.0 };
             let cover = 3.0 * se[p].hypot(drift);
             assert!(err.abs() <= cover, "seed {seed}: {} error {err:e} beyond 3 standard errors {cover:e}", names[p]);
@@ -73,7 +73,7 @@ fn free_fit_recovers_the_truth_of_simulated_hand_sessions() {
 
 #[test]
 fn too_few_intervals_and_one_plane_are_named() {
-    let (rows, _) = hand_session(1, 8);
+    let (rows, _) = hand_recording(1, 8);
     let intervals = free::static_intervals(Path::new("hand.csv"), &rows, &StaticOptions::default(), &seg_options())
         .expect("intervals");
     let u: Vec<[f64; 3]> = intervals.iter().map(|s| s.mean_u_v).collect();
@@ -257,7 +257,7 @@ fn calibrate_reports_the_unlevel_holds_and_calibrates_empty_references_freely() 
 }
 
 #[test]
-fn hand_sessions_at_three_temperatures_give_the_temperature_model() {
+fn hand_placements_at_three_temperatures_give_the_temperature_model() {
     let dir = tempfile::tempdir().expect("tmp");
     let scen = dir.path().join("hand-3t.toml");
     std::fs::write(

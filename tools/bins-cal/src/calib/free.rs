@@ -252,7 +252,7 @@ impl FrameFree {
 pub enum FreeParams {
     /// Biases, scale factors and non-orthogonalities (9).
     Full,
-    /// Biases and scale factors (6); the input axes are taken as orthogonal. For sessions
+    /// Biases and scale factors (6); the input axes are taken as orthogonal. For recordings
     /// whose holds all lie near the axes (six positions), which do not determine the
     /// non-orthogonality.
     BiasScale,
@@ -263,7 +263,7 @@ pub enum FreeParams {
 pub const NOT_DETERMINED_SE: [f64; 3] = [1e-3, 1e-3, 2e-3];
 
 /// The smallest residual standard error the free fit's standard errors assume \[g\]: no
-/// session measures `|f|` better than 1 µg.
+/// recording measures `|f|` better than 1 µg.
 pub const SIGMA_FLOOR_G: f64 = 1e-6;
 
 /// The result of the free fit.
