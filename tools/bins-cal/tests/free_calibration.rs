@@ -417,3 +417,17 @@ fn unlevel_tilter_holds_are_found_and_their_tilt_fitted() {
     assert!(rss(&tilt.tilt_rad) <= rss(&true_tilt) * 1.02 + 0.05e-3);
     assert!(tilt.tilt_rad.iter().any(|t| *t > 1e-3), "{:?}", tilt.tilt_rad);
 }
+
+#[test]
+fn too_few_intervals_is_one_line_naming_the_file() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let text = std::fs::read_to_string(common::repo("scenarios/hand-40.toml")).expect("scenario");
+    let scen = dir.path().join("hand-8.toml");
+    std::fs::write(&scen, text.replace("holds = 40", "holds = 8")).expect("write");
+    let rec = dir.path().join("hand-8.csv");
+    common::ok(&["simulate", scen.to_str().unwrap(), "-o", rec.to_str().unwrap(), "--seed", "2"]);
+    let out = dir.path().join("cal.toml");
+    let e = common::err(&["calibrate", "--tilter", rec.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    assert!(e.contains("hand-8.csv") && e.contains("9 static interval(s)") && e.contains("at least 12"), "{e}");
+    assert!(!out.exists());
+}
