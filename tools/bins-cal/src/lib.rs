@@ -5,6 +5,7 @@
 //!
 //! | module | owns |
 //! |---|---|
+//! | [`calib`] | calibration algorithms: dwells, per-temperature constants and temperature model, shake-table fits |
 //! | [`calfile`] | the calibration file (TOML): types, checks naming the key, conversion to and from the core's parameters and the blob |
 //! | [`constants_table`] | tables of the constants at several temperatures (CSV) |
 //! | [`diagnose`] | sim-vs-real mismatch: residual, strata, mechanism library, selection, report |
@@ -16,6 +17,7 @@
 #![deny(missing_docs)]
 
 pub mod calfile;
+pub mod calib;
 pub mod constants_table;
 pub mod diagnose;
 pub mod fsio;

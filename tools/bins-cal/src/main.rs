@@ -4,7 +4,7 @@
 //! | subcommand | module | does |
 //! |---|---|---|
 //! | `blob encode\|decode\|check` | [`cmd::blob`] | calibration file (TOML) ⇄ calibration blob, checks |
-//! | `calibrate` | [`cmd::calibrate`], [`cmd::shaker`] | tilter (and shake-table) recordings → calibration file, blob |
+//! | `calibrate` | [`cmd::calibrate`], [`cmd::shaker`] | tilter (and shake-table) recordings, or holds placed by hand (`--free`, `--tilt`) → calibration file, blob |
 //! | `verify` | [`cmd::verify`] | check recordings + calibration → \|g\| errors, table, plots |
 //! | `diagnose` | [`cmd::diagnose`] | SIM vs REAL recording → mismatch located, mechanisms named and fitted, report, plots |
 //! | `replay` | [`cmd::replay`] | recording + calibration → the firmware's per-sample output on the host; replay streams |

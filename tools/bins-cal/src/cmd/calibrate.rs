@@ -1,6 +1,6 @@
 //! `bins-cal calibrate`: a calibration file (and blob, Intel HEX) from tilter recordings.
 //!
-//! 1. The dwells of every position and temperature ([`segments`](super::segments)).
+//! 1. The dwells of every position and temperature ([`segments`](bins_cal::calib::segments)).
 //! 2. Per temperature, the 12 constants: T(10) when the dwells are exactly TP1…TP6 at the
 //!    ideal positions, otherwise the least squares fit over the dwell means and their
 //!    reference specific forces (`ident::fit_constants`).
@@ -10,24 +10,33 @@
 //!    written (`--model none`, or `auto`), and the file says so.
 //!
 //! 4. With `--shaker`: the vibration-error coefficients from shake-table recordings
-//!    ([`shaker`](super::shaker)), written as the file's `[vibration]` table and the blob's
+//!    ([`shaker`](bins_cal::calib::shaker)), written as the file's `[vibration]` table and the blob's
 //!    vibration section.
 //!
-//! Every fit's residual and the dwells it used are printed as a table.
+//! Without a tilter (`--free`, or when no recording has a reference): the static intervals
+//! are found in the signals, the 9 frame-independent constants fitted per temperature to
+//! `|f| = 1 g` (`calib::free`), then the temperature model as above. With `--tilt`, the
+//! labelled path fits each dwell's tilt from its label jointly with the constants and says
+//! how far each dwell was from its label.
+//!
+//! Every fit's residual and the dwells it used are printed as a table. The fits are in
+//! [`bins_cal::calib`]; this module parses the arguments and prints.
 
-use super::segments::{self, Segment};
 use anyhow::{anyhow, bail};
 use bins_cal::calfile::CalibrationFile;
+use bins_cal::calib::free::{self, FrameFree, FreeParams, StaticOptions};
+use bins_cal::calib::segments::{self, Reference, Segment};
+use bins_cal::calib::tilter::{ModelArg, ModelRequest, TempFit, fit_temperature, parse_model};
 use bins_cal::{fsio, ihex, memmap};
 use bins_comp::blob::Meta;
-use bins_comp::ident::{self, FitError, TILTER_POSITIONS_G};
-use bins_comp::{CalibrationParams, CoefDelta, Constants, Form, Method, TempModel};
+use bins_comp::{Constants, Form, Method};
 use std::path::PathBuf;
 
 /// Arguments of `bins-cal calibrate`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Tilter recordings (format v1 with `pos` and fx/fy/fz), one or several.
+    /// Tilter recordings (format v1 with `pos` and fx/fy/fz), one or several; with `--free`
+    /// (or without any reference) recordings of holds placed by hand.
     #[arg(long, num_args = 1.., required = true)]
     tilter: Vec<PathBuf>,
     /// Reference temperature T0 [°C]: the dwells nearest to it give the T0 constants, and
@@ -74,28 +83,25 @@ pub struct Args {
     ve_variant: String,
     #[command(flatten)]
     seg: segments::Options,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum ModelArg {
-    Auto,
-    None,
-    Pwl,
-    Poly(usize),
-}
-
-fn parse_model(s: &str) -> anyhow::Result<ModelArg> {
-    Ok(match s {
-        "auto" => ModelArg::Auto,
-        "none" => ModelArg::None,
-        "pwl" => ModelArg::Pwl,
-        _ => ModelArg::Poly(
-            s.strip_prefix("poly:")
-                .and_then(|n| n.parse::<usize>().ok())
-                .filter(|n| (1..=4).contains(n))
-                .ok_or_else(|| anyhow!("--model `{s}`: expected auto, none, pwl or poly:N with N in 1..=4"))?,
-        ),
-    })
+    /// Calibrate without a tilter: static intervals found in the signals, the constants fitted
+    /// to |f| = 1 g (automatic when no recording has a reference).
+    #[arg(long)]
+    free: bool,
+    /// Free fit: `full` (biases, scale factors, non-orthogonality) or `bias-scale` (axes taken
+    /// as orthogonal: for holds near the axes only).
+    #[arg(long, value_enum, default_value = "full")]
+    free_params: FreeParams,
+    /// Free fit: the signs of K_xx, K_yy, K_zz (`+++`, `---`, …), which |f| = 1 g cannot tell.
+    #[arg(long, default_value = "+++")]
+    free_signs: String,
+    #[command(flatten)]
+    stat: StaticOptions,
+    /// Labelled dwells: fit each dwell's tilt from its label with the constants, and report it.
+    #[arg(long, conflicts_with = "free")]
+    tilt: bool,
+    /// The rig's tilt tolerance [mrad]: the prior of `--tilt`, and a dwell beyond it is warned of.
+    #[arg(long, default_value_t = 10.0)]
+    tilt_tol_mrad: f64,
 }
 
 /// The method requested on the command line.
@@ -111,72 +117,6 @@ pub fn parse_method(method: u8, form: &str) -> anyhow::Result<Method> {
         2 => Ok(Method::OutputCorrection(form)),
         _ => bail!("--method {method}: expected 1 or 2"),
     }
-}
-
-/// The constants identified at one temperature.
-pub struct TempFit<'a> {
-    /// Mean temperature of its dwells [°C].
-    pub temp_c: f64,
-    /// The dwells used.
-    pub segments: Vec<&'a Segment>,
-    /// The constants.
-    pub constants: Constants<f64>,
-    /// `T(10)` or `LS`.
-    pub how: &'static str,
-    /// Residual of each dwell, `U − (K·f + U0)` in g (divided by K_ii), per axis.
-    pub residual_g: Vec<[f64; 3]>,
-}
-
-/// The constants at one temperature from its dwells.
-pub fn fit_temperature<'a>(temp_c: f64, segs: Vec<&'a Segment>, files: &str) -> anyhow::Result<TempFit<'a>> {
-    let f: Vec<[f64; 3]> = segs.iter().map(|s| s.f_g).collect();
-    let u: Vec<[f64; 3]> = segs.iter().map(|s| s.mean_u_v).collect();
-    let labels: Vec<&str> = segs.iter().map(|s| s.pos.as_str()).collect();
-    let six: Option<[[f64; 3]; 6]> = (segs.len() == 6)
-        .then(|| {
-            let mut out = [[0.0; 3]; 6];
-            for (k, ideal) in TILTER_POSITIONS_G.iter().enumerate() {
-                let s = segs.iter().find(|s| s.pos == format!("TP{}", k + 1) && s.f_g == *ideal)?;
-                out[k] = s.mean_u_v;
-            }
-            Some(out)
-        })
-        .flatten();
-    let (constants, how) = match six {
-        Some(u6) => (ident::six_position(&u6), "T(10)"),
-        None => {
-            let c = ident::fit_constants(&f, &u).map_err(|e| match e {
-                FitError::TooFewPoints { got, .. } => {
-                    let missing: Vec<String> =
-                        (1..=6).map(|k| format!("TP{k}")).filter(|p| !labels.contains(&p.as_str())).collect();
-                    anyhow!(
-                        "{files}: at {temp_c:.2} °C only {got} stationary dwell(s) ({}); the 12 constants need at least 4 positions (missing: {})",
-                        labels.join(", "),
-                        missing.join(", ")
-                    )
-                }
-                FitError::Singular => anyhow!(
-                    "{files}: at {temp_c:.2} °C the dwells ({}) do not determine the constants (singular fit: positions coplanar)",
-                    labels.join(", ")
-                ),
-                e => anyhow!("{files}: at {temp_c:.2} °C: {e}"),
-            })?;
-            (c, "LS")
-        }
-    };
-    let k = &constants.k_v_per_g;
-    let residual_g = segs
-        .iter()
-        .map(|s| {
-            let mut r = [0.0; 3];
-            for i in 0..3 {
-                let model = k[i][0] * s.f_g[0] + k[i][1] * s.f_g[1] + k[i][2] * s.f_g[2] + constants.u0_v[i];
-                r[i] = (s.mean_u_v[i] - model) / k[i][i];
-            }
-            r
-        })
-        .collect();
-    Ok(TempFit { temp_c, segments: segs, constants, how, residual_g })
 }
 
 /// Prints the dwells (used and rejected).
@@ -221,16 +161,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "paper" => bins_comp::Variant::Paper,
         v => bail!("--ve-variant `{v}`: expected exact or paper"),
     };
-    let (all, files) = segments::find_all(&args.tilter, &args.seg)?;
-    let all: Vec<Segment> = all.into_iter().filter(|s| s.pos.starts_with(&args.pos_prefix)).collect();
+    let mut notes: Vec<String> = Vec::new();
+    let free = args.free || no_reference(&args.tilter, &mut notes)?;
+    let (all, files) = if free {
+        free_intervals(&args.tilter, &args.stat, &args.seg)?
+    } else {
+        let (all, files) = segments::find_all(&args.tilter, &args.seg)?;
+        (all.into_iter().filter(|s| s.pos.starts_with(&args.pos_prefix)).collect(), files)
+    };
     print_segments(&all);
     let groups = segments::by_temperature(&all, args.seg.temp_tol_c);
     if groups.is_empty() {
         bail!("{files}: no stationary dwell with a settled temperature (see the table above)");
     }
+    if free {
+        return run_free(&args, groups, &all, &files, notes, (model_arg, method, ve_variant));
+    }
     let mut fits = Vec::new();
     for (t, segs) in groups {
-        fits.push(fit_temperature(t, segs, &files)?);
+        let mut fit = fit_temperature(t, segs, &files)?;
+        if args.tilt {
+            notes.push(refine_tilt(&mut fit, args.tilt_tol_mrad, &files)?);
+        }
+        fits.push(fit);
     }
     println!("\nconstants per temperature (residual = U − (K·f + U0), in mg of the axis):");
     println!("  {:>9} {:>4} {:<6} {:>10} {:>10}  dwells", "temp_C", "n", "fit", "rms_mg", "max_mg");
@@ -247,102 +200,37 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             names.join(" ")
         );
     }
-    // T0: the temperature nearest to --t0.
-    let i0 = (0..fits.len())
-        .min_by(|&a, &b| (fits[a].temp_c - args.t0).abs().total_cmp(&(fits[b].temp_c - args.t0).abs()))
-        .unwrap_or(0);
-    if (fits[i0].temp_c - args.t0).abs() > args.seg.temp_tol_c {
-        let temps: Vec<String> = fits.iter().map(|f| format!("{:.2}", f.temp_c)).collect();
-        bail!(
-            "{files}: no dwells at T0 = {} °C (within {} °C); the recordings have {} °C",
-            args.t0,
-            args.seg.temp_tol_c,
-            temps.join(", ")
-        );
-    }
-    let t0 = fits[i0].temp_c;
-    let c0 = fits[i0].constants;
-    let others: Vec<(f64, Constants<f64>)> =
-        fits.iter().enumerate().filter(|(i, _)| *i != i0).map(|(_, f)| (f.temp_c, f.constants)).collect();
-    let model_arg = match model_arg {
-        ModelArg::Auto if others.is_empty() => ModelArg::None,
-        ModelArg::Auto => ModelArg::Pwl,
-        m => m,
+    let points: Vec<(f64, Constants<f64>)> = fits.iter().map(|f| (f.temp_c, f.constants)).collect();
+    let kept: Vec<f64> = all.iter().filter(|s| s.rejected.is_none()).map(|s| s.temp_c).collect();
+    finish(&args, &points, &kept, &files, notes, (model_arg, method, ve_variant))
+}
+
+/// The temperature model, the vibration model and the outputs from the constants at each
+/// temperature (`points`); `kept_temps_c`: the temperatures of the used dwells.
+fn finish(
+    args: &Args,
+    points: &[(f64, Constants<f64>)],
+    kept_temps_c: &[f64],
+    files: &str,
+    mut notes: Vec<String>,
+    (model_arg, method, ve_variant): (ModelArg, Method, bins_comp::Variant),
+) -> anyhow::Result<()> {
+    let req = ModelRequest {
+        t0_c: args.t0,
+        model: model_arg,
+        knots: args.knots.clone(),
+        temp_tol_c: args.seg.temp_tol_c,
+        method,
     };
-    let mut notes: Vec<String> =
-        vec![format!("T0 = {t0:.2} °C: the measured mean temperature of the dwells nearest to --t0 {}", args.t0)];
-    let (model, method, range) = match model_arg {
-        ModelArg::None | ModelArg::Auto => {
-            notes.push(format!(
-                "one temperature only ({t0:.2} °C): T0 constants only, no temperature model (method: uncorrected)"
-            ));
-            let lo = all.iter().filter(|s| s.rejected.is_none()).map(|s| s.temp_c).fold(t0, f64::min);
-            let hi = all.iter().filter(|s| s.rejected.is_none()).map(|s| s.temp_c).fold(t0, f64::max);
-            let zero = TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] };
-            (zero, Method::Uncorrected, ((lo - 1.0).floor(), (hi + 1.0).ceil()))
-        }
-        ModelArg::Pwl => {
-            if others.is_empty() {
-                bail!(
-                    "{files}: only one temperature ({t0:.2} °C): the piecewise-linear model needs at least one more (use --model none for T0 constants only)"
-                );
-            }
-            let chosen: Vec<(f64, Constants<f64>)> = if args.knots.is_empty() {
-                others.clone()
-            } else {
-                let mut v: Vec<(f64, Constants<f64>)> = Vec::new();
-                for k in &args.knots {
-                    if (k - args.t0).abs() <= args.seg.temp_tol_c {
-                        continue;
-                    }
-                    let best = others
-                        .iter()
-                        .min_by(|a, b| (a.0 - k).abs().total_cmp(&(b.0 - k).abs()))
-                        .filter(|p| (p.0 - k).abs() <= args.seg.temp_tol_c)
-                        .ok_or_else(|| {
-                            anyhow!(
-                                "{files}: --knots {k}: no calibration temperature within {} °C",
-                                args.seg.temp_tol_c
-                            )
-                        })?;
-                    if !v.iter().any(|p| p.0 == best.0) {
-                        v.push(*best);
-                    }
-                }
-                v
-            };
-            let m = ident::pwl_from_constants(t0, &c0, &chosen)
-                .map_err(|e| anyhow!("{files}: piecewise-linear model: {e}"))?;
-            let lo = chosen.iter().map(|p| p.0).fold(t0, f64::min);
-            let hi = chosen.iter().map(|p| p.0).fold(t0, f64::max);
-            (m, method, (lo, hi))
-        }
-        ModelArg::Poly(order) => {
-            let m = ident::poly_from_constants(t0, &c0, &others, order).map_err(|e| match e {
-                FitError::TooFewPoints { needed, got } => anyhow!(
-                    "{files}: a polynomial of order {order} needs at least {needed} temperature(s) besides T0 = {t0:.2} °C, the recordings have {got}"
-                ),
-                e => anyhow!("{files}: polynomial model: {e}"),
-            })?;
-            let lo = others.iter().map(|p| p.0).fold(t0, f64::min);
-            let hi = others.iter().map(|p| p.0).fold(t0, f64::max);
-            (m, method, (lo, hi))
-        }
-    };
-    let params = CalibrationParams { constants: c0, t0_c: t0, model, method, temp_range_c: range };
+    let (params, model_notes) = bins_cal::calib::tilter::calibration_params(points, kept_temps_c, &req, files)?;
+    notes.splice(0..0, model_notes);
+    let method = params.method;
     // Model residual: the constants the model gives at each temperature vs the measured ones.
     println!("\ntemperature model residual (model − measured at each calibration temperature):");
     println!("  {:>9} {:>12} {:>14}", "temp_C", "max|dU0| mg", "max|dK/K| ppm");
-    for f in &fits {
-        let m = params.constants_at(f.temp_c);
-        let (mut du, mut dk) = (0.0f64, 0.0f64);
-        for i in 0..3 {
-            du = du.max(((m.u0_v[i] - f.constants.u0_v[i]) / f.constants.k_v_per_g[i][i]).abs());
-            for j in 0..3 {
-                dk = dk.max(((m.k_v_per_g[i][j] - f.constants.k_v_per_g[i][j]) / f.constants.k_v_per_g[i][i]).abs());
-            }
-        }
-        println!("  {:>9.2} {:>12.4} {:>14.2}", f.temp_c, du * 1e3, dk * 1e6);
+    for (t, c) in points {
+        let (du, dk) = bins_cal::calib::tilter::model_residual(&params, *t, c);
+        println!("  {:>9.2} {:>12.4} {:>14.2}", t, du * 1e3, dk * 1e6);
     }
     let vibration = if args.shaker.is_empty() {
         None
@@ -363,7 +251,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => None,
     };
     let mut header = String::from("# bins-cal calibrate from: ");
-    header.push_str(&files);
+    header.push_str(files);
     header.push('\n');
     if !args.shaker.is_empty() {
         header.push_str("# shake table: ");
@@ -396,4 +284,156 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("wrote {}", p.display());
     }
     Ok(())
+}
+
+/// True when no recording has a reference (absent or empty columns): the free fit is then
+/// automatic, and `notes` says why.
+fn no_reference(paths: &[PathBuf], notes: &mut Vec<String>) -> anyhow::Result<bool> {
+    let mut why = Vec::new();
+    for p in paths {
+        match segments::reference(p)? {
+            Reference::Rows(_) => return Ok(false),
+            Reference::Absent => why.push(format!("{} has no reference columns", p.display())),
+            Reference::Empty => why.push(format!("{}: the reference columns are empty in every row", p.display())),
+        }
+    }
+    notes.push(format!("{}: calibrated from static intervals alone (as with --free)", why.join("; ")));
+    Ok(true)
+}
+
+/// The static intervals of every recording; the names of the files.
+fn free_intervals(
+    paths: &[PathBuf],
+    opt: &StaticOptions,
+    seg: &segments::Options,
+) -> anyhow::Result<(Vec<Segment>, String)> {
+    let mut all = Vec::new();
+    for p in paths {
+        all.extend(free::find_static(p, opt, seg)?);
+    }
+    let names = paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ");
+    Ok((all, names))
+}
+
+/// Prints the frame-independent parameters with their standard errors; `fixed` marks the
+/// non-orthogonality as assumed zero.
+fn print_frame_free(p: &FrameFree, se: &FrameFree, fixed: bool) {
+    println!("  {:<20} {:>14} {:>12}", "parameter", "value", "std_error");
+    let (v, e) = (p.to_array(), se.to_array());
+    for (k, name) in FrameFree::names().iter().enumerate() {
+        let scale = if (3..6).contains(&k) { 1.0 } else { 1e3 };
+        if k >= 6 && fixed {
+            println!("  {:<20} {:>14} {:>12}  assumed (--free-params bias-scale)", name, "0", "-");
+        } else if (3..6).contains(&k) {
+            println!("  {:<20} {:>14.7} {:>12.2e}", name, v[k], e[k]);
+        } else {
+            println!("  {:<20} {:>+14.4} {:>12.4}", name, v[k] * scale, e[k] * scale);
+        }
+    }
+}
+
+/// `--free-signs`: three of `+` and `-`.
+fn parse_signs(s: &str) -> anyhow::Result<[f64; 3]> {
+    let v: Vec<f64> = s
+        .chars()
+        .map(|c| match c {
+            '+' => Ok(1.0),
+            '-' => Ok(-1.0),
+            _ => Err(anyhow!("--free-signs `{s}`: expected three of + and - (the signs of K_xx, K_yy, K_zz)")),
+        })
+        .collect::<anyhow::Result<_>>()?;
+    <[f64; 3]>::try_from(v)
+        .map_err(|_| anyhow!("--free-signs `{s}`: expected three of + and - (the signs of K_xx, K_yy, K_zz)"))
+}
+
+/// The free path: per temperature the free fit of its static intervals, then [`finish`].
+fn run_free(
+    args: &Args,
+    groups: Vec<(f64, Vec<&Segment>)>,
+    all: &[Segment],
+    files: &str,
+    notes: Vec<String>,
+    model: (ModelArg, Method, bins_comp::Variant),
+) -> anyhow::Result<()> {
+    let signs = parse_signs(&args.free_signs)?;
+    let mut notes = notes;
+    notes.push(format!(
+        "free fit (|f| = 1 g): K upper triangular (imu_tk's gauge: the z input axis is the frame's z, the y input axis lies in its y-z plane), signs of K_xx, K_yy, K_zz {}",
+        args.free_signs
+    ));
+    let mut points = Vec::new();
+    for (t, segs) in groups {
+        let u: Vec<[f64; 3]> = segs.iter().map(|s| s.mean_u_v).collect();
+        let fit = free::fit_free(&u, args.free_params, signs).map_err(|e| anyhow!("{files}: at {t:.2} °C: {e}"))?;
+        println!(
+            "\nfree fit at {t:.2} °C over {} static intervals (|f| = 1 g; K upper triangular: the z input axis is the frame's z, the y input axis lies in its y–z plane):",
+            segs.len()
+        );
+        print_frame_free(&fit.params, &fit.se, fit.which == FreeParams::BiasScale);
+        println!("  residual σ {:.4} mg; per interval, |f| − 1 g [mg]:", fit.sigma_g * 1e3);
+        for (s, r) in segs.iter().zip(&fit.residual_g) {
+            println!("    {:<5} {:>8.1} … {:<8.1} s {:>+9.4}", s.pos, s.t_s.0, s.t_s.1, r * 1e3);
+        }
+        notes.push(format!(
+            "free fit at {t:.2} °C: {} static intervals, residual σ {:.4} mg",
+            segs.len(),
+            fit.sigma_g * 1e3
+        ));
+        points.push((t, fit.constants));
+    }
+    let kept: Vec<f64> = all.iter().filter(|s| s.rejected.is_none()).map(|s| s.temp_c).collect();
+    finish(args, &points, &kept, files, notes, model)
+}
+
+/// `--tilt`: fits each dwell's tilt from its label jointly with the constants (replacing
+/// them and their residual in `fit`), prints how far each dwell was from its label and warns
+/// of those beyond the rig's tolerance. Returns the note for the file's header.
+fn refine_tilt(fit: &mut TempFit<'_>, tol_mrad: f64, files: &str) -> anyhow::Result<String> {
+    let labels: Vec<[f64; 3]> = fit.segments.iter().map(|s| s.f_g).collect();
+    let u: Vec<[f64; 3]> = fit.segments.iter().map(|s| s.mean_u_v).collect();
+    let se: Vec<[f64; 3]> =
+        fit.segments.iter().map(|s| s.std_u_v.map(|x| x / (s.rows.len().max(1) as f64).sqrt())).collect();
+    let t = fit.temp_c;
+    let tf = free::fit_tilted(&labels, &u, &se, &fit.constants, tol_mrad * 1e-3)
+        .map_err(|e| anyhow!("{files}: at {t:.2} °C: tilt fit: {e}"))?;
+    println!(
+        "\ndwells against their labels at {t:.2} °C (tilt fitted with the constants; rig tolerance {tol_mrad} mrad):"
+    );
+    println!("  {:<5} {:>10} {:>9} {:>9} {:>9} {:>9}  status", "pos", "tilt_mrad", "tilt_deg", "fx_g", "fy_g", "fz_g");
+    for (k, s) in fit.segments.iter().enumerate() {
+        let tilt = tf.tilt_rad[k];
+        let beyond = tilt * 1e3 > tol_mrad;
+        let f = tf.f_g[k];
+        println!(
+            "  {:<5} {:>10.3} {:>9.4} {:>+9.5} {:>+9.5} {:>+9.5}  {}",
+            s.pos,
+            tilt * 1e3,
+            tilt.to_degrees(),
+            f[0],
+            f[1],
+            f[2],
+            if beyond { "beyond the rig tolerance" } else { "ok" }
+        );
+        if beyond {
+            eprintln!(
+                "bins-cal: warning: {}: {} at {t:.2} °C was {:.1} mrad ({:.2}°) from its label, beyond the rig tolerance {tol_mrad} mrad",
+                s.file.display(),
+                s.pos,
+                tilt * 1e3,
+                tilt.to_degrees()
+            );
+        }
+    }
+    println!("  constants with the tilts (frame: the one that makes the tilts smallest):");
+    print_frame_free(&tf.params, &tf.se, false);
+    let (k, worst) = tf.tilt_rad.iter().enumerate().fold((0, 0.0f64), |a, (k, t)| if *t > a.1 { (k, *t) } else { a });
+    let note = format!(
+        "at {t:.2} °C the dwells' tilts from their labels were fitted with the constants (rig tolerance {tol_mrad} mrad): largest {:.2} mrad ({})",
+        worst * 1e3,
+        fit.segments.get(k).map_or("", |s| s.pos.as_str())
+    );
+    fit.constants = tf.constants;
+    fit.residual_g = tf.residual_g;
+    fit.how = "tilt";
+    Ok(note)
 }

@@ -4,7 +4,6 @@ pub mod blob;
 pub mod calibrate;
 pub mod diagnose;
 pub mod replay;
-pub mod segments;
 pub mod shaker;
 pub mod simulate;
 pub mod tempco;

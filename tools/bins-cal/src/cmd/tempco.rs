@@ -1,11 +1,12 @@
 //! `bins-cal tempco`: the temperature coefficients of T(3)/T(4) from the constants measured at
 //! several temperatures — T(12) for the piecewise-linear model (slopes between consecutive
 //! knots; the paper's Table T3 for knots −40, +20, +70 °C), T(11) or least squares for the
-//! polynomial. Prints a table and optionally writes JSON.
+//! polynomial ([`bins_cal::calib::tempco`]). Prints a table and optionally writes JSON.
 
-use anyhow::{Context, anyhow, bail};
+use anyhow::Context;
+use bins_cal::calib::tempco::{self, ModelSpec, Tempco};
 use bins_cal::{constants_table, fsio};
-use bins_comp::{CoefDelta, TempModel, ident};
+use bins_comp::CoefDelta;
 use serde_json::{Map, Value, json};
 use std::path::PathBuf;
 
@@ -24,32 +25,6 @@ pub struct Args {
     /// Write the coefficients as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
-}
-
-/// The model requested on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ModelSpec {
-    /// Piecewise-linear.
-    Pwl,
-    /// Polynomial of this order.
-    Poly(usize),
-}
-
-impl std::str::FromStr for ModelSpec {
-    type Err = anyhow::Error;
-    fn from_str(s: &str) -> anyhow::Result<Self> {
-        match s {
-            "pwl" => Ok(ModelSpec::Pwl),
-            _ => {
-                let n = s
-                    .strip_prefix("poly:")
-                    .and_then(|n| n.parse::<usize>().ok())
-                    .filter(|n| (1..=4).contains(n))
-                    .ok_or_else(|| anyhow!("--model `{s}`: expected `pwl` or `poly:N` with N in 1..=4"))?;
-                Ok(ModelSpec::Poly(n))
-            }
-        }
-    }
 }
 
 const AXES: [&str; 3] = ["x", "y", "z"];
@@ -73,50 +48,27 @@ fn coef_json(c: &CoefDelta<f64>) -> (Value, Value, Value) {
     (Value::Object(alpha), Value::Object(beta), Value::Object(gamma))
 }
 
-/// Slopes of every coefficient between two knots.
-fn slope(a: &CoefDelta<f64>, b: &CoefDelta<f64>, dt: f64) -> CoefDelta<f64> {
-    let (x, y) = (a.to_array(), b.to_array());
-    let mut s = [0.0; 12];
-    for k in 0..12 {
-        s[k] = (y[k] - x[k]) / dt;
-    }
-    CoefDelta::from_array(&s)
-}
-
 /// Identifies the model and returns its JSON description (keys `alpha_V_per_C`,
 /// `beta_per_C`, `gamma_per_C` per range or per power).
 pub fn tempco_json(points: &[(f64, bins_comp::Constants<f64>)], t0_c: f64, spec: ModelSpec) -> anyhow::Result<Value> {
-    let c0 =
-        points.iter().find(|(t, _)| *t == t0_c).map(|(_, c)| *c).ok_or_else(|| anyhow!("no row at T0 = {t0_c} °C"))?;
-    let others: Vec<_> = points.iter().filter(|(t, _)| *t != t0_c).copied().collect();
-    match spec {
-        ModelSpec::Pwl => {
-            if others.is_empty() {
-                bail!("the piecewise-linear model needs at least one temperature besides T0 = {t0_c} °C");
-            }
-            let model = ident::pwl_from_constants(t0_c, &c0, &others).map_err(|e| anyhow!("{e}"))?;
-            let TempModel::Pwl { n_knots, knots_c, at_knot } = model else { unreachable!("pwl") };
-            let n = n_knots as usize;
-            let ranges: Vec<Value> = (0..n - 1)
-                .map(|l| {
-                    let s = slope(&at_knot[l], &at_knot[l + 1], knots_c[l + 1] - knots_c[l]);
-                    let (a, b, g) = coef_json(&s);
-                    json!({"from_C": knots_c[l], "to_C": knots_c[l + 1], "alpha_V_per_C": a, "beta_per_C": b, "gamma_per_C": g})
+    match tempco::identify(points, t0_c, spec)? {
+        Tempco::Pwl(ranges) => {
+            let ranges: Vec<Value> = ranges
+                .iter()
+                .map(|(from, to, s)| {
+                    let (a, b, g) = coef_json(s);
+                    json!({"from_C": from, "to_C": to, "alpha_V_per_C": a, "beta_per_C": b, "gamma_per_C": g})
                 })
                 .collect();
             Ok(json!({"model": "pwl", "t0_C": t0_c, "ranges": ranges}))
         }
-        ModelSpec::Poly(order) => {
-            let model = ident::poly_from_constants(t0_c, &c0, &others, order).map_err(|e| match e {
-                ident::FitError::TooFewPoints { needed, got } => anyhow!(
-                    "a polynomial of order {order} needs at least {needed} temperatures besides T0 = {t0_c} °C, the table has {got}"
-                ),
-                e => anyhow!("{e}"),
-            })?;
-            let TempModel::Poly { coef, .. } = model else { unreachable!("poly") };
-            let terms: Vec<Value> = (0..order)
-                .map(|n| {
-                    let (a, b, g) = coef_json(&coef[n]);
+        Tempco::Poly(coef) => {
+            let order = coef.len();
+            let terms: Vec<Value> = coef
+                .iter()
+                .enumerate()
+                .map(|(n, c)| {
+                    let (a, b, g) = coef_json(c);
                     json!({"power": n + 1, "alpha_V_per_C": a, "beta_per_C": b, "gamma_per_C": g})
                 })
                 .collect();

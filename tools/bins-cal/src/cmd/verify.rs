@@ -11,9 +11,9 @@
 //! `replayed` beside the host's, so the firmware's |g| error is read on the very dwells the
 //! host's is.
 
-use super::segments::{self, Segment};
 use anyhow::{Context, anyhow, bail};
 use bins_cal::calfile::CalibrationFile;
+use bins_cal::calib::segments::{self, Segment};
 use bins_cal::fsio;
 use bins_comp::{Calibration, CalibrationParams, Form, Method, Status};
 use std::fmt::Write as _;

@@ -283,7 +283,7 @@ impl<'a> RowGen<'a> {
         row.chamber_c = self.sim.log_chamber.then(|| self.chamber_q.apply(self.thermal.chamber_c));
         row.power_s = Some(power_s);
         if seg.reference_known() {
-            row.f_g = f.map(Some);
+            row.f_g = seg.written_f_at(s).map(Some);
             row.set_vibration(&vib);
             match &seg.label {
                 Some(l) => match &mut row.pos {

@@ -1,11 +1,26 @@
 //! What the rigs do to the unit over time: a timeline of segments (holds, moves between
 //! positions, commanded acceleration ramps), each with its vibration and an optional new
 //! chamber set point, built from the tilter's test positions TP1–TP6, the check positions
-//! CP1–CP6, the shake table's ten-position plan and flight segments.
+//! CP1–CP6, the shake table's ten-position plan, flight segments, and placements by hand
+//! (random orientations without a reference; tilter positions that are not level).
 
 use bins_comp::ident::{TILTER_POSITIONS_G, check_positions_g};
 use bins_comp::vibration::shake::ten_position_plan;
 use bins_comp::vibration::{AccelAxes, Axis, Vibration};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Two unit vectors perpendicular to `l` and to each other.
+fn perpendiculars(l: &[f64; 3]) -> ([f64; 3], [f64; 3]) {
+    let n = norm(l);
+    let l = l.map(|x| x / n);
+    let k = if l[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+    let d = l[0] * k[0] + l[1] * k[1] + l[2] * k[2];
+    let e1: [f64; 3] = std::array::from_fn(|i| k[i] - d * l[i]);
+    let e1 = e1.map(|x| x / norm(&e1));
+    let e2 = [l[1] * e1[2] - l[2] * e1[1], l[2] * e1[0] - l[0] * e1[2], l[0] * e1[1] - l[1] * e1[0]];
+    (e1, e2)
+}
 
 /// How the static specific force moves during a segment.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -29,6 +44,18 @@ pub enum Motion {
     },
 }
 
+/// What the rig writes in the reference cells while it holds the unit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Written {
+    /// The true specific force (tilter, shake table, flight ramp).
+    Truth,
+    /// Nothing: the orientation is not measured (the unit placed by hand).
+    Nothing,
+    /// The label's nominal force, not the true one: a hold placed against its label but not
+    /// level.
+    Nominal([f64; 3]),
+}
+
 /// One piece of the timeline.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Segment {
@@ -42,6 +69,8 @@ pub struct Segment {
     pub vib: Vibration<f64>,
     /// The position label (`pos`).
     pub label: Option<String>,
+    /// What the reference cells say while the rig state is known.
+    pub written: Written,
 }
 
 impl Segment {
@@ -56,7 +85,15 @@ impl Segment {
 
     /// Whether the rig state is known during this segment.
     pub fn reference_known(&self) -> bool {
-        !matches!(self.motion, Motion::Move { .. })
+        !matches!(self.motion, Motion::Move { .. }) && self.written != Written::Nothing
+    }
+
+    /// The reference written at fraction `s` (the true force unless [`Written::Nominal`]).
+    pub fn written_f_at(&self, s: f64) -> [f64; 3] {
+        match self.written {
+            Written::Nominal(f) => f,
+            _ => self.f_at(s),
+        }
     }
 }
 
@@ -130,7 +167,7 @@ impl Timeline {
     fn push(&mut self, duration_s: f64, motion: Motion, vib: Vibration<f64>, label: Option<String>) {
         if duration_s > 0.0 {
             let chamber_c = self.pending_chamber.take();
-            self.segments.push(Segment { duration_s, chamber_c, motion, vib, label });
+            self.segments.push(Segment { duration_s, chamber_c, motion, vib, label, written: Written::Truth });
         }
     }
 
@@ -167,6 +204,49 @@ impl Timeline {
         for &k in which {
             self.move_to(TILTER_POSITIONS_G[k - 1], move_s);
             self.hold(dwell_s, Vibration::None, Some(format!("TP{k}")));
+        }
+    }
+
+    /// The tilter's positions placed by hand against their labels, not level: each true force
+    /// is the label tilted by an angle uniform in [0, `tilt_max_rad`] towards a uniformly
+    /// random direction (drawn from `seed`); the reference cells say the label.
+    pub fn tilter_unlevel(&mut self, which: &[usize], dwell_s: f64, move_s: f64, tilt_max_rad: f64, seed: u64) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        for &k in which {
+            let label = TILTER_POSITIONS_G[k - 1];
+            let tilt = tilt_max_rad * rng.random::<f64>();
+            let az = 2.0 * std::f64::consts::PI * rng.random::<f64>();
+            let (e1, e2) = perpendiculars(&label);
+            let f: [f64; 3] =
+                std::array::from_fn(|i| label[i] * tilt.cos() + tilt.sin() * (az.cos() * e1[i] + az.sin() * e2[i]));
+            self.move_to(f, move_s);
+            self.hold(dwell_s, Vibration::None, Some(format!("TP{k}")));
+            if let Some(last) = self.segments.last_mut() {
+                last.written = Written::Nominal(label);
+            }
+        }
+    }
+
+    /// A calibration by hand: `init_s` still where the unit is, then `holds` orientations
+    /// uniform on the sphere (drawn from `seed`), each reached in `move_s` and held for
+    /// `dwell_s`. Nothing is written in the reference cells.
+    pub fn hand(&mut self, holds: usize, init_s: f64, dwell_s: f64, move_s: f64, seed: u64) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        self.hold(init_s, Vibration::None, None);
+        self.hide_last();
+        for _ in 0..holds {
+            let z = 2.0 * rng.random::<f64>() - 1.0;
+            let phi = 2.0 * std::f64::consts::PI * rng.random::<f64>();
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            self.move_to([r * phi.cos(), r * phi.sin(), z], move_s);
+            self.hold(dwell_s, Vibration::None, None);
+            self.hide_last();
+        }
+    }
+
+    fn hide_last(&mut self) {
+        if let Some(last) = self.segments.last_mut() {
+            last.written = Written::Nothing;
         }
     }
 

@@ -323,6 +323,30 @@ pub enum StepSpec {
         /// Turn between positions \[s\].
         #[serde(default)]
         move_s: f64,
+        /// Placed by hand, not level: the largest tilt from the label [°] (default 0: level).
+        #[serde(default)]
+        tilt_deg: f64,
+        /// The draw of the tilts.
+        #[serde(default)]
+        tilt_seed: u64,
+    },
+    /// A calibration by hand: a still start, then random orientations (no reference).
+    Hand {
+        /// New chamber set point from the still start on [°C] (which is then the soak).
+        #[serde(default, rename = "chamber_C")]
+        chamber_c: Option<f64>,
+        /// Number of orientations.
+        holds: usize,
+        /// The still start where the unit is \[s\].
+        init_s: f64,
+        /// Hold per orientation \[s\].
+        dwell_s: f64,
+        /// Turn between orientations \[s\].
+        #[serde(default)]
+        move_s: f64,
+        /// The draw of the orientations.
+        #[serde(default)]
+        seed: u64,
     },
     /// Check positions CP1…CP6.
     Check {
@@ -657,9 +681,33 @@ fn build_step(tl: &mut Timeline, s: &StepSpec, key: &str) -> Check<()> {
             tl.set_chamber(temp_c(&k("chamber_C"), *chamber_c)?);
             tl.hold(positive(&k("dwell_s"), *dwell_s)?, Vibration::None, None);
         }
-        StepSpec::Tilter { positions: p, dwell_s, move_s } => {
+        StepSpec::Tilter { positions: p, dwell_s, move_s, tilt_deg, tilt_seed } => {
             let which = positions(&k("positions"), p)?;
-            tl.tilter(&which, positive(&k("dwell_s"), *dwell_s)?, non_negative(&k("move_s"), *move_s)?);
+            let (dwell, mv) = (positive(&k("dwell_s"), *dwell_s)?, non_negative(&k("move_s"), *move_s)?);
+            let tilt = non_negative(&k("tilt_deg"), *tilt_deg)?;
+            if tilt > 10.0 {
+                return Err(kerr(k("tilt_deg"), format!("{tilt}° is not a small tilt (at most 10°)")));
+            }
+            if tilt > 0.0 {
+                tl.tilter_unlevel(&which, dwell, mv, tilt.to_radians(), *tilt_seed);
+            } else {
+                tl.tilter(&which, dwell, mv);
+            }
+        }
+        StepSpec::Hand { chamber_c, holds, init_s, dwell_s, move_s, seed } => {
+            if *holds == 0 {
+                return Err(kerr(k("holds"), "at least one orientation"));
+            }
+            if let Some(c) = chamber_c {
+                tl.set_chamber(temp_c(&k("chamber_C"), *c)?);
+            }
+            tl.hand(
+                *holds,
+                positive(&k("init_s"), *init_s)?,
+                positive(&k("dwell_s"), *dwell_s)?,
+                non_negative(&k("move_s"), *move_s)?,
+                *seed,
+            );
         }
         StepSpec::Check { theta_deg, positions: p, dwell_s, move_s } => {
             let which = positions(&k("positions"), p)?;

@@ -1,4 +1,5 @@
-//! Dwell segments of rig recordings, shared by `calibrate` and `verify`.
+//! Dwell segments of rig recordings, shared by `calibrate` and `verify`: finding the dwells,
+//! their means and stationarity, grouping them by temperature.
 //!
 //! A segment is a maximal run of consecutive rows with the same `pos` label and the same known
 //! reference (fx/fy/fz). Its first `settle_s` seconds (at most a quarter of the run) are
@@ -8,8 +9,8 @@
 //! seconds at the logger's rate is enough. Kept segments are grouped by temperature: sorted
 //! by mean temperature and split where two neighbours differ by more than `temp_tol_c`.
 
+use crate::recording::{Reader, Row};
 use anyhow::{anyhow, bail};
-use bins_cal::recording::{Reader, Row};
 use std::path::{Path, PathBuf};
 
 /// How segments are found.
@@ -61,10 +62,10 @@ struct Run {
 }
 
 /// One row of a run: `t_s`, `u_v`, `temp_c`.
-pub(super) type RunRow = (f64, [f64; 3], f64);
+pub type RunRow = (f64, [f64; 3], f64);
 
 /// The rows of a run after the settling margin (`settle_s`, at most a quarter of the run).
-pub(super) fn after_settling(rows: &[RunRow], opt: &Options) -> Vec<RunRow> {
+pub fn after_settling(rows: &[RunRow], opt: &Options) -> Vec<RunRow> {
     let (Some(first), Some(last)) = (rows.first(), rows.last()) else { return Vec::new() };
     let margin = opt.settle_s.min(0.25 * (last.0 - first.0));
     rows.iter().filter(|r| r.0 >= first.0 + margin).copied().collect()
@@ -72,7 +73,7 @@ pub(super) fn after_settling(rows: &[RunRow], opt: &Options) -> Vec<RunRow> {
 
 /// The temperature's least-squares rate over `rows` [°C/min], about their mean time and the
 /// mean temperature `temp_c`; 0 when the rows span no time.
-pub(super) fn temp_rate_c_per_min(rows: &[RunRow], temp_c: f64) -> f64 {
+pub fn temp_rate_c_per_min(rows: &[RunRow], temp_c: f64) -> f64 {
     let n = rows.len() as f64;
     let t_mean: f64 = rows.iter().map(|r| r.0 / n).sum();
     let (mut stt, mut sty) = (0.0, 0.0);
@@ -83,6 +84,31 @@ pub(super) fn temp_rate_c_per_min(rows: &[RunRow], temp_c: f64) -> f64 {
     if stt > 0.0 { sty / stt * 60.0 } else { 0.0 }
 }
 
+/// Whether a recording says what specific force the unit was held at.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reference {
+    /// No `fx_g`, `fy_g`, `fz_g` columns.
+    Absent,
+    /// The columns are there, every row's cells are empty.
+    Empty,
+    /// This many rows have a reference.
+    Rows(usize),
+}
+
+/// The [`Reference`] of a recording (reads it through). Errors name the file.
+pub fn reference(path: &Path) -> anyhow::Result<Reference> {
+    let mut reader = Reader::open(path).map_err(|e| anyhow!("{e}"))?;
+    if !reader.has_reference() {
+        return Ok(Reference::Absent);
+    }
+    let mut row = Row::default();
+    let mut n = 0;
+    while reader.read_row(&mut row).map_err(|e| anyhow!("{e}"))? {
+        n += usize::from(row.reference_f_g().is_some());
+    }
+    Ok(if n == 0 { Reference::Empty } else { Reference::Rows(n) })
+}
+
 /// All dwells of a recording (kept and rejected). Errors name the file: unreadable, no `pos`
 /// column, no reference columns, no row with a known reference and a position label.
 pub fn find(path: &Path, opt: &Options) -> anyhow::Result<Vec<Segment>> {
@@ -91,12 +117,17 @@ pub fn find(path: &Path, opt: &Options) -> anyhow::Result<Vec<Segment>> {
         bail!("{}: missing column `pos` (the rig position label): cannot find the dwells", path.display());
     }
     if !reader.has_reference() {
-        bail!("{}: missing reference columns `fx_g`, `fy_g`, `fz_g`: cannot find the dwells", path.display());
+        bail!(
+            "{}: no reference columns `fx_g`, `fy_g`, `fz_g` in the header: the dwells' specific force is not known (calibrate --free finds static intervals without it)",
+            path.display()
+        );
     }
     let mut runs: Vec<Run> = Vec::new();
     let mut cur: Option<Run> = None;
     let mut row = Row::default();
+    let mut n_reference = 0usize;
     while reader.read_row(&mut row).map_err(|e| anyhow!("{e}"))? {
+        n_reference += usize::from(row.reference_f_g().is_some());
         let key = match (&row.pos, row.reference_f_g()) {
             (Some(p), Some(f)) if !p.is_empty() => Some((p.as_str(), f)),
             _ => None,
@@ -117,7 +148,16 @@ pub fn find(path: &Path, opt: &Options) -> anyhow::Result<Vec<Segment>> {
     }
     runs.extend(cur.take());
     if runs.is_empty() {
-        bail!("{}: no row with both a `pos` label and a known reference (fx_g, fy_g, fz_g)", path.display());
+        if n_reference == 0 {
+            bail!(
+                "{}: the reference columns `fx_g`, `fy_g`, `fz_g` are present but empty in every row: the dwells' specific force is not known (calibrate --free finds static intervals without it)",
+                path.display()
+            );
+        }
+        bail!(
+            "{}: no row with both a `pos` label and a known reference (fx_g, fy_g, fz_g): {n_reference} row(s) have a reference, none a `pos` label",
+            path.display()
+        );
     }
     Ok(runs.into_iter().map(|r| segment(path, r, opt)).collect())
 }
