@@ -525,7 +525,7 @@ fn rich_q(bank: &Bank, grams: &Grams, t: &[f64], r: &[f64], y: &[f64]) -> f64 {
 
 /// Diagnoses one accelerometer. `random_walk`: the random-walk intensity [g²/s] to test
 /// against (a sensor specification); `None` estimates it: the smaller of the richest model's
-/// ([`rich_q`]) and the upper bound of what the residual shows at averaging times up to a
+/// (`rich_q`: restricted likelihood with every mechanism in) and the upper bound of what the residual shows at averaging times up to a
 /// minute ([`short_tau_q`], structure the library cannot fit does not count as drift there).
 pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -> AxisFit {
     let p = ctx.p;
@@ -538,19 +538,15 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
         Some(q) => (q, Grams::new(t, r, q, y, &bank, &fold, true)),
         None => {
             // θ of the richest model picked by least squares (white noise: the deterministic
-            // structure decides), the random walk estimated with it in, then θ picked again
-            // against that noise model and the random walk re-estimated.
+            // structure decides), then the random walk estimated with it in.
             let g0 = Grams::new(t, r, 0.0, y, &bank, &fold, false);
-            let q1 = rich_q(&bank, &g0, t, r, y);
             let q_short = {
                 let runs = p.static_runs();
                 let segs: Vec<&[f64]> = runs.iter().map(|&(a, b)| &y[a..b]).collect();
                 short_tau_q(&segs, p.dt).map_or(f64::INFINITY, |q| q.1)
             };
-            let q1 = q1.min(q_short);
-            let g1 = Grams::new(t, r, q1, y, &bank, &fold, false);
-            let q2 = rich_q(&bank, &g1, t, r, y).min(q_short);
-            (q2, Grams::new(t, r, q2, y, &bank, &fold, true))
+            let q = rich_q(&bank, &g0, t, r, y).min(q_short);
+            (q, Grams::new(t, r, q, y, &bank, &fold, true))
         }
     };
     let filt = Filter::new(t, r, q, |_| true);

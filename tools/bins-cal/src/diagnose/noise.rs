@@ -129,9 +129,8 @@ pub fn smooth_level(t: &[f64], r: &[f64], q: f64, x: &[f64]) -> Vec<f64> {
 /// intensity `q`, the white variances known up to a common scale (profiled):
 /// `−½((n − p) ln(SSE/(n − p)) + Σ ln F + ln det(X̃ᵀX̃))`, `X̃` the whitened columns.
 ///
-/// The restricted form counts what the regressors absorb: a smooth drift that a thermal column
-/// can also explain is not charged to `q` twice, and `q` is not biased low by a rich model
-/// (the plain profile likelihood is; with a dozen smooth columns it halves a random walk).
+/// The restricted form counts what the regressors absorb, so `q` is not biased low by a rich
+/// model (the plain profile likelihood is, by the variance the regressors take).
 /// Returns `(ll, sse, n_used, β)`.
 pub fn profile_ll(t: &[f64], r: &[f64], q: f64, y: &[f64], xs: &[&[f64]]) -> (f64, f64, usize, Vec<f64>) {
     let filt = Filter::new(t, r, q, |_| true);

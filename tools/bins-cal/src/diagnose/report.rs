@@ -127,7 +127,7 @@ pub struct Report {
     pub random_walk_source: String,
     /// The sensor's own random walk [mg/√h]: from the Hadamard variance of what the model
     /// leaves in the static segments, at averaging times up to a minute
-    /// ([`short_tau_q`](super::noise::short_tau_q)); absent when no segment is long enough.
+    /// ([`short_tau_q`]); absent when no segment is long enough.
     pub sensor_random_walk_mg_per_sqrt_h: PerAxis<f64>,
     /// RMS of the drift (the random-walk level of what the model leaves, smoothed) \[mg\]:
     /// reported and drawn on its own, never subtracted from the figures.
