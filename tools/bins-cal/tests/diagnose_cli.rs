@@ -246,7 +246,7 @@ fn follow_and_calib_give_a_sim_for_a_real_recording() {
     let neither = bins_cal().args(["diagnose", "--real"]).arg(&rp).arg("--report").arg(&rep).output().unwrap();
     assert!(!neither.status.success());
     assert!(
-        String::from_utf8_lossy(&neither.stderr).contains("--calib"),
+        String::from_utf8_lossy(&neither.stderr).contains("--sim"),
         "{}",
         String::from_utf8_lossy(&neither.stderr)
     );
