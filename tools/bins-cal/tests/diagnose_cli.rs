@@ -245,9 +245,5 @@ fn follow_and_calib_give_a_sim_for_a_real_recording() {
     assert!(!both.status.success());
     let neither = bins_cal().args(["diagnose", "--real"]).arg(&rp).arg("--report").arg(&rep).output().unwrap();
     assert!(!neither.status.success());
-    assert!(
-        String::from_utf8_lossy(&neither.stderr).contains("--sim"),
-        "{}",
-        String::from_utf8_lossy(&neither.stderr)
-    );
+    assert!(String::from_utf8_lossy(&neither.stderr).contains("--sim"), "{}", String::from_utf8_lossy(&neither.stderr));
 }

@@ -19,7 +19,7 @@
 //! deviance by less than [`AMBIGUOUS_LR`]: the data cannot tell them apart.
 
 use super::mech::{Context, Mech};
-use super::noise::{Filter, Step, estimate_q, short_tau_q, smooth_level};
+use super::noise::{Filter, Step, q_upper, smooth_level};
 use super::stats::{chi2_sf, chol_solve, dot};
 
 /// Family-wise false-discovery level of the whole diagnosis.
@@ -495,11 +495,13 @@ impl Selector<'_> {
     }
 }
 
-/// The random-walk intensity [g²/s] the selection tests against: restricted maximum
-/// likelihood with the richest model in (the nuisance and every available mechanism at its
-/// best grid θ), as an F-test takes its variance from the full model. Estimated under the
-/// null alone, the random walk takes any slow structure for drift (a heating/cooling
-/// difference of 10× the noise becomes a few mg/√h) and nothing can be named against it.
+/// The random-walk intensity [g²/s] the selection tests against: the upper end of the 95 %
+/// restricted-likelihood interval ([`q_upper`]) with the richest model in (the nuisance and
+/// every available mechanism at its best grid θ), as an F-test takes its variance from the
+/// full model. Estimated under the null alone, the random walk takes any slow structure for
+/// drift (a heating/cooling difference of 10× the noise becomes a few mg/√h) and nothing can
+/// be named against it; estimated by its maximum alone, a weak random walk often comes out
+/// far too small and is then named as a mechanism.
 fn rich_q(bank: &Bank, grams: &Grams, t: &[f64], r: &[f64], y: &[f64]) -> f64 {
     let mut rich: Vec<usize> = Vec::new();
     for m in Mech::ALL {
@@ -520,13 +522,11 @@ fn rich_q(bank: &Bank, grams: &Grams, t: &[f64], r: &[f64], y: &[f64]) -> f64 {
             rich.push(c);
         }
     }
-    estimate_q(t, r, y, &bank.slices_of(&rich))
+    q_upper(t, r, y, &bank.slices_of(&rich))
 }
 
 /// Diagnoses one accelerometer. `random_walk`: the random-walk intensity [g²/s] to test
-/// against (a sensor specification); `None` estimates it: the smaller of the richest model's
-/// (`rich_q`: restricted likelihood with every mechanism in) and the upper bound of what the residual shows at averaging times up to a
-/// minute ([`short_tau_q`], structure the library cannot fit does not count as drift there).
+/// against (a sensor specification); `None` estimates it with the richest model (`rich_q`).
 pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -> AxisFit {
     let p = ctx.p;
     let (t, r, y) = (&p.t, &p.r_white[ctx.axis], &p.r[ctx.axis]);
@@ -540,12 +540,7 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
             // θ of the richest model picked by least squares (white noise: the deterministic
             // structure decides), then the random walk estimated with it in.
             let g0 = Grams::new(t, r, 0.0, y, &bank, &fold, false);
-            let q_short = {
-                let runs = p.static_runs();
-                let segs: Vec<&[f64]> = runs.iter().map(|&(a, b)| &y[a..b]).collect();
-                short_tau_q(&segs, p.dt).map_or(f64::INFINITY, |q| q.1)
-            };
-            let q = rich_q(&bank, &g0, t, r, y).min(q_short);
+            let q = rich_q(&bank, &g0, t, r, y);
             (q, Grams::new(t, r, q, y, &bank, &fold, true))
         }
     };

@@ -243,6 +243,35 @@ pub fn estimate_q(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> f64 {
     rmed * 10f64.powf(best_lq + 0.25 * off)
 }
 
+/// The upper end of the 95 % restricted-likelihood interval of `q` (where the log-likelihood
+/// has fallen by 1.92 from its maximum), with the columns `xs` in: the random walk that
+/// mechanisms are tested against. A weak random walk is poorly determined by one record (its
+/// estimate is often far below the truth, or 0), and a mechanism tested against too small a
+/// drift is named for what is drift; against the upper end it is named only when the data
+/// exclude the drift as its explanation.
+pub fn q_upper(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> f64 {
+    let rmed = super::stats::median(r).max(1e-300);
+    let q_hat = estimate_q(t, r, y, xs);
+    let ll = |q: f64| profile_ll(t, r, q, y, xs).0;
+    let ll_max = ll(q_hat);
+    // Walk up in quarter decades from the estimate (or from 1e-9·rmed when it is 0).
+    let mut lq = if q_hat > 0.0 { (q_hat / rmed).log10() } else { -9.0 };
+    let (mut prev_lq, mut prev_drop) = (lq, if q_hat > 0.0 { 0.0 } else { ll_max - ll(rmed * 1e-9) });
+    if prev_drop > 1.92 {
+        return q_hat;
+    }
+    while lq < 2.0 {
+        lq += 0.25;
+        let drop = ll_max - ll(rmed * 10f64.powf(lq));
+        if drop > 1.92 {
+            let f = ((1.92 - prev_drop) / (drop - prev_drop)).clamp(0.0, 1.0);
+            return rmed * 10f64.powf(prev_lq + f * (lq - prev_lq));
+        }
+        (prev_lq, prev_drop) = (lq, drop);
+    }
+    rmed * 100.0
+}
+
 /// The random walk [g²/s] seen at short averaging times, up to a minute, where the
 /// temperature barely moves: least squares of the Hadamard variance of `segs` (equally spaced
 /// at `dt` \[s\]) on `σ²·dt/τ + q·τ/6`, each point weighted by its variance `2·H²/n`

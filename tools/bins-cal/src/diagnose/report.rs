@@ -268,11 +268,6 @@ fn folds(m: Mech) -> Option<Mech> {
     }
 }
 
-/// The tempco a static term is folded into ([`folds`]).
-fn folded_into(m: Mech) -> Option<Mech> {
-    Mech::ALL.into_iter().find(|&t| folds(t) == Some(m))
-}
-
 /// A held-out RMS within this factor of the noise floor is "at the noise".
 pub const AT_NOISE: f64 = 1.2;
 
@@ -315,11 +310,39 @@ pub fn build(
     input: &Inputs,
 ) -> Report {
     let (sim, real) = (input.sim, input.real);
+    // A tempco and the static term it reduces to at the reference temperature are one finding:
+    // the temperature SIM was calibrated at is not known, and a tempco about another
+    // temperature is exactly the two together. Per axis, the members folded into a tempco: its
+    // static term, or a member the data cannot tell from that static term.
+    let folded: Vec<Vec<(Mech, Mech)>> = axes
+        .iter()
+        .map(|fit| {
+            let mut out = Vec::new();
+            for t in [Mech::ScaleTemp, Mech::CrossCouplingTemp] {
+                let Some(part) = folds(t) else { continue };
+                let plain = |m: Mech| fit.ambiguous.iter().all(|(a, _)| *a != m);
+                if !fit.terms.iter().any(|u| u.mech == t) || !plain(t) {
+                    continue;
+                }
+                for u in fit.terms.iter().filter(|u| u.mech != t) {
+                    let alike = fit.ambiguous.iter().any(|(a, alts)| *a == u.mech && alts.iter().any(|x| x.0 == part));
+                    if u.mech == part || alike {
+                        out.push((u.mech, t));
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    let is_folded = |axis: usize, m: Mech| folded[axis].iter().any(|f| f.0 == m);
     // Ambiguous groups per axis: the member and its alternatives.
     let mut amb_groups: BTreeMap<Vec<String>, AmbGroup> = BTreeMap::new();
     let mut ambiguous_member: Vec<Vec<Mech>> = vec![Vec::new(); 3];
     for fit in axes {
         for (m, alts) in &fit.ambiguous {
+            if is_folded(fit.axis, *m) {
+                continue;
+            }
             let mut ids: Vec<String> =
                 std::iter::once(m.id().to_string()).chain(alts.iter().map(|a| a.0.id().to_string())).collect();
             ids.sort();
@@ -327,6 +350,19 @@ pub fn build(
             e.0.push(AXES[fit.axis].into());
             e.2.insert(AXES[fit.axis].into(), alts.iter().map(|a| (a.0.id().to_string(), a.1)).collect());
             ambiguous_member[fit.axis].push(*m);
+        }
+        // Both turn-on terms found on one accelerometer: a power-on transient with two time
+        // constants is explained as well by a warm-up plus self-heating as by either with a
+        // second exponential, so the pair is reported as one group the data cannot split (the
+        // separating test: power-ons in other positions or at other temperatures).
+        let has = |m: Mech| fit.terms.iter().any(|t| t.mech == m) && !ambiguous_member[fit.axis].contains(&m);
+        if has(Mech::SelfHeating) && has(Mech::Warmup) {
+            let ids = vec![Mech::SelfHeating.id().to_string(), Mech::Warmup.id().to_string()];
+            let e =
+                amb_groups.entry(ids).or_insert_with(|| (Vec::new(), "self_heating + warmup".into(), BTreeMap::new()));
+            e.0.push(AXES[fit.axis].into());
+            e.2.insert(AXES[fit.axis].into(), BTreeMap::new());
+            ambiguous_member[fit.axis].extend([Mech::SelfHeating, Mech::Warmup]);
         }
     }
     let ambiguous: Vec<Ambiguous> = amb_groups
@@ -365,24 +401,14 @@ pub fn build(
                 if amb {
                     continue;
                 }
-                // A tempco and the static term it reduces to at the reference temperature are
-                // one finding: the temperature SIM was calibrated at is not known, and a
-                // tempco about another temperature is exactly the two together.
-                if let Some(into) = folded_into(m)
-                    && fit.terms.iter().any(|u| u.mech == into && !ambiguous_member[fit.axis].contains(&into))
-                {
+                if is_folded(fit.axis, m) {
                     continue;
                 }
-                if let Some(part) = folds(m)
-                    && let Some(u) = fit.terms.iter().find(|u| u.mech == part)
-                    && !ambiguous_member[fit.axis].contains(&part)
-                {
-                    let (pp, pc) = term_params(u, &sens[fit.axis], fit.axis);
-                    for (k, v) in pp {
-                        params.insert(format!("{k} (at T0)"), v);
-                    }
-                    for (k, v) in pc {
-                        ci.insert(format!("{k} (at T0)"), v);
+                for (x, _) in folded[fit.axis].iter().filter(|f| f.1 == m) {
+                    if let Some(u) = fit.terms.iter().find(|u| u.mech == *x) {
+                        let (pp, pc) = term_params(u, &sens[fit.axis], fit.axis);
+                        params.extend(pp.into_iter().map(|(k, v)| (format!("{k} (at T0)"), v)));
+                        ci.extend(pc.into_iter().map(|(k, v)| (format!("{k} (at T0)"), v)));
                     }
                 }
                 let ax = AXES[fit.axis].to_string();
