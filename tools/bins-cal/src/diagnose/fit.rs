@@ -20,7 +20,7 @@
 
 use super::mech::{Context, Mech};
 use super::noise::{Filter, Step, q_upper, smooth_level};
-use super::stats::{chi2_sf, chol_solve, dot};
+use super::stats::{chi2_sf, chol_solve, dot, gram_blocked};
 
 /// Family-wise false-discovery level of the whole diagnosis.
 pub const ALPHA: f64 = 1e-3;
@@ -104,39 +104,6 @@ struct Grams {
     n_all: usize,
 }
 
-/// Rows per block of the Gram products: the block of every column stays in cache while all
-/// pairs are multiplied (the columns themselves are far larger than the cache).
-const GRAM_BLOCK: usize = 256;
-
-/// `Σ w_a·w_b` over the rows of `rows` (all rows when `None`), every pair `a ≤ b`, computed
-/// block by block of rows; the full symmetric matrix.
-fn gram_of(w: &[Vec<f64>], rows: Option<&[(usize, usize)]>) -> Vec<f64> {
-    let p = w.len();
-    let n = w.first().map_or(0, Vec::len);
-    let all = [(0, n)];
-    let rows = rows.unwrap_or(&all);
-    let mut g = vec![0.0; p * p];
-    for &(s, e) in rows {
-        let mut c0 = s;
-        while c0 < e {
-            let c1 = (c0 + GRAM_BLOCK).min(e);
-            for a in 0..p {
-                let wa = &w[a][c0..c1];
-                for b in a..p {
-                    g[a * p + b] += dot(wa, &w[b][c0..c1]);
-                }
-            }
-            c0 = c1;
-        }
-    }
-    for a in 0..p {
-        for b in 0..a {
-            g[a * p + b] = g[b * p + a];
-        }
-    }
-    g
-}
-
 fn ranges_of(fold: &[usize], k: usize) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     let mut i = 0;
@@ -167,9 +134,9 @@ impl Grams {
         }
         f0.whiten(y, &mut w[p - 1]);
         if !folds {
-            return Grams { p, all: gram_of(&w, None), test: Vec::new(), train: Vec::new(), n_all: f0.n_used };
+            return Grams { p, all: gram_blocked(&w, None), test: Vec::new(), train: Vec::new(), n_all: f0.n_used };
         }
-        let test: Vec<Vec<f64>> = (0..FOLDS).map(|k| gram_of(&w, Some(&ranges_of(fold, k)))).collect();
+        let test: Vec<Vec<f64>> = (0..FOLDS).map(|k| gram_blocked(&w, Some(&ranges_of(fold, k)))).collect();
         let mut all = vec![0.0; p * p];
         for g in &test {
             for (a, b) in all.iter_mut().zip(g) {
@@ -708,7 +675,9 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
         let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
         gls(&filt, y, &refs).map_or(f64::INFINITY, |g| g.2)
     };
-    for _ in 0..2 {
+    // One pass suffices with one θ; with several, a second lets each adjust to the others.
+    let passes = if members.iter().filter(|m| m.1.is_some()).count() > 1 { 2 } else { 1 };
+    for _ in 0..passes {
         for k in 0..members.len() {
             let (m, Some(th0)) = members[k] else { continue };
             let grid = ctx.grid(m);
@@ -791,13 +760,13 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
                 let mut inside = th;
                 let mut x = th;
                 loop {
-                    let nx = if dir > 0.0 { x * 1.1 } else { x / 1.1 };
+                    let nx = if dir > 0.0 { x * 1.25 } else { x / 1.25 };
                     if nx < gmin || nx > gmax {
                         return nx.clamp(gmin, gmax);
                     }
                     if dev(nx) > 3.84 {
                         let (mut lo, mut hi) = (inside.ln(), nx.ln());
-                        for _ in 0..12 {
+                        for _ in 0..8 {
                             let mid = 0.5 * (lo + hi);
                             if dev(mid.exp()) > 3.84 {
                                 hi = mid;

@@ -19,7 +19,7 @@ use super::prep::Prepared;
 use bins_comp::vibration::{Axis, ConversionFunction, Variant, Vibration, ve_terms};
 
 /// Points a decade of the θ grids (refined off the grid by golden section in the fit).
-pub const GRID_PER_DECADE: f64 = 4.0;
+pub const GRID_PER_DECADE: f64 = 3.0;
 
 /// Reference temperature of the polynomial terms [°C] (the paper's normal conditions).
 pub const T0_C: f64 = 20.0;
@@ -301,13 +301,18 @@ pub fn fit_sensitivity(p: &Prepared, axis: usize) -> Sensitivity {
 pub fn lagged(t: &[f64], temp: &[f64], tau: f64) -> Vec<f64> {
     let mut out = Vec::with_capacity(temp.len());
     let mut x = temp.first().copied().unwrap_or(0.0);
+    // e^(−h/τ) of the last step length (the same for every step of a regular recording).
+    let (mut last_h, mut last_e) = (f64::NAN, 0.0);
     for k in 0..temp.len() {
         if k > 0 {
             let h = (t[k] - t[k - 1]).max(0.0);
             if h > 0.0 {
                 // u(s) = u0 + g·s: x(h) = u1 − gτ + (x − u0 + gτ)·e^(−h/τ).
                 let g = (temp[k] - temp[k - 1]) / h;
-                let e = (-h / tau).exp();
+                if h != last_h {
+                    (last_h, last_e) = (h, (-h / tau).exp());
+                }
+                let e = last_e;
                 x = temp[k] - g * tau + (x - temp[k - 1] + g * tau) * e;
             }
         }

@@ -152,7 +152,7 @@ pub fn ls_sse(y: &[f64], xs: &[Vec<f64>]) -> (f64, Vec<f64>) {
 
 /// [`ls_sse`] plus `ln det` of the kept columns' Gram matrix and their number.
 fn ls_fit(y: &[f64], xs: &[Vec<f64>]) -> (f64, Vec<f64>, f64, usize) {
-    use super::stats::{chol_logdet, chol_solve, dot};
+    use super::stats::{chol_logdet, chol_solve, dot, gram_blocked};
     let p = xs.len();
     let yy = dot(y, y);
     if p == 0 {
@@ -160,19 +160,20 @@ fn ls_fit(y: &[f64], xs: &[Vec<f64>]) -> (f64, Vec<f64>, f64, usize) {
     }
     // Greedy: keep the columns that are not collinear with those kept, on the Gram matrix of
     // the normalised columns (computed once).
-    let norms: Vec<f64> = xs.iter().map(|x| dot(x, x).sqrt()).collect();
+    let mut cols: Vec<&[f64]> = xs.iter().map(Vec::as_slice).collect();
+    cols.push(y);
+    let raw = gram_blocked(&cols, None);
+    let norms: Vec<f64> = (0..p).map(|u| raw[u * (p + 1) + u].sqrt()).collect();
     let mut full = vec![0.0; p * p];
     let mut xy = vec![0.0; p];
     for u in 0..p {
         if !(norms[u] > 0.0) {
             continue;
         }
-        xy[u] = dot(&xs[u], y) / norms[u];
-        for v in u..p {
+        xy[u] = raw[u * (p + 1) + p] / norms[u];
+        for v in 0..p {
             if norms[v] > 0.0 {
-                let g = dot(&xs[u], &xs[v]) / (norms[u] * norms[v]);
-                full[u * p + v] = g;
-                full[v * p + u] = g;
+                full[u * p + v] = raw[u * (p + 1) + v] / (norms[u] * norms[v]);
             }
         }
     }
@@ -211,6 +212,11 @@ fn ls_fit(y: &[f64], xs: &[Vec<f64>]) -> (f64, Vec<f64>, f64, usize) {
 /// (1e-9 … 10, and 0), the best point refined by steps of ½ and ¼ decade, and a parabola
 /// through the last three (16 likelihood evaluations).
 pub fn estimate_q(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> f64 {
+    estimate_q_ll(t, r, y, xs).0
+}
+
+/// [`estimate_q`] and the restricted log-likelihood at the estimate.
+fn estimate_q_ll(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> (f64, f64) {
     let rmed = super::stats::median(r).max(1e-300);
     let ll = |lq: f64| profile_ll(t, r, rmed * 10f64.powf(lq), y, xs).0;
     let (mut best_lq, mut best_ll) = (f64::NAN, f64::NEG_INFINITY);
@@ -220,8 +226,9 @@ pub fn estimate_q(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> f64 {
             (best_lq, best_ll) = (k as f64, v);
         }
     }
-    if profile_ll(t, r, 0.0, y, xs).0 >= best_ll {
-        return 0.0;
+    let ll0 = profile_ll(t, r, 0.0, y, xs).0;
+    if ll0 >= best_ll {
+        return (0.0, ll0);
     }
     let mut around = (f64::NEG_INFINITY, best_ll, f64::NEG_INFINITY);
     for step in [0.5, 0.25] {
@@ -240,7 +247,9 @@ pub fn estimate_q(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> f64 {
     let (a, b, c) = around;
     let den = a - 2.0 * b + c;
     let off = if den < 0.0 && a.is_finite() && c.is_finite() { (0.5 * (a - c) / den).clamp(-1.0, 1.0) } else { 0.0 };
-    rmed * 10f64.powf(best_lq + 0.25 * off)
+    // The parabola's vertex: its height is the maximum (no further evaluation needed).
+    let peak = if off != 0.0 { b + 0.5 * (c - a) * off + 0.5 * den * off * off } else { b };
+    (rmed * 10f64.powf(best_lq + 0.25 * off), peak.max(b))
 }
 
 /// The upper end of the 95 % restricted-likelihood interval of `q` (where the log-likelihood
@@ -251,9 +260,8 @@ pub fn estimate_q(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> f64 {
 /// exclude the drift as its explanation.
 pub fn q_upper(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> f64 {
     let rmed = super::stats::median(r).max(1e-300);
-    let q_hat = estimate_q(t, r, y, xs);
+    let (q_hat, ll_max) = estimate_q_ll(t, r, y, xs);
     let ll = |q: f64| profile_ll(t, r, q, y, xs).0;
-    let ll_max = ll(q_hat);
     // Walk up in quarter decades from the estimate (or from 1e-9·rmed when it is 0).
     let mut lq = if q_hat > 0.0 { (q_hat / rmed).log10() } else { -9.0 };
     let (mut prev_lq, mut prev_drop) = (lq, if q_hat > 0.0 { 0.0 } else { ll_max - ll(rmed * 1e-9) });

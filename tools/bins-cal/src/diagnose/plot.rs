@@ -167,7 +167,7 @@ pub fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, DiagnoseEr
                 chart
                     .configure_mesh()
                     .x_desc("fitted term [mg]")
-                    .y_desc("residual − drift − other terms [mg]")
+                    .y_desc("residual − other terms, offset removed [mg]")
                     .label_style(("sans-serif", 14))
                     .draw()
                     .map_err(|e| e.to_string())?;

@@ -234,6 +234,39 @@ pub fn hadamard_var(segments: &[&[f64]], ms: &[usize]) -> Vec<(usize, f64, usize
     out
 }
 
+/// Rows per block of [`gram_blocked`]: the block of every column stays in cache while all
+/// pairs are multiplied (the columns themselves are far larger than the cache).
+const GRAM_BLOCK: usize = 256;
+
+/// `Σ w_a·w_b` over the rows of `rows` (all rows when `None`), every pair `a ≤ b`, computed
+/// block by block of rows; the full symmetric matrix, row-major.
+pub fn gram_blocked<C: AsRef<[f64]>>(w: &[C], rows: Option<&[(usize, usize)]>) -> Vec<f64> {
+    let p = w.len();
+    let n = w.first().map_or(0, |c| c.as_ref().len());
+    let all = [(0, n)];
+    let rows = rows.unwrap_or(&all);
+    let mut g = vec![0.0; p * p];
+    for &(s, e) in rows {
+        let mut c0 = s;
+        while c0 < e {
+            let c1 = (c0 + GRAM_BLOCK).min(e);
+            for a in 0..p {
+                let wa = &w[a].as_ref()[c0..c1];
+                for b in a..p {
+                    g[a * p + b] += dot(wa, &w[b].as_ref()[c0..c1]);
+                }
+            }
+            c0 = c1;
+        }
+    }
+    for a in 0..p {
+        for b in 0..a {
+            g[a * p + b] = g[b * p + a];
+        }
+    }
+    g
+}
+
 /// Dot product with four accumulators (vectorises).
 #[inline]
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
