@@ -948,7 +948,9 @@ fn arb_model(range: (f64, f64)) -> impl Strategy<Value = TempModel<f64>> {
             let mut at_knot = [CoefDelta::zero(); MAX_KNOTS];
             let step = (range.1 - range.0) / (n - 1) as f64;
             for i in 0..n {
-                knots_c[i] = range.0 + step * (i as f64 + jit[i]);
+                // Within the format's knot limits ([-100, 200] °C): a range reaching −80 °C with
+                // a jittered first knot would otherwise fall below −100 °C.
+                knots_c[i] = (range.0 + step * (i as f64 + jit[i])).max(-100.0);
                 at_knot[i] = sets[i];
             }
             TempModel::Pwl { n_knots: n as u8, knots_c, at_knot }
