@@ -1,36 +1,12 @@
-//! Small numerical helpers of the diagnosis: a Cholesky solver for the few-column least-squares
-//! problems (normal equations of columns scaled to unit norm), the χ² tail probability, the
-//! overlapping Allan deviation.
+//! Small numerical helpers of the diagnosis: a Cholesky solver and log-determinant for the
+//! few-column least-squares problems (normal equations of columns scaled to unit norm), Gram
+//! matrices in row blocks, the χ² tail probability, the overlapping Allan deviation and
+//! Hadamard variance.
 
-/// `ln det A` of a symmetric positive-definite `A` (`p×p`, row-major) by Cholesky; `None`
-/// when it is not positive definite.
-pub fn chol_logdet(a: &[f64], p: usize) -> Option<f64> {
-    let mut l = vec![0.0; p * p];
-    let mut log_det = 0.0;
-    for i in 0..p {
-        for j in 0..=i {
-            let mut s = a[i * p + j];
-            for k in 0..j {
-                s -= l[i * p + k] * l[j * p + k];
-            }
-            if i == j {
-                if !(s > 0.0) {
-                    return None;
-                }
-                l[i * p + i] = s.sqrt();
-                log_det += s.ln();
-            } else {
-                l[i * p + j] = s / l[j * p + j];
-            }
-        }
-    }
-    Some(log_det)
-}
-
-/// Solves `A·x = b` for a symmetric positive-definite `A` (`p×p`, row-major) by Cholesky.
-/// Returns `None` when a pivot falls below `rel_tol` times its diagonal element (the columns
-/// are collinear on this data). Also returns the diagonal of `A⁻¹` (for standard errors).
-pub fn chol_solve(a: &[f64], b: &[f64], p: usize, rel_tol: f64) -> Option<(Vec<f64>, Vec<f64>)> {
+/// The Cholesky factor `L` (row-major, lower) of a symmetric positive-definite `A` (`p×p`);
+/// `None` when a pivot is not above `rel_tol` times its diagonal element or that element is
+/// not positive (the columns are collinear on this data).
+fn chol_factor(a: &[f64], p: usize, rel_tol: f64) -> Option<Vec<f64>> {
     let mut l = vec![0.0; p * p];
     for i in 0..p {
         for j in 0..=i {
@@ -49,6 +25,21 @@ pub fn chol_solve(a: &[f64], b: &[f64], p: usize, rel_tol: f64) -> Option<(Vec<f
             }
         }
     }
+    Some(l)
+}
+
+/// `ln det A` of a symmetric positive-definite `A` (`p×p`, row-major) by Cholesky; `None`
+/// when it is not positive definite.
+pub fn chol_logdet(a: &[f64], p: usize) -> Option<f64> {
+    let l = chol_factor(a, p, 0.0)?;
+    Some((0..p).map(|i| 2.0 * l[i * p + i].ln()).sum())
+}
+
+/// Solves `A·x = b` for a symmetric positive-definite `A` (`p×p`, row-major) by Cholesky.
+/// Returns `None` when a pivot falls below `rel_tol` times its diagonal element (the columns
+/// are collinear on this data). Also returns the diagonal of `A⁻¹` (for standard errors).
+pub fn chol_solve(a: &[f64], b: &[f64], p: usize, rel_tol: f64) -> Option<(Vec<f64>, Vec<f64>)> {
+    let l = chol_factor(a, p, rel_tol)?;
     let fwd = |rhs: &[f64]| {
         let mut y = rhs.to_vec();
         for i in 0..p {
