@@ -48,9 +48,10 @@ pub struct Prepared {
     pub k_determined: [bool; 3],
     /// Median sample period \[s\].
     pub dt: f64,
-    /// `temp_C` smoothed by a centred moving average over ±10 s (at least ±1 row): the
+    /// `temp_C` smoothed by a centred moving average over ±3 s (at least ±1 row): the
     /// thermal terms are built from it, so the thermistor's own noise does not enter the
-    /// regressors (errors in variables).
+    /// regressors (errors in variables). Short, because the average rounds a ramp's turn and
+    /// a play started from the rounded peak is offset for the whole next leg.
     pub temp_s: Vec<f64>,
     /// Temperature rate (centred difference over about a minute) [°C/s].
     pub dtemp: Vec<f64>,
@@ -315,7 +316,7 @@ pub fn prepare(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> 
             dtemp[i] = (temp[hi] - temp[lo]) / (t[hi] - t[lo]);
         }
     }
-    let half = ((10.0 / dt).round() as usize).clamp(1, 50);
+    let half = ((3.0 / dt).round() as usize).clamp(1, 50);
     let mut prefix = vec![0.0; n + 1];
     for k in 0..n {
         prefix[k + 1] = prefix[k] + temp[k];
