@@ -290,7 +290,7 @@ pub struct Calibration<F> {
     n_diag_split: [(F, F); 3],
     /// Low part of the diagonal: N_ii − hi.
     n_diag_lo: Vec3<F>,
-    /// 1/K_ii at T0.
+    /// 1/K_ii at T0 ([`float::recip`] in `f64`, rounded).
     inv_diag: Vec3<F>,
     model: TempModel<F>,
     method: Method,
@@ -385,7 +385,7 @@ impl<F: Float> Calibration<F> {
             n_g_per_v: n_f,
             n_diag_split: [float::split(n_f[0][0]), float::split(n_f[1][1]), float::split(n_f[2][2])],
             n_diag_lo,
-            inv_diag: [F::of(1.0 / k[0][0]), F::of(1.0 / k[1][1]), F::of(1.0 / k[2][2])],
+            inv_diag: [0, 1, 2].map(|i| F::of(float::recip(k[i][i]))),
             model: p.model.cast(),
             method: p.method,
             temp_min_c: F::of(lo),
