@@ -60,6 +60,19 @@ pub const MAX_WIDTH_C: f64 = 50.0;
 /// Largest |bias_play_g| accepted per axis \[g\] (100 mg).
 pub const MAX_BIAS_PLAY_G: f64 = 0.1;
 
+/// The range of parameter `n` in the order of [`ThermalDynamics::to_array`], in its units
+/// (s, °C, g): time constants within [0, [`MAX_TAU_S`]], play widths within [0,
+/// [`MAX_WIDTH_C`]], ΔT_sh within ±[`MAX_WIDTH_C`], the bias play's gains within
+/// ±[`MAX_BIAS_PLAY_G`].
+pub const fn limits(n: u8) -> (f64, f64) {
+    match n {
+        0 | 3 => (0.0, MAX_TAU_S),
+        1 | 4 => (0.0, MAX_WIDTH_C),
+        2 => (-MAX_WIDTH_C, MAX_WIDTH_C),
+        _ => (-MAX_BIAS_PLAY_G, MAX_BIAS_PLAY_G),
+    }
+}
+
 /// Parameters of the thermal dynamics; every stage optional (0 = off).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ThermalDynamics<F> {
@@ -171,20 +184,36 @@ pub struct Effective<F> {
     pub bias_play: F,
 }
 
-/// `1 − e^(−x)` for `x ≥ 0`, accurate for small x (a Taylor series below 0.01, where
-/// `1 − exp(−x)` would cancel; its first omitted term is x⁷/5040, below 2·10⁻¹⁶ relative).
-#[inline]
+/// `1 − e^(−x)` for `x ≥ 0` without an exponential: x is halved k times to below 0.01, where
+/// a Taylor series is exact to the rounding (its first omitted term is x⁷/5040, below
+/// 2·10⁻¹⁶ relative), and the result is squared back, `1 − e^(−2y) = g·(2 − g)` with
+/// `g = 1 − e^(−y)`, which does not cancel and does not amplify relative errors. No `exp` is
+/// linked for it (the target computes its gains once, at boot). 1 from x = 40 on (e⁻⁴⁰ is
+/// below half an `f64` ulp of 1), so at most 12 halvings; 0 for x ≤ 0 or NaN.
+#[inline(never)]
+#[cfg_attr(unstable_target, optimize(size))]
 pub fn one_minus_exp_neg<F: Float>(x: F) -> F {
-    if x < F::of(0.01) {
-        // x·(1 − x/2·(1 − x/3·(1 − x/4·(1 − x/5·(1 − x/6)))))
-        let mut acc = F::ONE;
-        for k in [6.0, 5.0, 4.0, 3.0, 2.0] {
-            acc = F::ONE - x / F::of(k) * acc;
-        }
-        x * acc
-    } else {
-        F::ONE - (-x).exp()
+    if !(x > F::ZERO) {
+        return F::ZERO;
     }
+    if x >= F::of(40.0) {
+        return F::ONE;
+    }
+    let (mut y, mut k) = (x, 0u32);
+    while y >= F::of(0.01) && k < 16 {
+        y *= F::of(0.5);
+        k += 1;
+    }
+    // y·(1 − y/2·(1 − y/3·(1 − y/4·(1 − y/5·(1 − y/6)))))
+    let mut acc = F::ONE;
+    for d in [6.0, 5.0, 4.0, 3.0, 2.0] {
+        acc = F::ONE - y / F::of(d) * acc;
+    }
+    let mut g = y * acc;
+    for _ in 0..k {
+        g = g * (F::of(2.0) - g);
+    }
+    if g > F::ONE { F::ONE } else { g }
 }
 
 /// The gain `1 − e^(−Δt/τ)` of an exactly discretised first-order lag (1 for τ = 0).
@@ -229,28 +258,22 @@ impl<F: Float> ThermalDynamics<F> {
             && self.bias_play_g.iter().all(|&b| b == z)
     }
 
-    /// Checks every parameter: finite, within its physical limit (module constants), and the
-    /// bias play's gains zero without a play width. The error names the parameter.
+    /// Checks every parameter: finite, within its physical limit ([`limits`]), and the bias
+    /// play's gains zero without a play width. The error names the parameter.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn validate(&self) -> Result<(), DynamicsError> {
-        let within = |x: F, lo: f64, hi: f64| x.is_finite() && x >= F::of(lo) && x <= F::of(hi);
-        if !within(self.lag_tau_s, 0.0, MAX_TAU_S) {
-            return Err(DynamicsError::LagTau);
-        }
-        if !within(self.hysteresis_width_c, 0.0, MAX_WIDTH_C) {
-            return Err(DynamicsError::HysteresisWidth);
-        }
-        if !within(self.self_heating_c, -MAX_WIDTH_C, MAX_WIDTH_C) {
-            return Err(DynamicsError::SelfHeating);
-        }
-        if !within(self.self_heating_tau_s, 0.0, MAX_TAU_S) {
-            return Err(DynamicsError::SelfHeatingTau);
-        }
-        if !within(self.bias_play_width_c, 0.0, MAX_WIDTH_C) {
-            return Err(DynamicsError::BiasPlayWidth);
-        }
-        for (i, &b) in self.bias_play_g.iter().enumerate() {
-            if !within(b, -MAX_BIAS_PLAY_G, MAX_BIAS_PLAY_G) {
-                return Err(DynamicsError::BiasPlayG(i as u8));
+        for (n, &x) in self.to_array().iter().enumerate() {
+            let (lo, hi) = limits(n as u8);
+            if !(x.is_finite() && x >= F::of(lo) && x <= F::of(hi)) {
+                return Err(match n {
+                    0 => DynamicsError::LagTau,
+                    1 => DynamicsError::HysteresisWidth,
+                    2 => DynamicsError::SelfHeating,
+                    3 => DynamicsError::SelfHeatingTau,
+                    4 => DynamicsError::BiasPlayWidth,
+                    _ => DynamicsError::BiasPlayG(n as u8 - 5),
+                });
             }
         }
         if self.bias_play_width_c == F::ZERO && self.bias_play_g.iter().any(|&b| b != F::ZERO) {
@@ -259,17 +282,40 @@ impl<F: Float> ThermalDynamics<F> {
         Ok(())
     }
 
-    /// Converts between float types.
-    pub fn cast<G: Float>(&self) -> ThermalDynamics<G> {
-        let g = |x: F| G::of(x.to_f64());
+    /// The parameters in the blob section's order: `lag_tau_s`, `hysteresis_width_c`,
+    /// `self_heating_c`, `self_heating_tau_s`, `bias_play_width_c`, `bias_play_g` x, y, z.
+    pub fn to_array(&self) -> [F; 8] {
+        let [bx, by, bz] = self.bias_play_g;
+        [
+            self.lag_tau_s,
+            self.hysteresis_width_c,
+            self.self_heating_c,
+            self.self_heating_tau_s,
+            self.bias_play_width_c,
+            bx,
+            by,
+            bz,
+        ]
+    }
+
+    /// Inverse of [`to_array`](Self::to_array).
+    pub fn from_array(a: &[F; 8]) -> Self {
+        let [lag_tau_s, hysteresis_width_c, self_heating_c, self_heating_tau_s, bias_play_width_c, bx, by, bz] = *a;
         ThermalDynamics {
-            lag_tau_s: g(self.lag_tau_s),
-            hysteresis_width_c: g(self.hysteresis_width_c),
-            self_heating_c: g(self.self_heating_c),
-            self_heating_tau_s: g(self.self_heating_tau_s),
-            bias_play_width_c: g(self.bias_play_width_c),
-            bias_play_g: self.bias_play_g.map(g),
+            lag_tau_s,
+            hysteresis_width_c,
+            self_heating_c,
+            self_heating_tau_s,
+            bias_play_width_c,
+            bias_play_g: [bx, by, bz],
         }
+    }
+
+    /// Converts between float types.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
+    pub fn cast<G: Float>(&self) -> ThermalDynamics<G> {
+        ThermalDynamics::from_array(&self.to_array().map(|x| G::of(x.to_f64())))
     }
 
     /// The self-heating term `ΔT_sh·(1 − e^(−t_on/τ_sh))` at `t_on_s` seconds after power-on
@@ -306,6 +352,8 @@ impl<F: Float> ThermalDynamics<F> {
     /// The stages at one fixed sample period `dt_s` [s], their per-sample constants
     /// precomputed. Fails on invalid parameters ([`validate`](Self::validate)) or a period
     /// that is not finite and positive.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn at_rate(&self, dt_s: F) -> Result<FixedRate<F>, DynamicsError> {
         self.validate()?;
         if !(dt_s.is_finite() && dt_s > F::ZERO) {

@@ -289,28 +289,25 @@ impl<F: Float> Pipeline<F> {
         temp_c: F,
         source: VibrationSource,
     ) -> (Sample<F>, Vec3<F>) {
-        let (mut s, usable) = match &self.dynamics {
-            None => {
-                let s = self.cal.apply(u_v, state.temps.get(&self.cal, temp_c));
-                let usable = self.cal.is_valid() && !s.status.contains(Status::NONFINITE_INPUT);
-                (s, usable)
-            }
+        // The temperature the model is evaluated at: the reading, or with thermal dynamics the
+        // effective temperature rounded to a multiple of the step (|T_eff| ≤ 1050 °C is far
+        // below the constant 1.5·2^p·step, so the sum's rounding is the rounding to the step; a
+        // non-finite T_eff stays non-finite and the calibration's policy applies). One call of
+        // the cache and of `apply` for both, so that they stay inlined in the step.
+        let (temp_c, play) = match &self.dynamics {
+            None => (temp_c, None),
             Some(d) => {
                 let e = d.step(&mut state.dynamics, temp_c);
-                // Rounded to a multiple of the step: |T_eff| ≤ 1050 °C is far below the
-                // constant's 2^p/2^8·1.5, so the sum's rounding is the rounding to the step
-                // (a non-finite T_eff stays non-finite: the calibration's policy applies).
-                let t = (e.temp_eff_c + self.round_c) - self.round_c;
-                let mut s = self.cal.apply(u_v, state.temps.get(&self.cal, t));
-                let usable = self.cal.is_valid() && !s.status.contains(Status::NONFINITE_INPUT);
-                if usable {
-                    for (a, b) in s.accel_g.iter_mut().zip(d.bias_play_g()) {
-                        *a -= *b * e.bias_play;
-                    }
-                }
-                (s, usable)
+                ((e.temp_eff_c + self.round_c) - self.round_c, Some((d.bias_play_g(), e.bias_play)))
             }
         };
+        let mut s = self.cal.apply(u_v, state.temps.get(&self.cal, temp_c));
+        let usable = self.cal.is_valid() && !s.status.contains(Status::NONFINITE_INPUT);
+        if let (true, Some((bias_g, d))) = (usable, play) {
+            for (a, b) in s.accel_g.iter_mut().zip(bias_g) {
+                *a -= *b * d;
+            }
+        }
         if source != VibrationSource::Online {
             // The window serves the online source only: a block must not span a time when
             // it was not selected.

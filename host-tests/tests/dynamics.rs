@@ -302,3 +302,22 @@ fn a_non_finite_reading_is_compensated_at_t0_and_flagged_with_or_without_dynamic
         assert_eq!(plain.step(&mut c, u, t, VibrationSource::Online), none.step(&mut d, u, t, VibrationSource::Online));
     }
 }
+
+#[test]
+fn the_exponential_free_gain_equals_expm1() {
+    use bins_comp::dynamics::one_minus_exp_neg;
+    let (mut worst64, mut worst32) = (0.0f64, 0.0f64);
+    let mut x = 1e-12f64;
+    while x < 60.0 {
+        let want = -(-x).exp_m1();
+        worst64 = worst64.max((one_minus_exp_neg(x) - want).abs() / want);
+        worst32 = worst32.max((one_minus_exp_neg(x as f32) as f64 - want).abs() / want);
+        x *= 1.07;
+    }
+    println!("1 − e^(−x): worst relative error f64 {worst64:.2e}, f32 {worst32:.2e}");
+    assert!(worst64 < 4e-15, "{worst64}");
+    assert!(worst32 < 1e-6, "{worst32}");
+    assert_eq!(one_minus_exp_neg(0.0f64), 0.0);
+    assert_eq!(one_minus_exp_neg(f64::NAN), 0.0);
+    assert_eq!(one_minus_exp_neg(1e30f64), 1.0);
+}
