@@ -227,9 +227,13 @@ impl CalibrationParams {
             return Err(CalibrationError::BadRange);
         }
         let (model, t0_c) = (p.model.cast::<f32>(), f32::of(p.t0_c));
-        for i in 0..=RANGE_CHECK_POINTS {
-            let t = lo + (hi - lo) * (i as f64 / RANGE_CHECK_POINTS as f64);
+        // The fraction i/64 as a running sum of 1/64 (exact), not a conversion of i: the
+        // target then needs no integer-to-f64 conversion.
+        let mut frac = 0.0;
+        for _ in 0..=RANGE_CHECK_POINTS {
+            let t = lo + (hi - lo) * frac;
             check_k_at(&c, &model, t0_c, f32::of(t))?;
+            frac += 1.0 / RANGE_CHECK_POINTS as f64;
         }
         if let TempModel::Pwl { n_knots, knots_c, .. } = &p.model {
             for &kn in knots_c.iter().take(*n_knots as usize) {

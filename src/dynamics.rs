@@ -356,6 +356,15 @@ impl<F: Float> ThermalDynamics<F> {
     #[cfg_attr(unstable_target, optimize(size))]
     pub fn at_rate(&self, dt_s: F) -> Result<FixedRate<F>, DynamicsError> {
         self.validate()?;
+        self.at_rate_validated(dt_s)
+    }
+
+    /// [`at_rate`](Self::at_rate) for parameters that have passed
+    /// [`validate`](Self::validate) (in any precision: rounding keeps a parameter within its
+    /// rounded limits), e.g. the blob parser's. Checks the period only.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
+    pub fn at_rate_validated(&self, dt_s: F) -> Result<FixedRate<F>, DynamicsError> {
         if !(dt_s.is_finite() && dt_s > F::ZERO) {
             return Err(DynamicsError::SamplePeriod);
         }
