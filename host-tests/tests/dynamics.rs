@@ -116,9 +116,15 @@ fn non_finite_readings_leave_the_state_and_pass_through() {
         assert_eq!(e.bias_play, 0.0);
         assert_eq!(st, before);
     }
-    // A huge finite reading is clamped: the state stays finite and recovers.
-    d.step(&mut st, 1e30);
-    assert!(st.lagged_c().is_finite() && st.lagged_c() <= 1000.0);
+    // A finite reading beyond ±1000 °C is not a temperature either: passed through, the
+    // state untouched.
+    for huge in [1e30, -1000.5, 3.0e38] {
+        let e = d.step(&mut st, huge);
+        assert_eq!((e.temp_eff_c, e.bias_play), (huge, 0.0));
+        assert_eq!(st.lagged_c(), before.lagged_c());
+    }
+    assert!(d.step(&mut st, 1000.0).temp_eff_c.is_finite());
+    let mut st = before;
     let mut reference = before;
     let (mut a, mut b) = (0.0, 0.0);
     for _ in 0..100_000 {
