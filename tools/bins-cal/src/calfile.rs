@@ -65,7 +65,7 @@ pub struct CalibrationFile {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DynamicsSpec {
-    /// τ of the die's lag behind the thermistor [s].
+    /// τ of the die's lag behind the thermistor \[s\].
     pub lag_tau_s: f64,
     /// Width of the hysteresis play on the lagged temperature [°C].
     #[serde(rename = "hysteresis_width_C")]
@@ -73,12 +73,12 @@ pub struct DynamicsSpec {
     /// ΔT_sh: how much warmer the die settles than the thermistor after power-on [°C].
     #[serde(rename = "self_heating_C")]
     pub self_heating_c: f64,
-    /// τ_sh of the self-heating [s].
+    /// τ_sh of the self-heating \[s\].
     pub self_heating_tau_s: f64,
     /// Width of the bias play on the effective temperature [°C].
     #[serde(rename = "bias_play_width_C")]
     pub bias_play_width_c: f64,
-    /// Bias per unit of the play fraction, x, y, z [mg].
+    /// Bias per unit of the play fraction, x, y, z \[mg\].
     pub bias_play_mg: [f64; 3],
 }
 
