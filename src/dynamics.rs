@@ -321,7 +321,7 @@ impl<F: Float> ThermalDynamics<F> {
     }
 
     /// The self-heating term `ΔT_sh·(1 − e^(−t_on/τ_sh))` at `t_on_s` seconds after power-on
-    /// (ΔT_sh for τ_sh = 0; the exponential is skipped once it is below 10⁻¹⁷, t_on > 40·τ_sh).
+    /// (ΔT_sh for τ_sh = 0, and from t_on > 40·τ_sh on, where the exponential is below 10⁻¹⁷).
     pub fn self_heating_at(&self, t_on_s: F) -> F {
         let (dt, tau) = (self.self_heating_c, self.self_heating_tau_s);
         if dt == F::ZERO {
@@ -336,7 +336,8 @@ impl<F: Float> ThermalDynamics<F> {
     /// One sample: thermistor reading `temp_c` [°C], sample period `dt_s` \[s\] (the time since
     /// the previous reading) and time since power-on `t_on_s` \[s\] to the effective
     /// temperature and the bias-play fraction (module docs). The gains are computed in the call
-    /// (up to two exponentials); at a fixed period [`FixedRate::step`] is the cheaper equivalent.
+    /// ([`one_minus_exp_neg`], twice); at a fixed period [`FixedRate::step`] is the cheaper
+    /// equivalent.
     /// A non-finite or negative `dt_s` is taken as 0 (the lag holds).
     pub fn step(&self, st: &mut DynamicsState<F>, temp_c: F, dt_s: F, t_on_s: F) -> Effective<F> {
         let dt = if dt_s.is_finite() && dt_s > F::ZERO { dt_s } else { F::ZERO };
