@@ -3,14 +3,17 @@
 //!
 //! - At boot the calibration blob in the CALIB region is parsed once ([`calib`]); if it is
 //!   missing or invalid the image runs uncalibrated (every sample flagged
-//!   `INVALID_CALIBRATION`), exactly as the replay firmware does.
+//!   `INVALID_CALIBRATION`), exactly as the replay firmware does. A blob with thermal dynamics
+//!   (section 0x0007) gets them at the interrupt's fixed period 1/[`TICK_HZ`], their gains
+//!   computed once here.
 //! - The sensors are initialised on the board's peripherals ([`board`]): the ADS131M04 on the
 //!   PL022 SPI with its DRDY line on GPIO0, the TMP117 on the SBCon I²C, behind the sample
 //!   source and its fault policy ([`bins_comp::drivers::SampleSource`], [`SOURCE_CONFIG`]).
 //!   A sensor that does not answer is not fatal: it is not read, every sample says so
 //!   (`SENSOR_FAULT`), and its initialisation is tried again every second.
 //! - SysTick fires at [`TICK_HZ`]. Its handler runs [`isr::Isr::on_tick`]: one sample from the
-//!   sensors, one pipeline step, one result into the queue.
+//!   sensors, one pipeline step (the thermal dynamics first, when the blob has them), one
+//!   result into the queue.
 //! - `main` is the consumer: it drains the queue into output frames on UART0
 //!   ([`bins_comp::frame`]): a boot frame first (blob accepted or not, sensors initialised),
 //!   then one sample frame per sample and a health frame (fault counts, overruns, link
@@ -224,11 +227,12 @@ impl Link {
 #[inline(never)]
 fn flashed_pipeline() -> (Pipeline<f32>, Boot) {
     let region = calib::read_region();
-    match calib::calibration(&region) {
-        Ok((cal, vib, parsed)) => {
+    match calib::calibration(&region, 1.0 / TICK_HZ as f32) {
+        Ok((pipeline, parsed)) => {
             let crc = parsed.blob.bytes().last_chunk::<4>().map_or(0, |c| u32::from_le_bytes(*c));
-            let boot = Boot { blob_accepted: true, vibration_profiles: vib.n_profiles() as u32, blob_crc32: crc };
-            (Pipeline::new(cal, vib), boot)
+            let profiles = pipeline.vibration().n_profiles() as u32;
+            let boot = Boot { blob_accepted: true, vibration_profiles: profiles, blob_crc32: crc };
+            (pipeline, boot)
         }
         Err(_) => (Pipeline::uncalibrated(), Boot { blob_accepted: false, vibration_profiles: 0, blob_crc32: 0 }),
     }

@@ -1,5 +1,6 @@
 //! The calibration file: one unit's calibration as TOML, with units in the key names (see
-//! `docs/calibration-blob.md`), optionally with its vibration-error model (`[vibration]`).
+//! `docs/calibration-blob.md`), optionally with its vibration-error model (`[vibration]`) and
+//! its thermal dynamics (`[thermal_dynamics]`).
 //! Owns its serde types, the structural checks that name the
 //! offending key, and the conversions to and from [`CalibrationParams`] and the blob.
 //!
@@ -8,6 +9,7 @@
 //! accept its blob. Errors from there name the field with the same key path as this file.
 
 use bins_comp::blob::{self, BlobError, CalDate, Meta};
+use bins_comp::dynamics::ThermalDynamics;
 use bins_comp::temperature::{MAX_KNOTS, MAX_POLY_ORDER};
 use bins_comp::vibration::MAX_PROFILES;
 use bins_comp::{
@@ -51,6 +53,87 @@ pub struct CalibrationFile {
     /// no VE model.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vibration: Option<VibrationSpec>,
+    /// Thermal dynamics between the thermistor and the sensing elements (blob section
+    /// 0x0007); absent: none, the temperature model is evaluated at the reading.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub thermal_dynamics: Option<DynamicsSpec>,
+}
+
+/// `[thermal_dynamics]`: what `bins-cal diagnose` names `thermal_lag`, `thermal_hysteresis`,
+/// `self_heating` and `bias_hysteresis`, in the units of the keys (the bias play in mg; the
+/// core takes g). A missing key is 0 (that stage off).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DynamicsSpec {
+    /// τ of the die's lag behind the thermistor \[s\].
+    pub lag_tau_s: f64,
+    /// Width of the hysteresis play on the lagged temperature [°C].
+    #[serde(rename = "hysteresis_width_C")]
+    pub hysteresis_width_c: f64,
+    /// ΔT_sh: how much warmer the die settles than the thermistor after power-on [°C].
+    #[serde(rename = "self_heating_C")]
+    pub self_heating_c: f64,
+    /// τ_sh of the self-heating \[s\].
+    pub self_heating_tau_s: f64,
+    /// Width of the bias play on the effective temperature [°C].
+    #[serde(rename = "bias_play_width_C")]
+    pub bias_play_width_c: f64,
+    /// Bias per unit of the play fraction, x, y, z \[mg\].
+    pub bias_play_mg: [f64; 3],
+}
+
+impl DynamicsSpec {
+    /// The core's parameters (bias in g: `bias_play_mg / 1000`).
+    pub fn to_dynamics(&self) -> ThermalDynamics<f64> {
+        ThermalDynamics {
+            lag_tau_s: self.lag_tau_s,
+            hysteresis_width_c: self.hysteresis_width_c,
+            self_heating_c: self.self_heating_c,
+            self_heating_tau_s: self.self_heating_tau_s,
+            bias_play_width_c: self.bias_play_width_c,
+            bias_play_g: self.bias_play_mg.map(|mg| mg / 1000.0),
+        }
+    }
+
+    /// The inverse of [`to_dynamics`](Self::to_dynamics): each bias in mg is the shortest
+    /// decimal whose `/ 1000` gives the bias in g back exactly. The g the core uses is lossless
+    /// through file → blob → file; the mg text is too for values of up to 9 significant digits
+    /// (two mg values an ulp apart can give one g, and the shorter is written).
+    pub fn from_dynamics(d: &ThermalDynamics<f64>) -> Self {
+        DynamicsSpec {
+            lag_tau_s: d.lag_tau_s,
+            hysteresis_width_c: d.hysteresis_width_c,
+            self_heating_c: d.self_heating_c,
+            self_heating_tau_s: d.self_heating_tau_s,
+            bias_play_width_c: d.bias_play_width_c,
+            bias_play_mg: d.bias_play_g.map(g_to_mg),
+        }
+    }
+}
+
+/// An mg value `m` with `m / 1000 == g`: of those within a few ulps of `g·1000`, the one
+/// with the shortest decimal form (so a file's `0.015` comes back as `0.015`, not as another
+/// value that gives the same g).
+fn g_to_mg(g: f64) -> f64 {
+    let m = g * 1000.0;
+    if !m.is_finite() {
+        return m;
+    }
+    let (mut best, mut best_len) = (m, usize::MAX);
+    let mut c = m;
+    for _ in 0..4 {
+        c = c.next_down();
+    }
+    for _ in 0..9 {
+        if c / 1000.0 == g {
+            let len = format!("{c:?}").len();
+            if len < best_len {
+                (best, best_len) = (c, len);
+            }
+        }
+        c = c.next_up();
+    }
+    best
 }
 
 /// `[vibration]`: the VE model of the unit (blob sections 0x0005, 0x0006).
@@ -504,15 +587,26 @@ impl CalibrationFile {
         self.vibration.as_ref().map(VibrationSpec::to_params).transpose()
     }
 
-    /// The blob: [`to_params`](Self::to_params) and [`to_vibration`](Self::to_vibration),
-    /// then the core's encoder (which checks everything the firmware checks).
+    /// The blob: [`to_params`](Self::to_params), [`to_vibration`](Self::to_vibration) and
+    /// the thermal dynamics, then the core's encoder (which checks everything the firmware
+    /// checks).
     pub fn to_blob(&self) -> Result<Vec<u8>, CalFileError> {
         let (params, meta) = self.to_params()?;
         let vib = self.to_vibration()?;
+        let dynamics = self.thermal_dynamics.as_ref().map(DynamicsSpec::to_dynamics);
         let mut buf = [0u8; blob::MAX_BLOB_BYTES];
-        let n = blob::encode_with_vibration(&params, vib.as_ref(), &meta.as_meta(), &mut buf)
+        let n = blob::encode_with_dynamics(&params, vib.as_ref(), dynamics.as_ref(), &meta.as_meta(), &mut buf)
             .map_err(CalFileError::Blob)?;
         Ok(buf[..n].to_vec())
+    }
+
+    /// The core's thermal dynamics of this calibration (`None` without `[thermal_dynamics]`),
+    /// as the firmware reads them: the file is checked completely ([`check`](Self::check)) and
+    /// the dynamics are taken from its parsed blob, so host tools model exactly what flies.
+    /// Errors name the key.
+    pub fn dynamics(&self) -> Result<Option<ThermalDynamics<f64>>, CalFileError> {
+        let bytes = self.check()?;
+        Ok(blob::parse(&bytes).map_err(CalFileError::Blob)?.dynamics)
     }
 
     /// The file for parameters, a vibration-error model and traceability data.
@@ -575,13 +669,16 @@ impl CalibrationFile {
             method,
             temperature_model,
             vibration: None,
+            thermal_dynamics: None,
         }
     }
 
     /// The file a blob holds; the blob is fully checked first.
     pub fn from_blob(bytes: &[u8]) -> Result<Self, BlobError> {
         let parsed = blob::parse(bytes)?;
-        Ok(Self::from_parts(&parsed.params, parsed.vibration.as_ref(), &parsed.meta))
+        let mut f = Self::from_parts(&parsed.params, parsed.vibration.as_ref(), &parsed.meta);
+        f.thermal_dynamics = parsed.dynamics.as_ref().map(DynamicsSpec::from_dynamics);
+        Ok(f)
     }
 }
 
