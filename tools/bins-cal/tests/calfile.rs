@@ -108,6 +108,16 @@ fn sample_text() -> String {
     CalibrationFile::from_params(&sample_params(), &SAMPLE_META).to_toml()
 }
 
+/// Every edited text differs from `original` and is refused with a one-line error naming its key.
+fn assert_rejected_naming(original: &str, cases: &[(String, &str)]) {
+    for (text, key) in cases {
+        assert_ne!(text, original, "edit applies for {key}");
+        let e = error_of(text);
+        assert!(e.contains(key), "error {e:?} should name {key:?}");
+        assert!(!e.contains('\n'), "one line: {e:?}");
+    }
+}
+
 #[test]
 fn malformed_files_are_rejected_naming_the_key() {
     let s = sample_text();
@@ -128,11 +138,7 @@ fn malformed_files_are_rejected_naming_the_key() {
         (s.replace("serial = \"PAPER-T1T2\"", "serial = \"PAPER-T1T2-ÄÖÜ\""), "serial"),
         (s.replace("t_C = 70.0", "t_C = 10.0"), "temperature_model.knot[2].t_C"),
     ];
-    for (text, key) in &cases {
-        let e = error_of(text);
-        assert!(e.contains(key), "error {e:?} should name {key:?}");
-        assert!(!e.contains('\n'), "one line: {e:?}");
-    }
+    assert_rejected_naming(&s, &cases);
     // A physically impossible value names the key and its limit, not a blob offset.
     let k01 = sample_params().constants.k_v_per_g[0][1];
     let e = error_of(&s.replace(&format!("{k01}"), "0.3"));
@@ -311,12 +317,9 @@ fn malformed_vibration_keys_are_rejected_naming_the_key() {
         (s.replace("band_Hz = [320.0, 640.0]", "band_Hz = [320.0, 300.0]"), "vibration.profile[6].band_Hz[1]"),
         (s.replacen("delta_1a = 0.000015", "delta_1a = nan", 1), "vibration.x.delta_1a"),
     ];
-    for (text, key) in &cases {
-        assert_ne!(text, &s, "edit applies for {key}");
-        let e = error_of(text);
-        assert!(e.contains(key), "error {e:?} should name {key:?}");
-        assert!(!e.contains('\n'), "one line: {e:?}");
-        assert!(!e.contains("byte"), "{e}");
+    assert_rejected_naming(&s, &cases);
+    for (text, _) in &cases {
+        assert!(!error_of(text).contains("byte"), "{}", error_of(text));
     }
 }
 
@@ -418,12 +421,9 @@ fn malformed_thermal_dynamics_are_rejected_naming_the_key() {
         (s.replace("lag_tau_s = 2.0", "lag_tau_min = 2.0"), "lag_tau_min"),
         (s.replace("lag_tau_s = 2.0", "lag_tau_s = \"slow\""), "lag_tau_s"),
     ];
-    for (text, key) in &cases {
-        assert_ne!(text, &s, "edit applies for {key}");
-        let e = error_of(text);
-        assert!(e.contains(key), "error {e:?} should name {key:?}");
-        assert!(!e.contains('\n'), "one line: {e:?}");
-        assert!(!e.contains("byte"), "{e}");
+    assert_rejected_naming(&s, &cases);
+    for (text, _) in &cases {
+        assert!(!error_of(text).contains("byte"), "{}", error_of(text));
     }
     let e = error_of(&s.replace("[0.02, -0.015, 0.01]", "[0.02, -150.0, 0.01]"));
     assert!(e.contains("[-100, 100] mg"), "the limit in the file's unit: {e}");
