@@ -29,6 +29,7 @@
 //! its contents is interpreted.
 
 use crate::compensate::{Calibration, CalibrationError, CalibrationParams, Form, Method};
+use crate::dynamics::{self, DynamicsError, FixedRate, ThermalDynamics};
 use crate::float::Float;
 use crate::model::Constants;
 use crate::temperature::{CoefDelta, MAX_KNOTS, MAX_POLY_ORDER, TempModel};
@@ -77,6 +78,10 @@ pub mod section {
     /// The flight-phase vibration profiles (optional, only with [`VIBRATION`]; written
     /// REQUIRED).
     pub const FLIGHT_PHASES: u16 = 0x0006;
+    /// The thermal dynamics between the thermistor and the sensing elements (optional;
+    /// written REQUIRED). Absent: no dynamics, the temperature model is evaluated at the
+    /// reading.
+    pub const THERMAL_DYNAMICS: u16 = 0x0007;
     /// The unit's serial number, printable ASCII (optional).
     pub const SERIAL: u16 = 0x0101;
     /// The calibration date (optional).
@@ -84,8 +89,18 @@ pub mod section {
     /// The version of the tool that produced the calibration, printable ASCII (optional).
     pub const TOOL_VERSION: u16 = 0x0103;
     /// Every id this version of the parser understands.
-    pub const KNOWN: [u16; 9] =
-        [CONSTANTS, TEMP_MODEL, METHOD, TEMP_RANGE, VIBRATION, FLIGHT_PHASES, SERIAL, CAL_DATE, TOOL_VERSION];
+    pub const KNOWN: [u16; 10] = [
+        CONSTANTS,
+        TEMP_MODEL,
+        METHOD,
+        TEMP_RANGE,
+        VIBRATION,
+        FLIGHT_PHASES,
+        THERMAL_DYNAMICS,
+        SERIAL,
+        CAL_DATE,
+        TOOL_VERSION,
+    ];
     /// The ids a version-1 blob must contain.
     pub const MANDATORY: [u16; 4] = [CONSTANTS, TEMP_MODEL, METHOD, TEMP_RANGE];
 }
@@ -126,6 +141,15 @@ pub const PROFILE_NONE: u8 = 0;
 pub const PROFILE_SINE: u8 = 1;
 /// Profile kind code of [`Vibration::Random`].
 pub const PROFILE_RANDOM: u8 = 2;
+
+/// Header of the thermal-dynamics section: its layout version u8, 7 reserved zero bytes.
+pub const DYNAMICS_HEADER_BYTES: usize = 8;
+/// Size of the thermal-dynamics section: the header and 8 × f64 (`lag_tau_s`,
+/// `hysteresis_width_c`, `self_heating_c`, `self_heating_tau_s`, `bias_play_width_c`,
+/// `bias_play_g` x, y, z).
+pub const DYNAMICS_BYTES: usize = DYNAMICS_HEADER_BYTES + 8 * 8;
+/// The layout version of the thermal-dynamics section this parser reads.
+pub const DYNAMICS_LAYOUT: u8 = 1;
 
 /// Model-section kind code of [`TempModel::Poly`].
 pub const KIND_POLY: u8 = 1;
@@ -287,6 +311,39 @@ pub enum Field {
         /// 0 = low edge, 1 = high edge.
         end: u8,
     },
+    /// The layout version of the thermal-dynamics section (no key in the calibration file:
+    /// the tool writes the version it knows).
+    DynamicsLayout,
+    /// `thermal_dynamics.<key>`: parameter `param` in the section's order
+    /// ([`DYNAMICS_KEYS`]; 5, 6, 7 are `bias_play_mg[0..3]`).
+    Dynamics {
+        /// Parameter index.
+        param: u8,
+    },
+}
+
+/// The calibration file's keys of the thermal-dynamics parameters, in the section's order
+/// (the last three are the x, y, z elements of `bias_play_mg`).
+pub const DYNAMICS_KEYS: [&str; 8] = [
+    "lag_tau_s",
+    "hysteresis_width_C",
+    "self_heating_C",
+    "self_heating_tau_s",
+    "bias_play_width_C",
+    "bias_play_mg",
+    "bias_play_mg",
+    "bias_play_mg",
+];
+
+const fn dynamics_key(param: u8) -> &'static str {
+    match param {
+        0 => "thermal_dynamics.lag_tau_s",
+        1 => "thermal_dynamics.hysteresis_width_C",
+        2 => "thermal_dynamics.self_heating_C",
+        3 => "thermal_dynamics.self_heating_tau_s",
+        4 => "thermal_dynamics.bias_play_width_C",
+        _ => "thermal_dynamics.bias_play_mg",
+    }
 }
 
 /// The calibration file's keys of the ten conversion-function coefficients, in the order of
@@ -372,6 +429,8 @@ impl Field {
             Field::ProfileFreq { .. } => "vibration.profile.freq_Hz",
             Field::ProfileSigma { .. } => "vibration.profile.sigma_g",
             Field::ProfileBand { .. } => "vibration.profile.band_Hz",
+            Field::DynamicsLayout => "thermal_dynamics",
+            Field::Dynamics { param } => dynamics_key(*param),
         }
     }
 
@@ -407,6 +466,11 @@ impl Field {
             Field::ProfileFreq { .. } => "finite, within [0, 1e5] Hz",
             Field::ProfileSigma { .. } => "finite, σ within [0, 10] g",
             Field::ProfileBand { .. } => "finite, 0 <= low < high <= 1e5 Hz",
+            Field::DynamicsLayout => "layout version 1",
+            Field::Dynamics { param: 0 | 3 } => "finite, within [0, 1e5] s",
+            Field::Dynamics { param: 1 | 4 } => "finite, within [0, 50] °C",
+            Field::Dynamics { param: 2 } => "finite, within [-50, 50] °C",
+            Field::Dynamics { .. } => "finite, within [-100, 100] mg, and 0 when bias_play_width_C is 0",
         }
     }
 }
@@ -430,6 +494,7 @@ impl core::fmt::Display for Field {
             Field::ProfileFreq { profile } => write!(f, "vibration.profile[{profile}].freq_Hz"),
             Field::ProfileSigma { profile, axis } => write!(f, "vibration.profile[{profile}].sigma_g[{axis}]"),
             Field::ProfileBand { profile, end } => write!(f, "vibration.profile[{profile}].band_Hz[{end}]"),
+            Field::Dynamics { param: param @ 5.. } => write!(f, "thermal_dynamics.bias_play_mg[{}]", param - 5),
             other => f.write_str(other.name()),
         }
     }
@@ -572,6 +637,9 @@ pub enum BlobError {
     /// A rejection by [`VibrationConfig::new`] (not reached for a blob whose values passed
     /// the checks above; kept so that nothing unchecked is ever used).
     Vibration(VibrationConfigError),
+    /// A rejection by [`ThermalDynamics::validate`] (not reached for a blob whose values
+    /// passed the checks above; kept so that nothing unchecked is ever used).
+    Dynamics(DynamicsError),
     /// The encoder's output buffer is too small.
     BufferTooSmall {
         /// Bytes needed.
@@ -669,6 +737,7 @@ impl core::fmt::Display for BlobError {
             BlobError::Vibration(VibrationConfigError::BadProfile(i)) => {
                 write!(f, "vibration.profile[{i}]: not finite, negative, or above the 10 g level limit")
             }
+            BlobError::Dynamics(e) => write!(f, "thermal_dynamics.{e}"),
             BlobError::BufferTooSmall { needed } => write!(f, "output buffer too small: {needed} bytes needed"),
         }
     }
@@ -899,6 +968,9 @@ pub struct ParsedCalibration<'a> {
     /// [`section::VIBRATION`] and [`section::FLIGHT_PHASES`]); `None` when the blob has no
     /// vibration section. [`VibrationConfig::new`] has accepted these.
     pub vibration: Option<VibrationParams>,
+    /// The thermal dynamics (section [`section::THERMAL_DYNAMICS`]); `None` when the blob has
+    /// no such section (no dynamics). They pass [`ThermalDynamics::validate`].
+    pub dynamics: Option<ThermalDynamics<f64>>,
     /// Serial, date, tool version.
     pub meta: Meta<'a>,
     /// The container.
@@ -928,6 +1000,18 @@ impl ParsedCalibration<'_> {
     pub fn configs<F: Float>(&self) -> Result<(Calibration<F>, VibrationConfig<F>), BlobError> {
         Ok((self.calibration()?, self.vibration_config()?))
     }
+
+    /// The thermal dynamics at the sampling period `dt_s` \[s\] in the working precision
+    /// ([`ThermalDynamics::at_rate`]), for [`crate::Pipeline::with_dynamics`]; `None` for a blob
+    /// without the section. Fails only for a period that is not finite and positive.
+    pub fn dynamics_at_rate<F: Float>(&self, dt_s: F) -> Result<Option<FixedRate<F>>, BlobError> {
+        match &self.dynamics {
+            None => Ok(None),
+            // `parse` has validated the f64 parameters; rounding to F keeps each within its
+            // (rounded) limits, so they are not validated again.
+            Some(d) => d.cast::<F>().at_rate_validated(dt_s).map(Some).map_err(BlobError::Dynamics),
+        }
+    }
 }
 
 /// Parses the blob at the start of a flash region ([`parse_region`]) and returns the
@@ -947,11 +1031,16 @@ struct Payload<'a> {
 }
 
 impl<'a> Payload<'a> {
+    /// One out-of-line copy for every lookup (and [`require`](Self::require)'s).
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
     fn get(blob: &Blob<'a>, id: u16) -> Option<Self> {
         let e = blob.entry(id)?;
-        Some(Payload { id, bytes: blob.section(id)?, base: e.start() })
+        Some(Payload { id, bytes: blob.bytes.get(e.start()..e.end())?, base: e.start() })
     }
 
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
     fn require(blob: &Blob<'a>, id: u16) -> Result<Self, BlobError> {
         Payload::get(blob, id).ok_or(BlobError::MissingSection(id))
     }
@@ -974,6 +1063,22 @@ impl<'a> Payload<'a> {
             Some(x) if x.is_finite() && ok(x) => Ok(x),
             _ => Err(BlobError::OutOfRange { field, offset: self.base + at }),
         }
+    }
+
+    /// The f64 at `at` if within `[lo, hi]`, else [`BlobError::OutOfRange`] naming `field`.
+    /// One out-of-line copy for every plain range check.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
+    fn value_in(&self, at: usize, field: Field, lo: f64, hi: f64) -> Result<f64, BlobError> {
+        self.value(at, field, |x| lo <= x && x <= hi)
+    }
+
+    /// The f64 x at `at` if `|a·x|·scale ≤ max`, else [`BlobError::OutOfRange`] naming
+    /// `field` (the temperature model's plausibility checks, one out-of-line copy).
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
+    fn value_scaled(&self, at: usize, field: Field, a: f64, scale: f64, max: f64) -> Result<f64, BlobError> {
+        self.value(at, field, |x| (a * x).abs() * scale <= max)
     }
 
     fn reserved_zero(&self, range: core::ops::Range<usize>) -> Result<(), BlobError> {
@@ -1001,10 +1106,6 @@ fn ascii_str(b: &[u8]) -> Option<&str> {
     return b.as_ascii().map(|a| a.as_str());
     #[cfg(not(unstable_target))]
     return core::str::from_utf8(b).ok();
-}
-
-fn in_temp_limits(t: f64) -> bool {
-    (limits::TEMP_MIN_C..=limits::TEMP_MAX_C).contains(&t)
 }
 
 /// |K_ii| within the scale-factor limits.
@@ -1049,19 +1150,21 @@ fn read_coef_set(
     let mut a = [0.0; 12];
     for (n, slot) in a.iter_mut().enumerate() {
         let off = at + 8 * n;
-        *slot = if n < 3 {
-            p.value(off, set.du0(n as u8), |x| x.abs() * scale <= limits::DU0_MAX_V)?
+        // |a·x|·scale ≤ max: a = 1 for ΔU0 and the scale changes, K_ij for a cross term.
+        let (field, a, max) = if n < 3 {
+            (set.du0(n as u8), 1.0, limits::DU0_MAX_V)
         } else {
             let (i, j) = ((n - 3) / 3, (n - 3) % 3);
-            let (k_ij, k_ii) = (k[i][j], k[i][i]);
+            let row = k.get(i).copied().unwrap_or_default();
+            let (k_ij, k_ii) = (row.get(j).copied().unwrap_or(0.0), row.get(i).copied().unwrap_or(0.0));
+            let field = set.rel_k(i as u8, j as u8);
             if i == j {
-                p.value(off, set.rel_k(i as u8, j as u8), |x| x.abs() * scale <= limits::REL_SCALE_MAX)?
+                (field, 1.0, limits::REL_SCALE_MAX)
             } else {
-                p.value(off, set.rel_k(i as u8, j as u8), |x| {
-                    (k_ij * x).abs() * scale <= limits::CROSS_RATIO_MAX * k_ii.abs()
-                })?
+                (field, k_ij, limits::CROSS_RATIO_MAX * k_ii.abs())
             }
         };
+        *slot = p.value_scaled(off, field, a, scale, max)?;
     }
     Ok(CoefDelta::from_array(&a))
 }
@@ -1080,7 +1183,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
     // Constants at T0.
     let p = Payload::require(&blob, section::CONSTANTS)?;
     p.expect_len(CONSTANTS_BYTES)?;
-    let t0_c = p.value(0, Field::T0, in_temp_limits)?;
+    let t0_c = p.value_in(0, Field::T0, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
     let mut k = [[0.0; 3]; 3];
     for i in 0..3 {
         k[i][i] = p.value(8 + 8 * (4 * i), Field::K { row: i as u8, col: i as u8 }, scale_ok)?;
@@ -1088,23 +1191,21 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
     for i in 0..3 {
         for j in 0..3 {
             if i != j {
-                let k_ii = k[i][i];
-                k[i][j] = p.value(8 + 8 * (3 * i + j), Field::K { row: i as u8, col: j as u8 }, |x| {
-                    x.abs() <= limits::CROSS_RATIO_MAX * k_ii.abs()
-                })?;
+                let c = limits::CROSS_RATIO_MAX * k[i][i].abs();
+                k[i][j] = p.value_in(8 + 8 * (3 * i + j), Field::K { row: i as u8, col: j as u8 }, -c, c)?;
             }
         }
     }
     let mut u0_v = [0.0; 3];
     for (i, u) in u0_v.iter_mut().enumerate() {
-        *u = p.value(80 + 8 * i, Field::U0 { axis: i as u8 }, |x| x.abs() <= limits::U0_MAX_V)?;
+        *u = p.value_in(80 + 8 * i, Field::U0 { axis: i as u8 }, -limits::U0_MAX_V, limits::U0_MAX_V)?;
     }
 
     // Temperature range.
     let p = Payload::require(&blob, section::TEMP_RANGE)?;
     p.expect_len(TEMP_RANGE_BYTES)?;
-    let lo = p.value(0, Field::TempRange { end: 0 }, in_temp_limits)?;
-    let hi = p.value(8, Field::TempRange { end: 1 }, in_temp_limits)?;
+    let lo = p.value_in(0, Field::TempRange { end: 0 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
+    let hi = p.value_in(8, Field::TempRange { end: 1 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
     if !(lo < hi && lo <= t0_c && t0_c <= hi) {
         return Err(BlobError::BadRange { offset: p.base });
     }
@@ -1143,7 +1244,12 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
             p.expect_len(MODEL_HEADER_BYTES + (8 + COEF_SET_BYTES) * n)?;
             let mut knots_c = [0.0; MAX_KNOTS];
             for (i, slot) in knots_c.iter_mut().enumerate().take(n) {
-                *slot = p.value(MODEL_HEADER_BYTES + 8 * i, Field::Knot { knot: i as u8 }, in_temp_limits)?;
+                *slot = p.value_in(
+                    MODEL_HEADER_BYTES + 8 * i,
+                    Field::Knot { knot: i as u8 },
+                    limits::TEMP_MIN_C,
+                    limits::TEMP_MAX_C,
+                )?;
             }
             for i in 1..n {
                 if let (Some(a), Some(b)) = (knots_c.get(i - 1), knots_c.get(i))
@@ -1199,6 +1305,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
     }
 
     let vibration = parse_vibration(&blob)?;
+    let dynamics = parse_dynamics(&blob)?;
 
     let params =
         CalibrationParams { constants: Constants { k_v_per_g: k, u0_v }, t0_c, model, method, temp_range_c: (lo, hi) };
@@ -1206,7 +1313,33 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
     if let Some(v) = &vibration {
         v.validate().map_err(BlobError::Vibration)?;
     }
-    Ok(ParsedCalibration { params, vibration, meta, blob })
+    Ok(ParsedCalibration { params, vibration, dynamics, meta, blob })
+}
+
+/// The thermal-dynamics section, if present (see `docs/calibration-blob.md`): its layout
+/// version, each parameter within its range ([`Field::limit`]), the bias play's gains zero
+/// without a play width: the checks of [`ThermalDynamics::validate`], naming the field and
+/// its offset.
+#[inline(never)]
+#[cfg_attr(unstable_target, optimize(size))]
+fn parse_dynamics(blob: &Blob<'_>) -> Result<Option<ThermalDynamics<f64>>, BlobError> {
+    let Some(p) = Payload::get(blob, section::THERMAL_DYNAMICS) else { return Ok(None) };
+    p.expect_len(DYNAMICS_BYTES)?;
+    let code = p.byte(0);
+    if code != DYNAMICS_LAYOUT {
+        return Err(BlobError::BadCode { field: Field::DynamicsLayout, offset: p.base, code });
+    }
+    p.reserved_zero(1..DYNAMICS_HEADER_BYTES)?;
+    let mut a = [0.0; 8];
+    for n in 0..8 {
+        // The bias play's gains (5, 6, 7) must be 0 without a play width (4, read before).
+        let (lo, hi) = if n >= 5 && a[4] == 0.0 { (0.0, 0.0) } else { dynamics::limits(n as u8) };
+        a[n] = p.value_in(DYNAMICS_HEADER_BYTES + 8 * n, Field::Dynamics { param: n as u8 }, lo, hi)?;
+    }
+    let d = ThermalDynamics::from_array(&a);
+    // These checks are [`ThermalDynamics::validate`]'s, field by field (the host tests check
+    // that the parser accepts exactly what it accepts); `at_rate` does not repeat them.
+    Ok(Some(d))
 }
 
 /// The vibration section and the flight-phase profiles, if present (see
@@ -1234,7 +1367,7 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
         for (n, x) in a.iter_mut().enumerate() {
             let lim = coefficient_limit(n as u8);
             let at = VIBRATION_HEADER_BYTES + CONVERSION_FUNCTION_BYTES * axis + 8 * n;
-            *x = p.value(at, Field::VibCoef { axis: axis as u8, coef: n as u8 }, |v| v.abs() <= lim)?;
+            *x = p.value_in(at, Field::VibCoef { axis: axis as u8, coef: n as u8 }, -lim, lim)?;
         }
         *c = ConversionFunction::from_array(&a);
     }
@@ -1266,20 +1399,18 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
                 let mut amp_g = [0.0; 3];
                 for (j, a) in amp_g.iter_mut().enumerate() {
                     *a =
-                        p.value(v + 8 * j, Field::ProfileAmp { profile, axis: j as u8 }, |x| x.abs() <= MAX_LEVEL_G)?;
+                        p.value_in(v + 8 * j, Field::ProfileAmp { profile, axis: j as u8 }, -MAX_LEVEL_G, MAX_LEVEL_G)?;
                 }
-                let freq_hz = p.value(v + 24, Field::ProfileFreq { profile }, freq_ok)?;
+                let freq_hz = p.value_in(v + 24, Field::ProfileFreq { profile }, 0.0, limits::FREQ_MAX_HZ)?;
                 p.reserved_zero(v + 32..v + 40)?;
                 Vibration::Harmonic { amp_g, freq_hz }
             }
             PROFILE_RANDOM => {
                 let mut sigma_g = [0.0; 3];
                 for (j, s) in sigma_g.iter_mut().enumerate() {
-                    *s = p.value(v + 8 * j, Field::ProfileSigma { profile, axis: j as u8 }, |x| {
-                        (0.0..=MAX_LEVEL_G).contains(&x)
-                    })?;
+                    *s = p.value_in(v + 8 * j, Field::ProfileSigma { profile, axis: j as u8 }, 0.0, MAX_LEVEL_G)?;
                 }
-                let lo = p.value(v + 24, Field::ProfileBand { profile, end: 0 }, freq_ok)?;
+                let lo = p.value_in(v + 24, Field::ProfileBand { profile, end: 0 }, 0.0, limits::FREQ_MAX_HZ)?;
                 let hi = p.value(v + 32, Field::ProfileBand { profile, end: 1 }, |x| freq_ok(x) && x > lo)?;
                 Vibration::Random { sigma_g, band_hz: (lo, hi) }
             }
@@ -1309,6 +1440,7 @@ pub fn parse_region(region: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
 fn layout(
     params: &CalibrationParams,
     vib: Option<&VibrationParams>,
+    dynamics: Option<&ThermalDynamics<f64>>,
     meta: &Meta<'_>,
 ) -> ([SectionEntry; MAX_SECTIONS], usize) {
     let model_len = match params.model {
@@ -1323,6 +1455,7 @@ fn layout(
         (section::TEMP_RANGE, FLAG_REQUIRED, TEMP_RANGE_BYTES, true),
         (section::VIBRATION, FLAG_REQUIRED, VIBRATION_BYTES, vib.is_some()),
         (section::FLIGHT_PHASES, FLAG_REQUIRED, PROFILES_HEADER_BYTES + PROFILE_BYTES * n_profiles, n_profiles > 0),
+        (section::THERMAL_DYNAMICS, FLAG_REQUIRED, DYNAMICS_BYTES, dynamics.is_some()),
         (section::SERIAL, 0, meta.serial.len(), !meta.serial.is_empty()),
         (section::CAL_DATE, 0, CAL_DATE_BYTES, meta.date.is_some()),
         (section::TOOL_VERSION, 0, meta.tool_version.len(), !meta.tool_version.is_empty()),
@@ -1388,6 +1521,19 @@ pub fn encode_with_vibration(
     meta: &Meta<'_>,
     out: &mut [u8],
 ) -> Result<usize, BlobError> {
+    encode_with_dynamics(params, vib, None, meta, out)
+}
+
+/// [`encode_with_vibration`], with the thermal-dynamics section when `dynamics` is given
+/// (written REQUIRED, layout version [`DYNAMICS_LAYOUT`]). Dynamics with every stage off are
+/// written as given: the blob then says explicitly that the unit has none.
+pub fn encode_with_dynamics(
+    params: &CalibrationParams,
+    vib: Option<&VibrationParams>,
+    dynamics: Option<&ThermalDynamics<f64>>,
+    meta: &Meta<'_>,
+    out: &mut [u8],
+) -> Result<usize, BlobError> {
     if let Some(v) = vib
         && v.n_profiles as usize > MAX_PROFILES
     {
@@ -1402,7 +1548,7 @@ pub fn encode_with_vibration(
         }
         _ => {}
     }
-    let (mut entries, n) = layout(params, vib, meta);
+    let (mut entries, n) = layout(params, vib, dynamics, meta);
     let mut at = align8(HEADER_BYTES + ENTRY_BYTES * n);
     for e in entries.iter_mut().take(n) {
         e.offset = at as u32;
@@ -1505,6 +1651,12 @@ pub fn encode_with_vibration(
                             }
                         }
                     }
+                }
+            }
+            section::THERMAL_DYNAMICS => {
+                if let Some(d) = dynamics {
+                    w.put(at, &[DYNAMICS_LAYOUT])?;
+                    w.f64s(at + DYNAMICS_HEADER_BYTES, &d.to_array())?;
                 }
             }
             section::SERIAL => w.put(at, meta.serial.as_bytes())?,

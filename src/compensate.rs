@@ -227,9 +227,13 @@ impl CalibrationParams {
             return Err(CalibrationError::BadRange);
         }
         let (model, t0_c) = (p.model.cast::<f32>(), f32::of(p.t0_c));
-        for i in 0..=RANGE_CHECK_POINTS {
-            let t = lo + (hi - lo) * (i as f64 / RANGE_CHECK_POINTS as f64);
+        // The fraction i/64 as a running sum of 1/64 (exact), not a conversion of i: the
+        // target then needs no integer-to-f64 conversion.
+        let mut frac = 0.0;
+        for _ in 0..=RANGE_CHECK_POINTS {
+            let t = lo + (hi - lo) * frac;
             check_k_at(&c, &model, t0_c, f32::of(t))?;
+            frac += 1.0 / RANGE_CHECK_POINTS as f64;
         }
         if let TempModel::Pwl { n_knots, knots_c, .. } = &p.model {
             for &kn in knots_c.iter().take(*n_knots as usize) {
@@ -290,7 +294,7 @@ pub struct Calibration<F> {
     n_diag_split: [(F, F); 3],
     /// Low part of the diagonal: N_ii − hi.
     n_diag_lo: Vec3<F>,
-    /// 1/K_ii at T0.
+    /// 1/K_ii at T0 ([`float::recip`] in `f64`, rounded).
     inv_diag: Vec3<F>,
     model: TempModel<F>,
     method: Method,
@@ -385,7 +389,7 @@ impl<F: Float> Calibration<F> {
             n_g_per_v: n_f,
             n_diag_split: [float::split(n_f[0][0]), float::split(n_f[1][1]), float::split(n_f[2][2])],
             n_diag_lo,
-            inv_diag: [F::of(1.0 / k[0][0]), F::of(1.0 / k[1][1]), F::of(1.0 / k[2][2])],
+            inv_diag: [0, 1, 2].map(|i| F::of(float::recip(k[i][i]))),
             model: p.model.cast(),
             method: p.method,
             temp_min_c: F::of(lo),

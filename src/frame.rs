@@ -182,13 +182,36 @@ fn sensor_flags(adc_ready: bool, temp_ready: bool) -> u8 {
 /// An acceleration \[g\] in the frame's fixed-point format, and whether it had to be
 /// saturated: rounded to the nearest multiple of 2⁻²⁴ g (ties to even) when in range, else
 /// the range's end on its side; NaN gives 0, flagged.
+///
+/// By hand rather than by the `fixed` crate's generic conversion (the same results, checked
+/// against it on every exponent in the host tests; 0.2 KB less flash): `a·2²⁴` is exact in
+/// `f32`; its truncation differs from it by a fraction that is exact too, which decides the
+/// rounding.
+#[inline(never)]
+#[cfg_attr(unstable_target, optimize(size))]
 pub fn accel_to_fixed(a_g: f32) -> (I8F24, bool) {
-    match I8F24::checked_from_num(a_g) {
-        Some(v) => (v, false),
-        None if a_g > 0.0 => (I8F24::MAX, true),
-        None if a_g < 0.0 => (I8F24::MIN, true),
-        None => (I8F24::ZERO, true),
+    let v = a_g * 16_777_216.0;
+    // The rounded value must lie in [−2³¹, 2³¹); f32 has no value in (2³¹ − 128, 2³¹) and
+    // every f32 of magnitude ≥ 2²³ is an integer, so testing v itself is exact.
+    if !(-2_147_483_648.0..2_147_483_648.0).contains(&v) {
+        let end = if a_g > 0.0 {
+            I8F24::MAX
+        } else if a_g < 0.0 {
+            I8F24::MIN
+        } else {
+            I8F24::ZERO
+        };
+        return (end, true);
     }
+    let mut t = v as i32;
+    let d = v - t as f32;
+    let odd = t & 1 != 0;
+    if d > 0.5 || (d == 0.5 && odd) {
+        t += 1;
+    } else if d < -0.5 || (d == -0.5 && odd) {
+        t -= 1;
+    }
+    (I8F24::from_bits(t), false)
 }
 
 impl Frame {

@@ -19,6 +19,7 @@
 //! | [`model`] | the metrological model T(1) and its constants |
 //! | [`temperature`] | temperature models T(3)/T(4) of the 12 constants |
 //! | [`compensate`] | the per-sample step: methods 1 and 2 of §5, status bits |
+//! | [`dynamics`] | thermal dynamics: lag, hysteresis and self-heating of the die behind the thermistor, bias hysteresis |
 //! | [`ident`] | identification: six-position T(10), least squares, T(11)/T(12) |
 //! | [`paper`] | the temperature paper's Tables T1/T2/T3 as constants |
 //! | [`vectors`] | the test-vector record shared by the host and the firmware |
@@ -36,6 +37,7 @@
 pub mod blob;
 pub mod compensate;
 pub mod drivers;
+pub mod dynamics;
 pub mod float;
 pub mod frame;
 pub mod ident;
@@ -51,6 +53,7 @@ pub mod vibration;
 pub use compensate::{
     AtTemperature, Calibration, CalibrationError, CalibrationParams, Form, Method, Sample, Status, TempCache,
 };
+pub use dynamics::{DynamicsState, Effective, FixedRate, ThermalDynamics};
 pub use float::Float;
 pub use linalg::{Mat3, Vec3};
 pub use model::Constants;

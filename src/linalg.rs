@@ -87,19 +87,25 @@ pub fn inverse_checked<F: Float>(m: &Mat3<F>, min_ratio: F) -> Option<Mat3<F>> {
     if !(d.abs() >= min_ratio * p) || !(p > F::ZERO) || !d.is_finite() || !p.is_finite() {
         return None;
     }
-    Some(adjugate_over(m, c0, d))
+    Some(adjugate_times(m, c0, F::ONE / d))
 }
 
-/// Inverse by the adjugate, or `None` when the determinant is zero or not finite. No
-/// conditioning check: for a matrix whose conditioning is checked elsewhere (the load-time
-/// `f64` inverse, whose `f32` image [`inverse_checked`] has accepted).
+/// Inverse by the adjugate, or `None` when the determinant is zero or not finite (or outside
+/// the normal range of `f32`). No conditioning check: for a matrix whose conditioning is
+/// checked elsewhere (the load-time `f64` inverse, whose `f32` image [`inverse_checked`] has
+/// accepted). The reciprocal of the determinant is [`float::recip`](crate::float::recip)'s (no
+/// `f64` division on the target): within 2 ulp of `1/det`.
 #[inline(always)]
 pub fn inverse_unchecked<F: Float>(m: &Mat3<F>) -> Option<Mat3<F>> {
     let (c0, d) = first_row_cofactors(m);
     if !(d.abs() > F::ZERO) || !d.is_finite() {
         return None;
     }
-    Some(adjugate_over(m, c0, d))
+    let r = crate::float::recip(d);
+    if !r.is_finite() {
+        return None;
+    }
+    Some(adjugate_times(m, c0, r))
 }
 
 /// The cofactors of the first row and the determinant expanded along it.
@@ -111,11 +117,11 @@ fn first_row_cofactors<F: Float>(m: &Mat3<F>) -> ([F; 3], F) {
     ([c00, c01, c02], m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02)
 }
 
-/// The adjugate of `m` divided by its determinant `d` (`c0`: the first row's cofactors).
+/// The adjugate of `m` times `r`, the reciprocal of its determinant (`c0`: the first row's
+/// cofactors).
 #[inline(always)]
-fn adjugate_over<F: Float>(m: &Mat3<F>, c0: [F; 3], d: F) -> Mat3<F> {
+fn adjugate_times<F: Float>(m: &Mat3<F>, c0: [F; 3], r: F) -> Mat3<F> {
     let [c00, c01, c02] = c0;
-    let r = F::ONE / d;
     [
         [c00 * r, (m[0][2] * m[2][1] - m[0][1] * m[2][2]) * r, (m[0][1] * m[1][2] - m[0][2] * m[1][1]) * r],
         [c01 * r, (m[0][0] * m[2][2] - m[0][2] * m[2][0]) * r, (m[0][2] * m[1][0] - m[0][0] * m[1][2]) * r],

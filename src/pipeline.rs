@@ -37,12 +37,22 @@
 //! - Invalid calibration (output in volts) or a non-finite input: nothing subtracted and the
 //!   sample is kept out of the window.
 //!
+//! # Thermal dynamics
+//!
+//! A pipeline built [`with_dynamics`](Pipeline::with_dynamics) runs the thermal dynamics
+//! ([`dynamics`](crate::dynamics)) on each reading first: the temperature model is evaluated
+//! at the effective temperature rounded to a multiple of [`TEMP_EFF_STEP_C`] (so that the
+//! cached terms are reused while it moves less than the step; the host tests bound what the
+//! rounding costs), and the bias play is subtracted from the compensated sample before the
+//! window and the VE. Without dynamics the step is the one before they existed, bit for bit.
+//!
 //! Allocation-free, panic-free and bounded time: one compensation (its temperature terms
 //! reused while the temperature reading does not change, [`TempCache`]), one window update
 //! (O(1)), and per step at most three VE solutions of five evaluations each (a profile), or
 //! one share of an online block's VE (its moments, or one accelerometer's solution).
 
 use crate::compensate::{Calibration, Sample, Status, TempCache};
+use crate::dynamics::{DynamicsState, FixedRate};
 use crate::float::Float;
 use crate::linalg::Vec3;
 use crate::vibration::window::{MomentWindow, Pushed, WindowMoments};
@@ -112,11 +122,24 @@ const fn eq(a: &[u8], b: &[u8]) -> bool {
     true
 }
 
-/// The configuration of the per-sample step: calibration and VE model. Immutable after boot.
+/// The step of the cache's key for an effective temperature [°C]: with thermal dynamics the
+/// temperature terms are computed at the effective temperature rounded to a multiple of
+/// 1/256 °C (±2 m°C, half the TMP117's resolution), so that the terms are reused while it
+/// stays within one step (see [`Pipeline::with_dynamics`]).
+pub const TEMP_EFF_STEP_C: f64 = 1.0 / 256.0;
+
+/// The configuration of the per-sample step: calibration, VE model and thermal dynamics.
+/// Immutable after boot.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pipeline<F> {
     cal: Calibration<F>,
     vib: VibrationConfig<F>,
+    /// The thermal dynamics at the sampling period (`None`: the temperature model is
+    /// evaluated at the reading, as without dynamics).
+    dynamics: Option<FixedRate<F>>,
+    /// `1.5·2^p·step` (p the mantissa bits): `(T + c) − c` rounds T to a multiple of the
+    /// step; 0 evaluates at the exact effective temperature.
+    round_c: F,
 }
 
 /// The running state of the per-sample step: the online moment window over blocks of `W`
@@ -132,6 +155,8 @@ pub struct PipelineState<F, const W: usize> {
     next_ve: Option<NextVe<F>>,
     /// Temperature terms of the last reading.
     temps: TempCache<F>,
+    /// The thermal dynamics' state (untouched without dynamics).
+    pub dynamics: DynamicsState<F>,
 }
 
 impl<F: Float, const W: usize> Default for PipelineState<F, W> {
@@ -143,7 +168,13 @@ impl<F: Float, const W: usize> Default for PipelineState<F, W> {
 impl<F: Float, const W: usize> PipelineState<F, W> {
     /// The state at power-on: empty window, nothing cached.
     pub const fn new() -> Self {
-        PipelineState { window: MomentWindow::new(), online_ve: None, next_ve: None, temps: TempCache::new() }
+        PipelineState {
+            window: MomentWindow::new(),
+            online_ve: None,
+            next_ve: None,
+            temps: TempCache::new(),
+            dynamics: DynamicsState::new(),
+        }
     }
 }
 
@@ -161,7 +192,36 @@ struct NextVe<F> {
 impl<F: Float> Pipeline<F> {
     /// Joins a calibration and a VE configuration.
     pub fn new(cal: Calibration<F>, vib: VibrationConfig<F>) -> Self {
-        Pipeline { cal, vib }
+        Pipeline { cal, vib, dynamics: None, round_c: F::ZERO }
+    }
+
+    /// The same pipeline with thermal dynamics at a fixed sampling period
+    /// ([`ThermalDynamics::at_rate`](crate::dynamics::ThermalDynamics::at_rate)); dynamics
+    /// with every stage off are not applied. Each step then evaluates the temperature model at
+    /// the effective temperature rounded to a multiple of [`TEMP_EFF_STEP_C`] (the cache keeps
+    /// the terms while the rounded value does not change) and subtracts the bias play.
+    pub fn with_dynamics(mut self, dynamics: FixedRate<F>) -> Self {
+        if dynamics.params().is_none() {
+            self.dynamics = None;
+            self.round_c = F::ZERO;
+        } else {
+            self.dynamics = Some(dynamics);
+            self.round_c = F::of(1.5) / F::EPSILON * F::of(TEMP_EFF_STEP_C);
+        }
+        self
+    }
+
+    /// The same pipeline evaluating the temperature model at the exact effective temperature
+    /// on every sample (no rounding to [`TEMP_EFF_STEP_C`]): the reference the rounded one is
+    /// tested against.
+    pub fn exact_effective_temperature(mut self) -> Self {
+        self.round_c = F::ZERO;
+        self
+    }
+
+    /// The thermal dynamics in use.
+    pub fn dynamics(&self) -> Option<&FixedRate<F>> {
+        self.dynamics.as_ref()
     }
 
     /// The stand-in when no valid calibration exists (a missing or rejected blob):
@@ -229,8 +289,25 @@ impl<F: Float> Pipeline<F> {
         temp_c: F,
         source: VibrationSource,
     ) -> (Sample<F>, Vec3<F>) {
+        // The temperature the model is evaluated at: the reading, or with thermal dynamics the
+        // effective temperature rounded to a multiple of the step (|T_eff| ≤ 1050 °C is far
+        // below the constant 1.5·2^p·step, so the sum's rounding is the rounding to the step; a
+        // non-finite T_eff stays non-finite and the calibration's policy applies). One call of
+        // the cache and of `apply` for both, so that they stay inlined in the step.
+        let (temp_c, play) = match &self.dynamics {
+            None => (temp_c, None),
+            Some(d) => {
+                let e = d.step(&mut state.dynamics, temp_c);
+                ((e.temp_eff_c + self.round_c) - self.round_c, Some((d.bias_play_g(), e.bias_play)))
+            }
+        };
         let mut s = self.cal.apply(u_v, state.temps.get(&self.cal, temp_c));
         let usable = self.cal.is_valid() && !s.status.contains(Status::NONFINITE_INPUT);
+        if let (true, Some((bias_g, d))) = (usable, play) {
+            for (a, b) in s.accel_g.iter_mut().zip(bias_g) {
+                *a -= *b * d;
+            }
+        }
         if source != VibrationSource::Online {
             // The window serves the online source only: a block must not span a time when
             // it was not selected.

@@ -175,6 +175,8 @@ impl<F: Float> ConversionFunction<F> {
     }
 
     /// True when every coefficient is finite.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn is_finite(&self) -> bool {
         self.to_array().iter().all(|x| x.is_finite())
     }
@@ -341,6 +343,8 @@ impl<F: Float> Vibration<F> {
 
     /// True when every number is finite, amplitudes/σ are within [`MAX_LEVEL_G`], σ ≥ 0,
     /// the frequency ≥ 0 and the band is ordered and non-negative.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
     pub fn is_valid(&self) -> bool {
         let lim = F::of(MAX_LEVEL_G);
         let ok3 = |v: &Vec3<F>| v.iter().all(|x| x.is_finite() && !(x.abs() > lim));

@@ -3,10 +3,11 @@
 //! single-bit flip and every truncation of a typical blob is rejected with the error its
 //! position implies, and physically impossible values under a valid CRC are rejected naming
 //! the field and its byte offset. The same holds for blobs with the optional vibration
-//! sections (0x0005 coefficients, 0x0006 flight-phase profiles); a blob without them gives
-//! no vibration-error model.
+//! sections (0x0005 coefficients, 0x0006 flight-phase profiles) and the thermal-dynamics
+//! section (0x0007); a blob without them gives no vibration-error model and no dynamics.
 
 use bins_comp::blob::{self, BlobError, CalDate, Field, Meta, section};
+use bins_comp::dynamics::{DynamicsError, ThermalDynamics};
 use bins_comp::temperature::{MAX_KNOTS, MAX_POLY_ORDER};
 use bins_comp::vibration::{MAX_PROFILES, tables};
 use bins_comp::{
@@ -1056,5 +1057,151 @@ proptest! {
         bytes[8..12].copy_from_slice(&(len as u32).to_le_bytes());
         seal(&mut bytes);
         let _ = blob::parse(&bytes);
+    }
+}
+
+// ---- thermal dynamics (section 0x0007) -----------------------------------------------------
+
+/// A unit with every stage of the thermal dynamics on.
+fn dyn_params() -> ThermalDynamics<f64> {
+    ThermalDynamics {
+        lag_tau_s: 150.0,
+        hysteresis_width_c: 0.3,
+        self_heating_c: 1.2,
+        self_heating_tau_s: 600.0,
+        bias_play_width_c: 0.5,
+        bias_play_g: [20e-6, -15e-6, 0.0],
+    }
+}
+
+/// The typical blob with the vibration sections and the thermal-dynamics section.
+fn typical_dyn() -> Vec<u8> {
+    let mut buf = [0u8; blob::MAX_BLOB_BYTES];
+    let n = blob::encode_with_dynamics(&paper_params(), Some(&vib_params()), Some(&dyn_params()), &meta(), &mut buf)
+        .expect("encode");
+    buf[..n].to_vec()
+}
+
+/// The section as the spec lays it out: layout version 1, 7 zero bytes, 8 f64.
+fn spec_dynamics(d: &ThermalDynamics<f64>) -> Sec {
+    let mut p = vec![1u8, 0, 0, 0, 0, 0, 0, 0];
+    let b = d.bias_play_g;
+    p.extend(f64s(&[
+        d.lag_tau_s,
+        d.hysteresis_width_c,
+        d.self_heating_c,
+        d.self_heating_tau_s,
+        d.bias_play_width_c,
+        b[0],
+        b[1],
+        b[2],
+    ]));
+    (0x0007, 1, p)
+}
+
+#[test]
+fn dynamics_section_equals_the_spec_and_parses_to_its_parameters() {
+    let b = typical_dyn();
+    let mut spec = spec_sections_vib(&paper_params(), Some(&vib_params()), SERIAL, Some((2024, 2, 29)), TOOL);
+    spec.insert(6, spec_dynamics(&dyn_params()));
+    assert_eq!(b, build(&spec));
+    assert_eq!(b.len(), 1340, "size quoted in docs/calibration-blob.md");
+    assert_eq!(table(&b)[entry_index(&b, section::THERMAL_DYNAMICS)].3, blob::DYNAMICS_BYTES);
+    let parsed = blob::parse(&b).expect("valid");
+    assert_eq!(parsed.dynamics, Some(dyn_params()));
+    assert_eq!(parsed.vibration, Some(vib_params()));
+    assert_eq!(parsed.params, paper_params());
+    let fixed = parsed.dynamics_at_rate(1e-3f32).unwrap().unwrap();
+    assert_eq!(*fixed.params(), dyn_params().cast::<f32>());
+    // Without the section (every blob written before it): no dynamics.
+    for old in [typical(), typical_vib()] {
+        let p = blob::parse(&old).unwrap();
+        assert_eq!(p.dynamics, None);
+        assert_eq!(p.dynamics_at_rate(1e-3f32), Ok(None));
+    }
+    // Dynamics alone, without the vibration sections.
+    let mut buf = [0u8; 4096];
+    let n = blob::encode_with_dynamics(&paper_params(), None, Some(&dyn_params()), &Meta::default(), &mut buf).unwrap();
+    let p = blob::parse(&buf[..n]).unwrap();
+    assert_eq!((p.vibration, p.dynamics), (None, Some(dyn_params())));
+    // A period that is not finite and positive is refused by name.
+    assert_eq!(parsed.dynamics_at_rate(0.0f32), Err(BlobError::Dynamics(DynamicsError::SamplePeriod)));
+}
+
+#[test]
+fn every_single_bit_flip_and_truncation_of_a_dynamics_blob_is_rejected() {
+    let b = typical_dyn();
+    assert_every_bit_flip_rejected(&b);
+    assert_every_truncation_rejected(&b);
+}
+
+#[test]
+fn bad_dynamics_sections_are_rejected_naming_the_field() {
+    let b = typical_dyn();
+    let at = payload_offset(&b, section::THERMAL_DYNAMICS);
+    let edited = |edit: &dyn Fn(&mut Vec<u8>)| {
+        let mut c = b.clone();
+        edit(&mut c);
+        seal(&mut c);
+        blob::parse(&c).map(|_| ())
+    };
+    // Each value just outside its range, and NaN, names its key and offset.
+    let outside = [-1e-9, 50.0 + 1e-9, -50.0 - 1e-9, 1e5 + 1e-6, -1e-12, 0.1 + 1e-12, -0.1 - 1e-12, f64::INFINITY];
+    for (param, bad) in outside.iter().enumerate() {
+        let off = at + 8 + 8 * param;
+        for x in [*bad, f64::NAN] {
+            let got = edited(&|c| put_f64(c, off, x));
+            let want = BlobError::OutOfRange { field: Field::Dynamics { param: param as u8 }, offset: off };
+            // Parameter 1 at 50 + 1e-9 is outside; param 2 at −50 − 1e-9 too; the list above
+            // pairs each parameter with a value outside its own range.
+            assert_eq!(got, Err(want), "param {param} = {x}");
+        }
+    }
+    // Limits themselves are accepted.
+    for (param, ok) in [(0usize, 1e5), (1, 50.0), (2, -50.0), (3, 0.0), (4, 50.0), (5, 0.1), (6, -0.1)] {
+        assert_eq!(edited(&|c| put_f64(c, at + 8 + 8 * param, ok)), Ok(()), "param {param} = {ok}");
+    }
+    // Layout version, reserved bytes, length.
+    assert_eq!(edited(&|c| c[at] = 2), Err(BlobError::BadCode { field: Field::DynamicsLayout, offset: at, code: 2 }));
+    assert_eq!(edited(&|c| c[at + 7] = 1), Err(BlobError::ReservedNotZero { offset: at + 7 }));
+    let e = entry_index(&b, section::THERMAL_DYNAMICS);
+    assert_eq!(
+        edited(&|c| c[16 + 12 * e + 8] = 64),
+        Err(BlobError::SectionLength { id: section::THERMAL_DYNAMICS, offset: at, len: 64 })
+    );
+    // A bias play without a width names the first nonzero gain.
+    let got = edited(&|c| put_f64(c, at + 8 + 8 * 4, 0.0));
+    assert_eq!(got, Err(BlobError::OutOfRange { field: Field::Dynamics { param: 5 }, offset: at + 8 + 40 }));
+    let msg = got.unwrap_err().to_string();
+    assert!(msg.starts_with("thermal_dynamics.bias_play_mg[0] at byte"), "{msg}");
+    let msg = edited(&|c| put_f64(c, at + 8, -1.0)).unwrap_err().to_string();
+    assert!(msg.starts_with("thermal_dynamics.lag_tau_s at byte"), "{msg}");
+    // The section is REQUIRED: a parser that did not know it would refuse the blob.
+    assert_eq!(table(&b)[e].1, blob::FLAG_REQUIRED);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+    /// Whatever the section holds, the parser accepts exactly what
+    /// `ThermalDynamics::validate` accepts, and the encoder round-trips it bit for bit.
+    #[test]
+    fn dynamics_parser_accepts_exactly_what_validate_accepts(
+        a in proptest::array::uniform8(prop_oneof![
+            Just(0.0), -0.2f64..0.2, -60.0f64..60.0, 0.0f64..2e5, Just(f64::NAN), Just(-0.0)
+        ])
+    ) {
+        let d = ThermalDynamics::from_array(&a);
+        let mut b = typical_dyn();
+        let at = payload_offset(&b, section::THERMAL_DYNAMICS);
+        for (n, x) in a.iter().enumerate() {
+            put_f64(&mut b, at + 8 + 8 * n, *x);
+        }
+        seal(&mut b);
+        let parsed = blob::parse(&b);
+        prop_assert_eq!(parsed.is_ok(), d.validate().is_ok(), "{:?}: {:?}", d, parsed.map(|_| ()));
+        if let Ok(p) = parsed {
+            let got = p.dynamics.unwrap().to_array().map(f64::to_bits);
+            prop_assert_eq!(got, a.map(f64::to_bits));
+        }
     }
 }

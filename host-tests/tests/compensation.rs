@@ -343,3 +343,23 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn division_free_reciprocal_is_within_2_ulp_of_the_quotient() {
+    // `float::recip` replaces the f64 division at load time (N = K⁻¹, 1/K_ii): against the
+    // correctly rounded quotient over the f32 normal range, both signs.
+    let mut worst = 0u64;
+    let mut x = 1.3e-37f64;
+    while x < 3e37 {
+        for v in [x, -x, x * 1.000_000_7, x * 0.999_999_3] {
+            let r = bins_comp::float::recip(v);
+            let q = 1.0 / v;
+            let ulps = (r.to_bits() as i64 - q.to_bits() as i64).unsigned_abs();
+            worst = worst.max(ulps);
+        }
+        x *= 1.37;
+    }
+    println!("recip: worst {worst} ulp");
+    assert!(worst <= 2, "{worst} ulp");
+    assert!(bins_comp::float::recip(1e-300f64).is_nan() || !bins_comp::float::recip(1e-300f64).is_finite());
+}

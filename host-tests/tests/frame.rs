@@ -133,6 +133,29 @@ fn accelerations_are_rounded_to_2_pow_minus_24_g() {
 }
 
 #[test]
+fn the_conversion_equals_the_fixed_crates_on_every_exponent() {
+    // Every exponent, the mantissas' ends and a stride through them, both signs: the
+    // hand-written rounding against `fixed`'s checked conversion (ties to even).
+    let mut n = 0;
+    for exp in 0u32..=255 {
+        for m in (0u32..1 << 23).step_by(4099).chain([0, 1, 2, (1 << 22) - 1, 1 << 22, (1 << 22) + 1, (1 << 23) - 1]) {
+            for sign in [0u32, 1 << 31] {
+                let a = f32::from_bits(sign | exp << 23 | m);
+                let want = match I8F24::checked_from_num(a) {
+                    Some(v) => (v, false),
+                    None if a > 0.0 => (I8F24::MAX, true),
+                    None if a < 0.0 => (I8F24::MIN, true),
+                    None => (I8F24::ZERO, true),
+                };
+                assert_eq!(accel_to_fixed(a), want, "{a:e} ({:#010x})", a.to_bits());
+                n += 1;
+            }
+        }
+    }
+    assert!(n > 1_000_000);
+}
+
+#[test]
 fn out_of_range_saturates_and_flags_instead_of_wrapping() {
     for (a, bits) in [
         (128.0f32, i32::MAX),

@@ -17,7 +17,9 @@ mod interrupts;
 
 use bins_comp::pipeline::VibrationSource;
 use bins_comp::replay::{Input, SOURCE, Tick, WINDOW};
-use bins_comp::{Calibration, Form, Method, Pipeline, Status, TempModel, VibrationConfig, paper};
+use bins_comp::{
+    Calibration, FixedRate, Form, Method, Pipeline, Status, TempModel, ThermalDynamics, VibrationConfig, paper,
+};
 use cortex_m::peripheral::SYST;
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m_rt::entry;
@@ -141,22 +143,55 @@ fn main() -> ! {
     let online = VibrationSource::Online;
     let none = VibrationSource::None;
     let profile = VibrationSource::Profile(0);
-    let cases: [(&str, Calibration<f32>, VibrationSource, u32); 9] = [
-        ("poly3 method 1 + online VE", cal(poly3, m1), online, TEMP_EVERY),
-        ("poly3 method 1 + flight-profile VE", cal(poly3, m1), profile, TEMP_EVERY),
-        ("poly3 method 1", cal(poly3, m1), none, TEMP_EVERY),
-        ("poly3 method 1, new temperature every sample", cal(poly3, m1), none, 1),
-        ("pwl method 1", cal(pwl, m1), none, TEMP_EVERY),
-        ("pwl method 2 simplified", cal(pwl, m2s), none, TEMP_EVERY),
-        ("pwl method 2 simplified, new temperature every sample", cal(pwl, m2s), none, 1),
-        ("pwl method 2 simplified + online VE", cal(pwl, m2s), online, TEMP_EVERY),
-        ("pwl uncorrected", cal(pwl, Method::Uncorrected), none, TEMP_EVERY),
+    // Thermal dynamics with every stage on (a die a minute behind the thermistor), and the
+    // same without the lag, whose effective temperature follows each new reading at once: the
+    // temperature terms are then recomputed as often as without dynamics.
+    let unit = ThermalDynamics {
+        lag_tau_s: 60.0f32,
+        hysteresis_width_c: 0.3,
+        self_heating_c: 1.5,
+        self_heating_tau_s: 300.0,
+        bias_play_width_c: 0.5,
+        bias_play_g: [20e-6, -15e-6, 10e-6],
+    };
+    let full = unit.at_rate(1.0e-3).ok();
+    let no_lag = ThermalDynamics { lag_tau_s: 0.0, ..unit }.at_rate(1.0e-3).ok();
+    type Case<'a> = (&'a str, Calibration<f32>, VibrationSource, u32, Option<FixedRate<f32>>);
+    let cases: [Case; 17] = [
+        ("poly3 method 1 + online VE", cal(poly3, m1), online, TEMP_EVERY, None),
+        ("poly3 method 1 + flight-profile VE", cal(poly3, m1), profile, TEMP_EVERY, None),
+        ("poly3 method 1", cal(poly3, m1), none, TEMP_EVERY, None),
+        ("poly3 method 1, new temperature every sample", cal(poly3, m1), none, 1, None),
+        ("pwl method 1", cal(pwl, m1), none, TEMP_EVERY, None),
+        ("pwl method 2 simplified", cal(pwl, m2s), none, TEMP_EVERY, None),
+        ("pwl method 2 simplified, new temperature every sample", cal(pwl, m2s), none, 1, None),
+        ("pwl method 2 simplified + online VE", cal(pwl, m2s), online, TEMP_EVERY, None),
+        ("pwl uncorrected", cal(pwl, Method::Uncorrected), none, TEMP_EVERY, None),
+        ("poly3 method 1 + online VE + dynamics", cal(poly3, m1), online, TEMP_EVERY, full),
+        ("poly3 method 1 + online VE + dynamics without lag", cal(poly3, m1), online, TEMP_EVERY, no_lag),
+        ("poly3 method 1 + dynamics", cal(poly3, m1), none, TEMP_EVERY, full),
+        ("poly3 method 1 + dynamics without lag", cal(poly3, m1), none, TEMP_EVERY, no_lag),
+        ("pwl method 2 simplified + dynamics", cal(pwl, m2s), none, TEMP_EVERY, full),
+        ("pwl method 2 simplified + dynamics without lag", cal(pwl, m2s), none, TEMP_EVERY, no_lag),
+        ("pwl method 2 simplified + online VE + dynamics", cal(pwl, m2s), online, TEMP_EVERY, full),
+        (
+            "pwl method 2 simplified + dynamics without lag, new temperature every sample",
+            cal(pwl, m2s),
+            none,
+            1,
+            no_lag,
+        ),
     ];
-    for (i, (name, c, source, temp_every)) in cases.iter().enumerate() {
+    for (i, (name, c, source, temp_every, dynamics)) in cases.iter().enumerate() {
         if !c.is_valid() {
             defmt::error!("case {=str}: calibration did not build", name);
         }
-        let p = if *source != none { Pipeline::new(*c, vib) } else { Pipeline::new(*c, VibrationConfig::none()) };
+        let mut p = if *source != none { Pipeline::new(*c, vib) } else { Pipeline::new(*c, VibrationConfig::none()) };
+        if let Some(d) = dynamics {
+            p = p.with_dynamics(*d);
+        } else if i >= 9 {
+            defmt::error!("case {=str}: thermal dynamics did not build", name);
+        }
         let mut t = Tick::<f32, WINDOW>::new(p);
         // Complete a block so the VE cases take their full path.
         for k in 0..WINDOW as u32 {
@@ -170,6 +205,8 @@ fn main() -> ! {
         defmt::info!("BENCH {=str}: {=u32}.{=u32:02} instructions/sample", name, x / 100, x % 100);
         if i == 0 {
             defmt::info!("STACK step high-water: {=u32} bytes below main's frame", high_water());
+        }
+        if i == 0 || i == 9 || i == 10 {
             let w = worst_counts(syst, &mut t) * INSNS_PER_COUNT;
             defmt::info!("WORST {=str}: {=u32} instructions (one step, ±{=u32})", name, w, INSNS_PER_COUNT);
         }

@@ -7,8 +7,8 @@
 //! by QEMU's generic loader: `-device loader,file=CAL.bin,addr=0x003ff000`). It is read once,
 //! at boot, and checked completely (`bins_comp::blob::parse_region`) before anything uses it.
 
+use bins_comp::Pipeline;
 use bins_comp::blob::{self, BlobError, MAX_BLOB_BYTES, ParsedCalibration};
-use bins_comp::{Calibration, VibrationConfig};
 
 /// A copy of the CALIB region in RAM (at most [`MAX_BLOB_BYTES`]).
 pub struct Region {
@@ -47,14 +47,17 @@ pub fn read_region() -> Region {
     region
 }
 
-/// The calibration and the vibration-error configuration the region holds (sections
-/// 0x0005/0x0006; [`VibrationConfig::none`] without them), checked completely, with the
-/// parsed blob (serial, date, tool version). An error means: compensate with
-/// [`Calibration::uncalibrated`] and subtract nothing.
-pub fn calibration(
-    region: &Region,
-) -> Result<(Calibration<f32>, VibrationConfig<f32>, ParsedCalibration<'_>), BlobError> {
+/// The per-sample step the region's calibration defines, checked completely: the calibration,
+/// the vibration-error configuration (sections 0x0005/0x0006; [`VibrationConfig::none`](bins_comp::VibrationConfig::none)
+/// without them) and the thermal dynamics at the sampling period `dt_s` \[s\] (section
+/// 0x0007; none without it), with the parsed blob (serial, date, tool version). An error
+/// means: compensate with [`Calibration::uncalibrated`](bins_comp::Calibration::uncalibrated) and subtract nothing.
+pub fn calibration(region: &Region, dt_s: f32) -> Result<(Pipeline<f32>, ParsedCalibration<'_>), BlobError> {
     let parsed = blob::parse_region(region.bytes())?;
     let (cal, vib) = parsed.configs::<f32>()?;
-    Ok((cal, vib, parsed))
+    let mut pipeline = Pipeline::new(cal, vib);
+    if let Some(d) = parsed.dynamics_at_rate(dt_s)? {
+        pipeline = pipeline.with_dynamics(d);
+    }
+    Ok((pipeline, parsed))
 }

@@ -140,15 +140,17 @@ fn run() -> Result<Totals, RunError> {
 /// on every sample.
 fn flashed_calibration() -> Calibration<f32> {
     let region = calib::read_region();
-    match calib::calibration(&region) {
-        Ok((cal, _, parsed)) => {
+    // The vectors are compensated sample by sample without the thermal dynamics' period:
+    // any period serves; the calibration alone is used.
+    match calib::calibration(&region, 1.0e-3) {
+        Ok((pipeline, parsed)) => {
             defmt::info!(
                 "CALIB: valid calibration blob, {} bytes, unit {=str}, by {=str}",
                 parsed.blob.bytes().len(),
                 parsed.meta.serial,
                 parsed.meta.tool_version
             );
-            cal
+            *pipeline.calibration()
         }
         Err(BlobError::BadMagic) => {
             defmt::warn!("CALIB: no calibration blob (bad magic): running uncalibrated");

@@ -224,11 +224,12 @@ impl Link {
 #[inline(never)]
 fn flashed_pipeline() -> (Pipeline<f32>, Boot) {
     let region = calib::read_region();
-    match calib::calibration(&region) {
-        Ok((cal, vib, parsed)) => {
+    match calib::calibration(&region, 1.0 / TICK_HZ as f32) {
+        Ok((pipeline, parsed)) => {
             let crc = parsed.blob.bytes().last_chunk::<4>().map_or(0, |c| u32::from_le_bytes(*c));
-            let boot = Boot { blob_accepted: true, vibration_profiles: vib.n_profiles() as u32, blob_crc32: crc };
-            (Pipeline::new(cal, vib), boot)
+            let profiles = pipeline.vibration().n_profiles() as u32;
+            let boot = Boot { blob_accepted: true, vibration_profiles: profiles, blob_crc32: crc };
+            (pipeline, boot)
         }
         Err(_) => (Pipeline::uncalibrated(), Boot { blob_accepted: false, vibration_profiles: 0, blob_crc32: 0 }),
     }

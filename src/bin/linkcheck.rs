@@ -179,9 +179,9 @@ mod bus {
 fn main() -> ! {
     let mut cals = vectors::calibrations();
     let mut flashed = bins_comp::Pipeline::uncalibrated();
-    if let Ok((cal, vib, _)) = calib::calibration(&calib::read_region()) {
-        cals[vectors::FLASHED_VARIANT] = cal;
-        flashed = bins_comp::Pipeline::new(cal, vib);
+    if let Ok((pipeline, _)) = calib::calibration(&calib::read_region(), 1.0e-3) {
+        cals[vectors::FLASHED_VARIANT] = *pipeline.calibration();
+        flashed = pipeline;
     }
     let vib_pipeline = bins_comp::Pipeline::new(
         cals.get(1).copied().unwrap_or(bins_comp::Calibration::uncalibrated()),

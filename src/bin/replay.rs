@@ -255,14 +255,15 @@ fn read_full(file: &mut File, buf: &mut [u8]) -> Result<usize, RunError> {
 /// flagged `INVALID_CALIBRATION`).
 fn flashed_pipeline() -> Pipeline<f32> {
     let region = calib::read_region();
-    match calib::calibration(&region) {
-        Ok((cal, vib, parsed)) => {
+    match calib::calibration(&region, 1.0 / TICK_HZ as f32) {
+        Ok((pipeline, parsed)) => {
             defmt::info!(
-                "CALIB: valid calibration blob, unit {=str}, {=usize} vibration profiles",
+                "CALIB: valid calibration blob, unit {=str}, {=usize} vibration profiles, thermal dynamics {=bool}",
                 parsed.meta.serial,
-                vib.n_profiles()
+                pipeline.vibration().n_profiles(),
+                pipeline.dynamics().is_some()
             );
-            Pipeline::new(cal, vib)
+            pipeline
         }
         Err(e) => {
             defmt::error!("CALIB: {}: running uncalibrated", defmt::Display2Format(&e));
