@@ -1,5 +1,6 @@
 //! The calibration file: one unit's calibration as TOML, with units in the key names (see
-//! `docs/calibration-blob.md`), optionally with its vibration-error model (`[vibration]`).
+//! `docs/calibration-blob.md`), optionally with its vibration-error model (`[vibration]`) and
+//! its thermal dynamics (`[thermal_dynamics]`).
 //! Owns its serde types, the structural checks that name the
 //! offending key, and the conversions to and from [`CalibrationParams`] and the blob.
 //!
@@ -8,6 +9,7 @@
 //! accept its blob. Errors from there name the field with the same key path as this file.
 
 use bins_comp::blob::{self, BlobError, CalDate, Meta};
+use bins_comp::dynamics::ThermalDynamics;
 use bins_comp::temperature::{MAX_KNOTS, MAX_POLY_ORDER};
 use bins_comp::vibration::MAX_PROFILES;
 use bins_comp::{
@@ -51,6 +53,75 @@ pub struct CalibrationFile {
     /// no VE model.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vibration: Option<VibrationSpec>,
+    /// Thermal dynamics between the thermistor and the sensing elements (blob section 0x0007);
+    /// absent: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub thermal_dynamics: Option<DynamicsSpec>,
+}
+
+/// `[thermal_dynamics]`: lag, hysteresis play, self-heating and bias play of the unit
+/// (`bins_comp::dynamics`); a missing key is 0 (that stage off).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DynamicsSpec {
+    /// Lag of the sensing elements behind the thermistor \[s\].
+    pub lag_tau_s: f64,
+    /// Width of the play on the lagged temperature [°C].
+    #[serde(rename = "hysteresis_width_C")]
+    pub hysteresis_width_c: f64,
+    /// Self-heating after power-on [°C].
+    #[serde(rename = "self_heating_C")]
+    pub self_heating_c: f64,
+    /// Its time constant \[s\].
+    pub self_heating_tau_s: f64,
+    /// Width of the additive bias play [°C].
+    #[serde(rename = "bias_play_width_C")]
+    pub bias_play_width_c: f64,
+    /// Its amplitude per axis x, y, z [mg] (subtracted as `bias_play_mg·d`).
+    pub bias_play_mg: [f64; 3],
+}
+
+impl DynamicsSpec {
+    /// The core's parameters (mg to g); ranges are checked by the encoder.
+    pub fn to_dynamics(&self) -> ThermalDynamics<f64> {
+        ThermalDynamics {
+            lag_tau_s: self.lag_tau_s,
+            hysteresis_width_c: self.hysteresis_width_c,
+            self_heating_c: self.self_heating_c,
+            self_heating_tau_s: self.self_heating_tau_s,
+            bias_play_width_c: self.bias_play_width_c,
+            bias_play_g: self.bias_play_mg.map(|b| b * 1e-3),
+        }
+    }
+
+    /// The inverse of [`to_dynamics`](Self::to_dynamics).
+    pub fn from_dynamics(d: &ThermalDynamics<f64>) -> Self {
+        DynamicsSpec {
+            lag_tau_s: d.lag_tau_s,
+            hysteresis_width_c: d.hysteresis_width_c,
+            self_heating_c: d.self_heating_c,
+            self_heating_tau_s: d.self_heating_tau_s,
+            bias_play_width_c: d.bias_play_width_c,
+            bias_play_mg: d.bias_play_g.map(|b| b * 1e3),
+        }
+    }
+
+    /// Reads the `[thermal_dynamics]` table of a TOML file (a calibration file, or the model
+    /// `bins-cal diagnose --model` writes; other tables are ignored) and checks it as the
+    /// firmware would. Errors name the file and the key.
+    pub fn read_table(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let value: toml::Table =
+            toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), one_line(&e.to_string())))?;
+        let table = value
+            .get("thermal_dynamics")
+            .ok_or_else(|| anyhow::anyhow!("{}: no [thermal_dynamics] table", path.display()))?;
+        let spec: DynamicsSpec = table.clone().try_into().map_err(|e: toml::de::Error| {
+            anyhow::anyhow!("{}: thermal_dynamics: {}", path.display(), one_line(&e.to_string()))
+        })?;
+        spec.to_dynamics().validate().map_err(|e| anyhow::anyhow!("{}: thermal_dynamics.{e}", path.display()))?;
+        Ok(spec)
+    }
 }
 
 /// `[vibration]`: the VE model of the unit (blob sections 0x0005, 0x0006).
@@ -499,6 +570,11 @@ impl CalibrationFile {
         Ok((params, meta))
     }
 
+    /// The thermal dynamics (`[thermal_dynamics]`), `None` when the file has none.
+    pub fn to_dynamics(&self) -> Option<ThermalDynamics<f64>> {
+        self.thermal_dynamics.as_ref().map(DynamicsSpec::to_dynamics)
+    }
+
     /// The vibration-error parameters (`[vibration]`), `None` when the file has none.
     pub fn to_vibration(&self) -> Result<Option<VibrationParams>, CalFileError> {
         self.vibration.as_ref().map(VibrationSpec::to_params).transpose()
@@ -509,8 +585,9 @@ impl CalibrationFile {
     pub fn to_blob(&self) -> Result<Vec<u8>, CalFileError> {
         let (params, meta) = self.to_params()?;
         let vib = self.to_vibration()?;
+        let dynamics = self.to_dynamics();
         let mut buf = [0u8; blob::MAX_BLOB_BYTES];
-        let n = blob::encode_with_vibration(&params, vib.as_ref(), &meta.as_meta(), &mut buf)
+        let n = blob::encode_with_dynamics(&params, vib.as_ref(), dynamics.as_ref(), &meta.as_meta(), &mut buf)
             .map_err(CalFileError::Blob)?;
         Ok(buf[..n].to_vec())
     }
@@ -575,13 +652,16 @@ impl CalibrationFile {
             method,
             temperature_model,
             vibration: None,
+            thermal_dynamics: None,
         }
     }
 
     /// The file a blob holds; the blob is fully checked first.
     pub fn from_blob(bytes: &[u8]) -> Result<Self, BlobError> {
         let parsed = blob::parse(bytes)?;
-        Ok(Self::from_parts(&parsed.params, parsed.vibration.as_ref(), &parsed.meta))
+        let mut f = Self::from_parts(&parsed.params, parsed.vibration.as_ref(), &parsed.meta);
+        f.thermal_dynamics = parsed.dynamics.as_ref().map(DynamicsSpec::from_dynamics);
+        Ok(f)
     }
 }
 

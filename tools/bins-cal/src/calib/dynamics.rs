@@ -349,29 +349,73 @@ fn log_grid(lo: f64, hi: f64, per_decade: f64) -> Vec<f64> {
     (0..=n).map(|k| lo * (hi / lo).powf(k as f64 / n as f64)).collect()
 }
 
-/// Golden-section minimum of `f` on `[a, b]` (log scale), `iters` steps.
-fn golden(a: f64, b: f64, iters: usize, f: &mut dyn FnMut(f64) -> f64) -> (f64, f64) {
-    let (mut x0, mut x1) = (a.ln(), b.ln());
-    let g = 0.5 * (5f64.sqrt() - 1.0);
-    let mut c = x1 - g * (x1 - x0);
-    let mut d = x0 + g * (x1 - x0);
-    let (mut fc, mut fd) = (f(c.exp()), f(d.exp()));
-    for _ in 0..iters {
-        if fc < fd {
-            x1 = d;
-            d = c;
-            fd = fc;
-            c = x1 - g * (x1 - x0);
-            fc = f(c.exp());
+/// Parameter `k` of θ: 0 lag, 1 hysteresis, 2 bias play width.
+fn get(th: &Theta, k: usize) -> f64 {
+    match k {
+        0 => th.lag_tau_s,
+        1 => th.hysteresis_width_c,
+        _ => th.bias_play_width_c,
+    }
+}
+
+fn set(th: &mut Theta, k: usize, v: f64) {
+    match k {
+        0 => th.lag_tau_s = v,
+        1 => th.hysteresis_width_c = v,
+        _ => th.bias_play_width_c = v,
+    }
+}
+
+/// Nelder–Mead minimum of `f` from `x0` with initial steps `step`, at most `max_evals`
+/// evaluations, stopping when the simplex's values agree within `ftol` (relative).
+fn nelder_mead(x0: &[f64], step: f64, max_evals: usize, ftol: f64, f: &dyn Fn(&[f64]) -> f64) -> (Vec<f64>, f64) {
+    let n = x0.len();
+    let mut pts: Vec<(Vec<f64>, f64)> = Vec::with_capacity(n + 1);
+    pts.push((x0.to_vec(), f(x0)));
+    for k in 0..n {
+        let mut x = x0.to_vec();
+        x[k] += step;
+        let v = f(&x);
+        pts.push((x, v));
+    }
+    let mut evals = n + 1;
+    while evals < max_evals {
+        pts.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let (lo, hi) = (pts[0].1, pts[n].1);
+        if (hi - lo).abs() <= ftol * lo.abs().max(1e-300) {
+            break;
+        }
+        let centroid: Vec<f64> = (0..n).map(|k| pts[..n].iter().map(|p| p.0[k]).sum::<f64>() / n as f64).collect();
+        let along = |t: f64| -> Vec<f64> { (0..n).map(|k| centroid[k] + t * (pts[n].0[k] - centroid[k])).collect() };
+        let xr = along(-1.0);
+        let fr = f(&xr);
+        evals += 1;
+        if fr < pts[0].1 {
+            let xe = along(-2.0);
+            let fe = f(&xe);
+            evals += 1;
+            pts[n] = if fe < fr { (xe, fe) } else { (xr, fr) };
+        } else if fr < pts[n - 1].1 {
+            pts[n] = (xr, fr);
         } else {
-            x0 = c;
-            c = d;
-            fc = fd;
-            d = x0 + g * (x1 - x0);
-            fd = f(d.exp());
+            let xc = if fr < pts[n].1 { along(-0.5) } else { along(0.5) };
+            let fc = f(&xc);
+            evals += 1;
+            if fc < pts[n].1.min(fr) {
+                pts[n] = (xc, fc);
+            } else {
+                // Shrink towards the best.
+                let best = pts[0].0.clone();
+                for p in pts.iter_mut().skip(1) {
+                    p.0 = (0..n).map(|k| best[k] + 0.5 * (p.0[k] - best[k])).collect();
+                    p.1 = f(&p.0);
+                    evals += 1;
+                }
+            }
         }
     }
-    if fc < fd { (c.exp(), fc) } else { (d.exp(), fd) }
+    pts.sort_by(|a, b| a.1.total_cmp(&b.1));
+    pts.swap_remove(0)
 }
 
 /// Identifies the dynamics and the static model jointly (see the module's text). `progress`
@@ -434,39 +478,29 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
             best = (th, c);
         }
     }
-    progress(&format!("dynamics: grid over h_b ({} values): h_b = {:.3} °C", widths.len() - 1, best.0.bias_play_width_c));
-    // Stage 3: refine each in turn, golden section between its grid neighbours.
-    let neighbours = |grid: &[f64], v: f64| -> (f64, f64) {
-        let k = grid.iter().position(|&g| g == v).unwrap_or(0);
-        let lo = if k > 1 { grid[k - 1] } else { grid[1] * 0.5 };
-        let hi = grid.get(k + 1).copied().unwrap_or(grid[grid.len() - 1] * 2.0);
-        (lo, hi)
-    };
-    for round in 0..2 {
-        for which in 0..3 {
-            let (grid, v) = match which {
-                0 => (&taus, best.0.lag_tau_s),
-                1 => (&widths, best.0.hysteresis_width_c),
-                _ => (&widths, best.0.bias_play_width_c),
-            };
-            if v == 0.0 || grid.len() < 2 {
-                continue;
+    progress(&format!(
+        "dynamics: grid over h_b ({} values): h_b = {:.3} °C",
+        widths.len() - 1,
+        best.0.bias_play_width_c
+    ));
+    // Stage 3: refine the nonzero parameters together (Nelder–Mead on their logarithms): lag
+    // and play trade against each other along a valley, which one at a time would not follow.
+    let on: Vec<usize> = (0..3).filter(|&k| get(&best.0, k) > 0.0).collect();
+    if !on.is_empty() {
+        let f = |x: &[f64]| {
+            let mut th = best.0;
+            for (v, &k) in x.iter().zip(&on) {
+                set(&mut th, k, v.exp());
             }
-            let (lo, hi) = if round == 0 { neighbours(grid, v) } else { (v / 1.3, v * 1.3) };
-            let base = best.0;
-            let set = |x: f64| {
-                let mut th = base;
-                match which {
-                    0 => th.lag_tau_s = x,
-                    1 => th.hysteresis_width_c = x,
-                    _ => th.bias_play_width_c = x,
-                }
-                th
-            };
-            let (x, c) = golden(lo, hi, 12, &mut |x| cost(&set(x)));
-            if c < best.1 {
-                best = (set(x), c);
+            cost(&th)
+        };
+        let x0: Vec<f64> = on.iter().map(|&k| get(&best.0, k).ln()).collect();
+        let (x, c) = nelder_mead(&x0, 0.3, 300, 1e-4, &f);
+        if c < best.1 {
+            for (v, &k) in x.iter().zip(&on) {
+                set(&mut best.0, k, v.exp());
             }
+            best.1 = c;
         }
     }
     progress(&format!(
@@ -478,11 +512,9 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
     let sigma2 = full.sse() / ((3 * full.n_blocks).saturating_sub(3 * full.n_params).max(1)) as f64;
     let mut components = Vec::new();
     let mut kept = best.0;
-    for (name, value) in [
-        ("lag", best.0.lag_tau_s),
-        ("hysteresis", best.0.hysteresis_width_c),
-        ("bias_play", best.0.bias_play_width_c),
-    ] {
+    for (name, value) in
+        [("lag", best.0.lag_tau_s), ("hysteresis", best.0.hysteresis_width_c), ("bias_play", best.0.bias_play_width_c)]
+    {
         let mut th = best.0;
         match name {
             "lag" => th.lag_tau_s = 0.0,

@@ -962,6 +962,7 @@ impl UnitSpec {
                     method: MethodSpec { kind: MethodKind::Uncorrected, form: None },
                     temperature_model: m.clone(),
                     vibration: None,
+                    thermal_dynamics: None,
                 };
                 file.to_params().map_err(|e| Issue { key: None, reason: format!("unit.{e}") })?.0.model
             }
