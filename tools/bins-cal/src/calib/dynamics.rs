@@ -32,8 +32,9 @@ use crate::diagnose::mech::{lagged, play};
 use crate::diagnose::noise::ls_sse;
 use crate::recording::read_all;
 use anyhow::{anyhow, bail};
+use bins_comp::dynamics::{DynamicsState, Effective, ThermalDynamics};
 use bins_comp::temperature::MAX_POLY_ORDER;
-use bins_comp::{CalibrationParams, CoefDelta, Constants, Method, TempModel};
+use bins_comp::{Calibration, CalibrationParams, CoefDelta, Constants, Method, TempModel};
 use std::path::Path;
 
 /// Scale of ΔT in the regressors [°C] (conditioning only).
@@ -548,4 +549,31 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
     }
     let fit = fit_at(series, &kept, req, scale)?;
     Ok(Identification { fit, static_fit, components, lag_resolution_s: lag_res, evaluations: evals.get() })
+}
+
+/// The core's thermal dynamics run over a recording's rows (`t_s`, `temp_C`; the time since
+/// power-on from `power_s`, else from the first row): the effective temperature and bias-play
+/// fraction of every row, as the firmware computes them (in f64).
+pub fn run_core(rows: &[crate::recording::Row], d: &ThermalDynamics<f64>) -> Vec<Effective<f64>> {
+    let mut st = DynamicsState::new();
+    let t_first = rows.first().map_or(0.0, |r| r.t_s);
+    let mut prev: Option<f64> = None;
+    rows.iter()
+        .map(|r| {
+            let dt = prev.map_or(0.0, |p| r.t_s - p);
+            prev = Some(r.t_s);
+            let t_on = r.power_s.unwrap_or(r.t_s - t_first);
+            d.step(&mut st, r.temp_c, dt, t_on)
+        })
+        .collect()
+}
+
+/// The compensated acceleration \[g\] of one sample with the thermal dynamics: the core's
+/// compensation at the effective temperature, minus the bias play (`bias_play_g·d`).
+pub fn compensate(cal: &Calibration<f64>, d: &ThermalDynamics<f64>, u_v: [f64; 3], e: &Effective<f64>) -> [f64; 3] {
+    let mut a = cal.compensate(u_v, e.temp_eff_c).accel_g;
+    for i in 0..3 {
+        a[i] -= d.bias_play_g[i] * e.bias_play;
+    }
+    a
 }
