@@ -30,7 +30,7 @@
 use super::segments::{self, Options};
 use crate::diagnose::mech::{lagged, play};
 use crate::diagnose::noise::ls_sse;
-use crate::recording::read_all;
+use crate::recording::{Row, read_all};
 use anyhow::{anyhow, bail};
 use bins_comp::dynamics::{DynamicsState, Effective, ThermalDynamics};
 use bins_comp::temperature::MAX_POLY_ORDER;
@@ -57,32 +57,81 @@ pub struct Series {
 
 impl Series {
     /// Reads a recording and finds its dwells (labels starting with `pos_prefix`), ramping or
-    /// not, stationary by `opt.max_std_v`; blocks of at most `block_s`. Errors name the file.
+    /// not ([`from_rows`](Self::from_rows)). Errors name the file.
     pub fn read(path: &Path, opt: &Options, pos_prefix: &str, block_s: f64) -> anyhow::Result<Series> {
-        let opt = Options { max_rate_c_per_min: f64::INFINITY, ..*opt };
-        let segs = segments::find(path, &opt)?;
         let (_, rows) = read_all(path).map_err(|e| anyhow!("{e}"))?;
-        let name = path.display().to_string();
-        if rows.iter().any(|r| !r.temp_c.is_finite()) {
-            bail!("{name}: `temp_C` is missing in some rows: the dynamics need the temperature of every row");
+        Self::from_rows(&path.display().to_string(), &rows, opt, pos_prefix, block_s)
+    }
+
+    /// The dwells of `rows`: runs of consecutive rows with the same `pos` label (starting with
+    /// `pos_prefix`) and a known specific force, less the settling margin
+    /// ([`segments::after_settling`]), kept when every signal's standard deviation is at most
+    /// `opt.max_std_v` (the temperature may ramp); blocks of at most `block_s`. Errors name
+    /// `name`: a row without a temperature, no dwell.
+    pub fn from_rows(
+        name: &str,
+        rows: &[Row],
+        opt: &Options,
+        pos_prefix: &str,
+        block_s: f64,
+    ) -> anyhow::Result<Series> {
+        if let Some(r) = rows.iter().find(|r| !r.temp_c.is_finite()) {
+            bail!("{name}: line {}: no `temp_C`: the dynamics need the temperature of every row", r.line);
         }
         let t_s: Vec<f64> = rows.iter().map(|r| r.t_s).collect();
+        // Runs: (first row, end row, f).
+        let mut runs: Vec<(usize, usize, [f64; 3])> = Vec::new();
+        let mut k = 0;
+        while k < rows.len() {
+            let key = |r: &Row| match (&r.pos, r.reference_f_g()) {
+                (Some(p), Some(f)) if p.starts_with(pos_prefix) && !p.is_empty() => Some((p.clone(), f)),
+                _ => None,
+            };
+            let Some(first) = key(&rows[k]) else {
+                k += 1;
+                continue;
+            };
+            let mut e = k + 1;
+            while e < rows.len() && key(&rows[e]).as_ref() == Some(&first) {
+                e += 1;
+            }
+            runs.push((k, e, first.1));
+            k = e;
+        }
         let mut blocks = Vec::new();
-        for s in segs.iter().filter(|s| s.rejected.is_none() && s.pos.starts_with(pos_prefix)) {
-            let a = t_s.partition_point(|&t| t < s.t_s.0);
-            let b = t_s.partition_point(|&t| t <= s.t_s.1);
+        for (a, b, f) in runs {
+            let run: Vec<segments::RunRow> = (a..b).map(|k| (rows[k].t_s, rows[k].u_v, rows[k].temp_c)).collect();
+            let kept = segments::after_settling(&run, opt);
+            if kept.len() < 3 {
+                continue;
+            }
+            let n = kept.len() as f64;
+            let stationary = (0..3).all(|i| {
+                let m = kept.iter().map(|r| r.1[i]).sum::<f64>() / n;
+                (kept.iter().map(|r| (r.1[i] - m).powi(2)).sum::<f64>() / n).sqrt() <= opt.max_std_v
+            });
+            if !stationary {
+                continue;
+            }
+            let a = a + (run.len() - kept.len());
             let mut k = a;
             while k < b {
                 let mut e = k + 1;
                 while e < b && t_s[e] - t_s[k] < block_s {
                     e += 1;
                 }
-                blocks.push((k, e, s.f_g));
+                blocks.push((k, e, f));
                 k = e;
             }
         }
+        if blocks.is_empty() {
+            bail!(
+                "{name}: no stationary dwell labelled `{pos_prefix}…` with a known specific force (signal std ≤ {} V)",
+                opt.max_std_v
+            );
+        }
         Ok(Series {
-            name,
+            name: name.to_string(),
             t_s,
             temp_c: rows.iter().map(|r| r.temp_c).collect(),
             u_v: rows.iter().map(|r| r.u_v).collect(),
@@ -93,8 +142,14 @@ impl Series {
     /// The series keeping only the blocks whose rows lie in `[from_s, to_s)` (the rows
     /// themselves stay: the dynamics run over the whole history).
     pub fn window(&self, from_s: f64, to_s: f64) -> Series {
+        self.keep(|a, b| a >= from_s && b < to_s)
+    }
+
+    /// The series keeping only the blocks for which `keep(first t_s, last t_s)` holds (the rows
+    /// stay).
+    pub fn keep(&self, keep: impl Fn(f64, f64) -> bool) -> Series {
         let mut s = self.clone();
-        s.blocks.retain(|b| self.t_s[b.0] >= from_s && self.t_s[b.1 - 1] < to_s);
+        s.blocks.retain(|b| keep(self.t_s[b.0], self.t_s[b.1 - 1]));
         s
     }
 
@@ -488,9 +543,16 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
     // and play trade against each other along a valley, which one at a time would not follow.
     let on: Vec<usize> = (0..3).filter(|&k| get(&best.0, k) > 0.0).collect();
     if !on.is_empty() {
+        // Within the grids' ranges.
+        let bound =
+            |k: usize| if k == 0 { (taus[1], taus[taus.len() - 1]) } else { (widths[1], widths[widths.len() - 1]) };
         let f = |x: &[f64]| {
             let mut th = best.0;
             for (v, &k) in x.iter().zip(&on) {
+                let (lo, hi) = bound(k);
+                if !(v.exp() >= lo && v.exp() <= hi) {
+                    return f64::INFINITY;
+                }
                 set(&mut th, k, v.exp());
             }
             cost(&th)
