@@ -5,11 +5,9 @@ use bins_cal::calib::dynamics::{self, Request, Series};
 use bins_cal::calib::segments::Options;
 use bins_cal::sim::scenario;
 use bins_comp::Method;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn repo(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(rel)
-}
+use common::repo;
 
 /// Simulates `scenario_text` (seed 1) into `dir`, reads it as a series.
 fn series(dir: &Path, scenario_text: &str) -> Series {
@@ -67,4 +65,73 @@ fn identifies_no_dynamics_when_none_is_simulated() {
         assert!(!c.on, "{} identified where none was simulated: {c:?}", c.name);
     }
     assert_eq!(id.fit.theta, dynamics::Theta::default());
+}
+
+#[allow(dead_code)] // the helpers other test files use
+mod common;
+
+#[test]
+fn a_diagnosis_merges_into_a_calibration_and_bad_tables_name_the_file_and_key() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = |n: &str| tmp.path().join(n).to_string_lossy().into_owned();
+    let sc = |n: &str| repo(&format!("scenarios/{n}")).to_string_lossy().into_owned();
+    common::ok(&["simulate", &sc("test-tilter-3t.toml"), "-o", &p("cal.csv"), "--seed", "1"]);
+    common::ok(&["calibrate", "--tilter", &p("cal.csv"), "--model", "poly:2", "-o", &p("unit.toml")]);
+    common::ok(&["simulate", &sc("diagnose-ramps.toml"), "-o", &p("ramps.csv"), "--seed", "2"]);
+    common::ok(&[
+        "diagnose",
+        "--calib",
+        &p("unit.toml"),
+        "--real",
+        &p("ramps.csv"),
+        "--report",
+        &p("d.json"),
+        "--model",
+        &p("model.toml"),
+    ]);
+    // The diagnosis names the die lag (150 s in the scenario) and writes it as the table.
+    let model = bins_cal::calfile::DynamicsSpec::read_table(Path::new(&p("model.toml"))).unwrap();
+    assert!((model.lag_tau_s - 150.0).abs() < 0.2 * 150.0, "{model:?}");
+    common::ok(&[
+        "calibrate",
+        "--tilter",
+        &p("cal.csv"),
+        "--model",
+        "poly:2",
+        "--dynamics",
+        &p("model.toml"),
+        "-o",
+        &p("unit-dyn.toml"),
+        "--blob",
+        &p("unit-dyn.bin"),
+    ]);
+    let file = bins_cal::calfile::CalibrationFile::read(Path::new(&p("unit-dyn.toml"))).unwrap();
+    assert_eq!(file.thermal_dynamics, Some(model));
+    // The blob carries it: back to the same table.
+    let blob = std::fs::read(p("unit-dyn.bin")).unwrap();
+    assert_eq!(bins_cal::calfile::CalibrationFile::from_blob(&blob).unwrap().thermal_dynamics, Some(model));
+    // Errors name the file and the key; nothing is written.
+    for (text, key) in [
+        ("[thermal_dynamics]\nlag_tau = 3.0\n", "lag_tau"),
+        ("[thermal_dynamics]\nlag_tau_s = -3.0\n", "thermal_dynamics.lag_tau_s"),
+        ("[thermal_dynamics]\nbias_play_mg = [1.0, 0.0, 0.0]\n", "bias_play_mg"),
+        ("[other]\nx = 1\n", "[thermal_dynamics]"),
+    ] {
+        std::fs::write(p("bad.toml"), text).unwrap();
+        let e = common::err(&[
+            "calibrate",
+            "--tilter",
+            &p("cal.csv"),
+            "--model",
+            "poly:2",
+            "--dynamics",
+            &p("bad.toml"),
+            "-o",
+            &p("out.toml"),
+        ]);
+        assert!(e.contains("bad.toml") && e.contains(key), "{text:?}: {e}");
+        assert!(!tmp.path().join("out.toml").exists());
+    }
+    let e = common::err(&["calibrate", "--tilter", &p("cal.csv"), "--dynamics", "identify", "-o", &p("out.toml")]);
+    assert!(e.contains("--model poly:N"), "{e}");
 }

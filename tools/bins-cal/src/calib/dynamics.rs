@@ -15,8 +15,8 @@
 //! the core evaluates, `CalibrationParams::constants_at`). For fixed (τ, h, h_b) the model is
 //! linear in the constants, their temperature coefficients and the amplitudes `b_i`: they are
 //! fitted by least squares. The three nonlinear parameters are searched as the diagnosis
-//! searches its θ: a log-spaced grid over (τ, h), then h_b, then golden-section refinement of
-//! each in turn. A component is kept only when dropping it (and re-fitting the rest) raises the
+//! searches its θ: a log-spaced grid over (τ, h), then h_b, then Nelder–Mead on the logarithms
+//! of the non-zero ones together, within the grids' ranges. A component is kept only when dropping it (and re-fitting the rest) raises the
 //! residual beyond what the noise allows (`Component::on`); a lag below the resolution of the
 //! recording (three sample periods, at least 1 s) is reported as off.
 //!

@@ -233,7 +233,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for (t, segs) in &groups {
         let mut rows = Vec::new();
         for s in segs {
-            rows.push((s.pos.clone(), s.temp_c, values(s)?));
+            rows.push((s.pos.clone(), *t, values(s)?));
         }
         panels.push((format!("check at {t:+.1} °C"), "hold", rows));
     }
@@ -346,7 +346,11 @@ pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec
             top.draw(&Text::new(label.to_string(), (x + 26, 45), font.clone())).map_err(|e| anyhow!("plot: {e}"))?;
             x += 100;
         }
-        for ((title, _, rows), area) in panels.iter().zip(areas) {
+        for ((title, phase, rows), area) in panels.iter().zip(areas) {
+            if *phase != "hold" {
+                ramp_panel(&area, title, rows, &colors[..m])?;
+                continue;
+            }
             let lim = rows.iter().flat_map(|r| r.2.iter()).fold(1.2f64, |a, b| a.max(b.abs() * 1.1));
             let n = rows.len().max(1);
             let mut chart = ChartBuilder::on(&area)
@@ -395,6 +399,51 @@ pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec
     let bytes = std::fs::read(&path).with_context(|| format!("{}", path.display()))?;
     let _ = std::fs::remove_dir_all(&dir);
     Ok(bytes)
+}
+
+/// A panel of dwells during a ramp: Δg against the dwell's temperature, a point per dwell and
+/// method (the T0 constants, whose error is tens of times larger, are left out: they are in
+/// `verify.csv`).
+fn ramp_panel<DB: plotters::prelude::DrawingBackend>(
+    area: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    rows: &[(String, f64, Vec<f64>)],
+    colors: &[plotters::style::RGBColor],
+) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    let (lo, hi) = rows.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, r| (a.0.min(r.1), a.1.max(r.1)));
+    let lim = rows.iter().flat_map(|r| r.2.iter().skip(1)).fold(1.2f64, |a, b| a.max(b.abs() * 1.1));
+    let mut chart = ChartBuilder::on(area)
+        .caption(format!("{title} (T0 constants off scale, in verify.csv)"), ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(60)
+        .build_cartesian_2d((lo - 2.0)..(hi + 2.0), -lim..lim)
+        .map_err(|e| anyhow!("plot: {e}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("temperature read by the unit [°C]")
+        .y_desc("Δg [mg]")
+        .label_style(("sans-serif", 14))
+        .draw()
+        .map_err(|e| anyhow!("plot: {e}"))?;
+    for (k, c) in colors.iter().enumerate().skip(1) {
+        chart
+            .draw_series(
+                rows.iter().filter_map(|r| {
+                    r.2.get(k).filter(|v| v.is_finite()).map(|v| Circle::new((r.1, *v), 3, c.filled()))
+                }),
+            )
+            .map_err(|e| anyhow!("plot: {e}"))?;
+    }
+    for (tol, style) in [(0.3, BLACK.stroke_width(2)), (1.0, RGBColor(150, 0, 150).stroke_width(1))] {
+        for s in [-1.0, 1.0] {
+            chart
+                .draw_series(LineSeries::new([(lo - 2.0, s * tol), (hi + 2.0, s * tol)], style))
+                .map_err(|e| anyhow!("plot: {e}"))?;
+        }
+    }
+    Ok(())
 }
 
 /// A private scratch directory for the bitmap backend (which writes files only).
