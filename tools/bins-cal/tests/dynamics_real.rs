@@ -41,6 +41,9 @@ fn heldout_rms(
     ss.map(|s| (s / n as f64).sqrt())
 }
 
+/// Which rows a split fits on (by time).
+type Split = Box<dyn Fn(f64) -> bool>;
+
 pub fn halves(order: usize) -> Vec<(String, [f64; 3], [f64; 3], Theta)> {
     let path = repo("data/real/tofupilot-sweep-real.csv");
     // One orientation held throughout: the whole record is one dwell (its signals change with
@@ -58,7 +61,7 @@ pub fn halves(order: usize) -> Vec<(String, [f64; 3], [f64; 3], Theta)> {
     let mut out = Vec::new();
     let chunk = 600.0;
     let even = move |t: f64| (((t - t0) / chunk).floor() as i64) % 2 == 0;
-    let cases: [(&str, Box<dyn Fn(f64) -> bool>); 4] = [
+    let cases: [(&str, Split); 4] = [
         ("fit 1st half, predict 2nd", Box::new(move |t| t < mid)),
         ("fit 2nd half, predict 1st", Box::new(move |t| t >= mid)),
         ("fit even 10-min chunks, predict odd", Box::new(even)),
@@ -67,8 +70,8 @@ pub fn halves(order: usize) -> Vec<(String, [f64; 3], [f64; 3], Theta)> {
     for (name, fit_in) in cases {
         let s = all.keep(|a, b| fit_in(a) && fit_in(b));
         let id = dynamics::identify(std::slice::from_ref(&s), &req, &mut |_| {}).unwrap();
-        let mut wide = |p: &CalibrationParams| {
-            let mut p = p.clone();
+        let wide = |p: &CalibrationParams| {
+            let mut p = *p;
             p.temp_range_c = (-40.0, 100.0);
             p
         };
