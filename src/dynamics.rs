@@ -55,7 +55,7 @@ use crate::linalg::Vec3;
 /// without touching the state, as a non-finite one is (the calibration clamps it to its
 /// range).
 pub const MAX_READING_C: f64 = 1000.0;
-/// Largest time constant (lag, self-heating) accepted [s].
+/// Largest time constant (lag, self-heating) accepted \[s\].
 pub const MAX_TAU_S: f64 = 1.0e5;
 /// Largest width of a play (hysteresis, bias hysteresis) and largest |ΔT_sh| accepted [°C].
 pub const MAX_WIDTH_C: f64 = 50.0;
@@ -78,14 +78,14 @@ pub const fn limits(n: u8) -> (f64, f64) {
 /// Parameters of the thermal dynamics; every stage optional (0 = off).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ThermalDynamics<F> {
-    /// τ of the first-order lag of the die behind the thermistor reading [s] (0: no lag).
+    /// τ of the first-order lag of the die behind the thermistor reading \[s\] (0: no lag).
     pub lag_tau_s: F,
     /// Width h of the play operator on the lagged temperature [°C] (0: no hysteresis).
     pub hysteresis_width_c: F,
     /// ΔT_sh: how much warmer the die settles than the thermistor after power-on [°C] (may be
     /// negative; 0: no self-heating).
     pub self_heating_c: F,
-    /// τ_sh of the self-heating [s] (0 with ΔT_sh ≠ 0: a constant offset from power-on).
+    /// τ_sh of the self-heating \[s\] (0 with ΔT_sh ≠ 0: a constant offset from power-on).
     pub self_heating_tau_s: F,
     /// Width h_b of the bias play on the effective temperature [°C] (0: no bias hysteresis).
     pub bias_play_width_c: F,
@@ -321,7 +321,7 @@ impl<F: Float> ThermalDynamics<F> {
     }
 
     /// The self-heating term `ΔT_sh·(1 − e^(−t_on/τ_sh))` at `t_on_s` seconds after power-on
-    /// (ΔT_sh for τ_sh = 0; the exponential is skipped once it is below 10⁻¹⁷, t_on > 40·τ_sh).
+    /// (ΔT_sh for τ_sh = 0, and from t_on > 40·τ_sh on, where the exponential is below 10⁻¹⁷).
     pub fn self_heating_at(&self, t_on_s: F) -> F {
         let (dt, tau) = (self.self_heating_c, self.self_heating_tau_s);
         if dt == F::ZERO {
@@ -333,10 +333,11 @@ impl<F: Float> ThermalDynamics<F> {
         dt * one_minus_exp_neg(t_on_s.max(F::ZERO) / tau)
     }
 
-    /// One sample: thermistor reading `temp_c` [°C], sample period `dt_s` [s] (the time since
-    /// the previous reading) and time since power-on `t_on_s` [s] to the effective
+    /// One sample: thermistor reading `temp_c` [°C], sample period `dt_s` \[s\] (the time since
+    /// the previous reading) and time since power-on `t_on_s` \[s\] to the effective
     /// temperature and the bias-play fraction (module docs). The gains are computed in the call
-    /// (up to two exponentials); at a fixed period [`FixedRate::step`] is the cheaper equivalent.
+    /// ([`one_minus_exp_neg`], twice); at a fixed period [`FixedRate::step`] is the cheaper
+    /// equivalent.
     /// A non-finite or negative `dt_s` is taken as 0 (the lag holds).
     pub fn step(&self, st: &mut DynamicsState<F>, temp_c: F, dt_s: F, t_on_s: F) -> Effective<F> {
         let dt = if dt_s.is_finite() && dt_s > F::ZERO { dt_s } else { F::ZERO };
@@ -351,7 +352,7 @@ impl<F: Float> ThermalDynamics<F> {
         k.advance(st, temp_c, heating)
     }
 
-    /// The stages at one fixed sample period `dt_s` [s], their per-sample constants
+    /// The stages at one fixed sample period `dt_s` \[s\], their per-sample constants
     /// precomputed. Fails on invalid parameters ([`validate`](Self::validate)) or a period
     /// that is not finite and positive.
     #[inline(never)]
@@ -465,7 +466,7 @@ impl<F: Float> FixedRate<F> {
         &self.params
     }
 
-    /// The sample period [s].
+    /// The sample period \[s\].
     pub fn dt_s(&self) -> F {
         self.dt_s
     }

@@ -3,14 +3,17 @@
 //!
 //! - At boot the calibration blob in the CALIB region is parsed once ([`calib`]); if it is
 //!   missing or invalid the image runs uncalibrated (every sample flagged
-//!   `INVALID_CALIBRATION`), exactly as the replay firmware does.
+//!   `INVALID_CALIBRATION`), exactly as the replay firmware does. A blob with thermal dynamics
+//!   (section 0x0007) gets them at the interrupt's fixed period 1/[`TICK_HZ`], their gains
+//!   computed once here.
 //! - The sensors are initialised on the board's peripherals ([`board`]): the ADS131M04 on the
 //!   PL022 SPI with its DRDY line on GPIO0, the TMP117 on the SBCon I²C, behind the sample
 //!   source and its fault policy ([`bins_comp::drivers::SampleSource`], [`SOURCE_CONFIG`]).
 //!   A sensor that does not answer is not fatal: it is not read, every sample says so
 //!   (`SENSOR_FAULT`), and its initialisation is tried again every second.
 //! - SysTick fires at [`TICK_HZ`]. Its handler runs [`isr::Isr::on_tick`]: one sample from the
-//!   sensors, one pipeline step, one result into the queue.
+//!   sensors, one pipeline step (the thermal dynamics first, when the blob has them), one
+//!   result into the queue.
 //! - `main` is the consumer: it drains the queue into output frames on UART0
 //!   ([`bins_comp::frame`]): a boot frame first (blob accepted or not, sensors initialised),
 //!   then one sample frame per sample and a health frame (fault counts, overruns, link

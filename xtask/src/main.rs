@@ -19,6 +19,8 @@ const THUMB_TARGET_DIR: &str = "target/thumb";
 const VECTORS_IN: &str = "target/fw-vectors/in.bin";
 /// The calibration file whose blob the firmware finds in its CALIB region during the test.
 const CALIBRATION: &str = "calibrations/paper-two-range.toml";
+/// The same unit with thermal dynamics (blob section 0x0007), for the replay test.
+const CALIBRATION_DYNAMICS: &str = "calibrations/paper-two-range-dynamics.toml";
 /// That blob, and the same as Intel HEX at the CALIB origin (the address the loader uses).
 const BLOB: &str = "target/fw-vectors/cal.bin";
 const BLOB_HEX: &str = "target/fw-vectors/cal.hex";
@@ -454,8 +456,10 @@ impl Xtask {
 
     /// The short recording ([`REPLAY_SCENARIO`]) through the replay firmware in QEMU and
     /// through `bins-cal replay` on the host, with the paper's calibration (method 2,
-    /// simplified, piecewise-linear) and the same with method 1, both with the online VE, and
-    /// method 2 with flight-phase profile 0's: the CSVs must be identical.
+    /// simplified, piecewise-linear) and the same with method 1, both with the online VE,
+    /// method 2 with flight-phase profile 0's, and the same unit with thermal dynamics
+    /// ([`CALIBRATION_DYNAMICS`], methods 2 and 1, online VE): the CSVs must be identical, and
+    /// the dynamics must change the output.
     fn replay_test(&mut self) -> Result {
         self.run(self.host_cargo(["build", "--release", "-q", "-p", "bins-cal"]))?;
         let dir = self.root.join(REPLAY_DIR);
@@ -476,11 +480,25 @@ impl Xtask {
         let mut c = self.bins_cal();
         c.args(["blob", "encode"]).arg(&m1_toml).arg("-o").arg(&m1_blob);
         self.run(c)?;
+        // The unit with thermal dynamics, methods 2 and 1.
+        let dyn_toml = std::fs::read_to_string(self.root.join(CALIBRATION_DYNAMICS))
+            .map_err(|e| format!("{CALIBRATION_DYNAMICS}: {e}"))?;
+        let dyn_m1_toml = dir.join("dynamics-method1.toml");
+        std::fs::write(&dyn_m1_toml, dyn_toml.replace(m2, "kind = \"coefficient-correction\""))
+            .map_err(|e| format!("{}: {e}", dyn_m1_toml.display()))?;
+        let (dyn_blob, dyn_m1_blob) = (dir.join("dynamics.bin"), dir.join("dynamics-method1.bin"));
+        for (toml, out) in [(&self.root.join(CALIBRATION_DYNAMICS), &dyn_blob), (&dyn_m1_toml, &dyn_m1_blob)] {
+            let mut c = self.bins_cal();
+            c.args(["blob", "encode"]).arg(toml).arg("-o").arg(out);
+            self.run(c)?;
+        }
         let blob = self.root.join(BLOB);
         for (name, blob, ve) in [
             ("method2", &blob, DEFAULT_VE),
             ("method1", &m1_blob, DEFAULT_VE),
             ("method2-profile0", &blob, "profile:0"),
+            ("method2-dynamics", &dyn_blob, DEFAULT_VE),
+            ("method1-dynamics", &dyn_m1_blob, DEFAULT_VE),
         ] {
             let (fw, host) = (dir.join(format!("{name}-qemu.csv")), dir.join(format!("{name}-host.csv")));
             self.replay_firmware(&rec, blob, &self.root.join(BLOB_HEX), &fw, &dir, ve)?;
@@ -489,6 +507,11 @@ impl Xtask {
         // The source reached the firmware: profile 0's VE is not the online estimate.
         if read(&dir.join("method2-qemu.csv"))? == read(&dir.join("method2-profile0-qemu.csv"))? {
             return Err("replay: the firmware's output with profile 0's VE equals the online VE's".into());
+        }
+        // The thermal dynamics reached the firmware: its output differs from the same unit's
+        // without them.
+        if read(&dir.join("method2-qemu.csv"))? == read(&dir.join("method2-dynamics-qemu.csv"))? {
+            return Err("replay: the firmware's output with thermal dynamics equals the output without".into());
         }
         Ok(())
     }

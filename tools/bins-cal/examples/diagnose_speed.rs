@@ -1,6 +1,7 @@
-//! Speed of `bins-cal diagnose` (run by `cargo xtask bench`): wall time of the diagnosis of
-//! pairs of 30 000 and 260 000 rows, in release, on one core, against the budgets of 2 s and
-//! 10 s. The pairs are the proof suite's cases (`warmup`: all four θ-mechanisms searched on
+//! Speed of `bins-cal diagnose` (run by `cargo xtask bench`): time of the diagnosis of pairs
+//! of 30 000 and 260 000 rows, in release, on one core, against the budgets of 2 s and 10 s.
+//! The diagnosis runs on one thread; the budget is checked on that thread's CPU time, so other
+//! work on the machine does not count against it (the wall time is printed beside it). The pairs are the proof suite's cases (`warmup`: all four θ-mechanisms searched on
 //! three axes; `lag_plus_asymmetry`: the thermal and V(2) terms, vibration on) lengthened;
 //! generating them is not timed. Exits non-zero when a budget is missed.
 //!
@@ -25,7 +26,7 @@ fn main() {
             };
             case.plan.rows = rows;
             let (sim, real) = cases::generate(&case);
-            let t0 = Instant::now();
+            let (t0, cpu0) = (Instant::now(), thread_cpu_s());
             let d = match diagnose(&sim, &real, Path::new("sim"), Path::new("real")) {
                 Ok(d) => d,
                 Err(e) => {
@@ -33,12 +34,12 @@ fn main() {
                     std::process::exit(2);
                 }
             };
-            let secs = t0.elapsed().as_secs_f64();
+            let (wall_s, secs) = (t0.elapsed().as_secs_f64(), thread_cpu_s() - cpu0);
             let ok = secs < budget_s;
             missed |= !ok;
             let named: Vec<&str> = d.report.effects.iter().map(|e| e.id.as_str()).collect();
             println!(
-                "diagnosis of {rows:>7} rows ({name:<18}): {secs:6.2} s (budget {budget_s} s: {}); named {named:?}",
+                "diagnosis of {rows:>7} rows ({name:<18}): {secs:6.2} s CPU, {wall_s:6.2} s wall (budget {budget_s} s: {}); named {named:?}",
                 if ok { "met" } else { "MISSED" }
             );
         }
@@ -46,4 +47,16 @@ fn main() {
     if missed {
         std::process::exit(1);
     }
+}
+
+/// CPU time of the calling thread [s].
+fn thread_cpu_s() -> f64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `ts` is a valid, writable timespec; CLOCK_THREAD_CPUTIME_ID needs nothing else.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    if rc != 0 {
+        eprintln!("clock_gettime(CLOCK_THREAD_CPUTIME_ID) failed");
+        std::process::exit(2);
+    }
+    ts.tv_sec as f64 + 1e-9 * ts.tv_nsec as f64
 }

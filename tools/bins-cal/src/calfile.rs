@@ -53,36 +53,37 @@ pub struct CalibrationFile {
     /// no VE model.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vibration: Option<VibrationSpec>,
-    /// Thermal dynamics between the thermistor and the sensing elements (blob section 0x0007);
-    /// absent: none.
+    /// Thermal dynamics between the thermistor and the sensing elements (blob section
+    /// 0x0007); absent: none, the temperature model is evaluated at the reading.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub thermal_dynamics: Option<DynamicsSpec>,
 }
 
-/// `[thermal_dynamics]`: lag, hysteresis play, self-heating and bias play of the unit
-/// (`bins_comp::dynamics`); a missing key is 0 (that stage off).
+/// `[thermal_dynamics]`: what `bins-cal diagnose` names `thermal_lag`, `thermal_hysteresis`,
+/// `self_heating` and `bias_hysteresis`, in the units of the keys (the bias play in mg; the
+/// core takes g). A missing key is 0 (that stage off).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DynamicsSpec {
-    /// Lag of the sensing elements behind the thermistor \[s\].
+    /// τ of the die's lag behind the thermistor \[s\].
     pub lag_tau_s: f64,
-    /// Width of the play on the lagged temperature [°C].
+    /// Width of the hysteresis play on the lagged temperature [°C].
     #[serde(rename = "hysteresis_width_C")]
     pub hysteresis_width_c: f64,
-    /// Self-heating after power-on [°C].
+    /// ΔT_sh: how much warmer the die settles than the thermistor after power-on [°C].
     #[serde(rename = "self_heating_C")]
     pub self_heating_c: f64,
-    /// Its time constant \[s\].
+    /// τ_sh of the self-heating \[s\].
     pub self_heating_tau_s: f64,
-    /// Width of the additive bias play [°C].
+    /// Width of the bias play on the effective temperature [°C].
     #[serde(rename = "bias_play_width_C")]
     pub bias_play_width_c: f64,
-    /// Its amplitude per axis x, y, z [mg] (subtracted as `bias_play_mg·d`).
+    /// Bias per unit of the play fraction, x, y, z \[mg\].
     pub bias_play_mg: [f64; 3],
 }
 
 impl DynamicsSpec {
-    /// The core's parameters (mg to g); ranges are checked by the encoder.
+    /// The core's parameters (bias in g: `bias_play_mg / 1000`).
     pub fn to_dynamics(&self) -> ThermalDynamics<f64> {
         ThermalDynamics {
             lag_tau_s: self.lag_tau_s,
@@ -90,11 +91,14 @@ impl DynamicsSpec {
             self_heating_c: self.self_heating_c,
             self_heating_tau_s: self.self_heating_tau_s,
             bias_play_width_c: self.bias_play_width_c,
-            bias_play_g: self.bias_play_mg.map(|b| b * 1e-3),
+            bias_play_g: self.bias_play_mg.map(|mg| mg / 1000.0),
         }
     }
 
-    /// The inverse of [`to_dynamics`](Self::to_dynamics).
+    /// The inverse of [`to_dynamics`](Self::to_dynamics): each bias in mg is the shortest
+    /// decimal whose `/ 1000` gives the bias in g back exactly. The g the core uses is lossless
+    /// through file → blob → file; the mg text is too for values of up to 9 significant digits
+    /// (two mg values an ulp apart can give one g, and the shorter is written).
     pub fn from_dynamics(d: &ThermalDynamics<f64>) -> Self {
         DynamicsSpec {
             lag_tau_s: d.lag_tau_s,
@@ -102,7 +106,7 @@ impl DynamicsSpec {
             self_heating_c: d.self_heating_c,
             self_heating_tau_s: d.self_heating_tau_s,
             bias_play_width_c: d.bias_play_width_c,
-            bias_play_mg: d.bias_play_g.map(|b| b * 1e3),
+            bias_play_mg: d.bias_play_g.map(g_to_mg),
         }
     }
 
@@ -122,6 +126,31 @@ impl DynamicsSpec {
         spec.to_dynamics().validate().map_err(|e| anyhow::anyhow!("{}: thermal_dynamics.{e}", path.display()))?;
         Ok(spec)
     }
+}
+
+/// An mg value `m` with `m / 1000 == g`: of those within a few ulps of `g·1000`, the one
+/// with the shortest decimal form (so a file's `0.015` comes back as `0.015`, not as another
+/// value that gives the same g).
+fn g_to_mg(g: f64) -> f64 {
+    let m = g * 1000.0;
+    if !m.is_finite() {
+        return m;
+    }
+    let (mut best, mut best_len) = (m, usize::MAX);
+    let mut c = m;
+    for _ in 0..4 {
+        c = c.next_down();
+    }
+    for _ in 0..9 {
+        if c / 1000.0 == g {
+            let len = format!("{c:?}").len();
+            if len < best_len {
+                (best, best_len) = (c, len);
+            }
+        }
+        c = c.next_up();
+    }
+    best
 }
 
 /// `[vibration]`: the VE model of the unit (blob sections 0x0005, 0x0006).
@@ -570,26 +599,31 @@ impl CalibrationFile {
         Ok((params, meta))
     }
 
-    /// The thermal dynamics (`[thermal_dynamics]`), `None` when the file has none.
-    pub fn to_dynamics(&self) -> Option<ThermalDynamics<f64>> {
-        self.thermal_dynamics.as_ref().map(DynamicsSpec::to_dynamics)
-    }
-
     /// The vibration-error parameters (`[vibration]`), `None` when the file has none.
     pub fn to_vibration(&self) -> Result<Option<VibrationParams>, CalFileError> {
         self.vibration.as_ref().map(VibrationSpec::to_params).transpose()
     }
 
-    /// The blob: [`to_params`](Self::to_params) and [`to_vibration`](Self::to_vibration),
-    /// then the core's encoder (which checks everything the firmware checks).
+    /// The blob: [`to_params`](Self::to_params), [`to_vibration`](Self::to_vibration) and
+    /// the thermal dynamics, then the core's encoder (which checks everything the firmware
+    /// checks).
     pub fn to_blob(&self) -> Result<Vec<u8>, CalFileError> {
         let (params, meta) = self.to_params()?;
         let vib = self.to_vibration()?;
-        let dynamics = self.to_dynamics();
+        let dynamics = self.thermal_dynamics.as_ref().map(DynamicsSpec::to_dynamics);
         let mut buf = [0u8; blob::MAX_BLOB_BYTES];
         let n = blob::encode_with_dynamics(&params, vib.as_ref(), dynamics.as_ref(), &meta.as_meta(), &mut buf)
             .map_err(CalFileError::Blob)?;
         Ok(buf[..n].to_vec())
+    }
+
+    /// The core's thermal dynamics of this calibration (`None` without `[thermal_dynamics]`),
+    /// as the firmware reads them: the file is checked completely ([`check`](Self::check)) and
+    /// the dynamics are taken from its parsed blob, so host tools model exactly what flies.
+    /// Errors name the key.
+    pub fn dynamics(&self) -> Result<Option<ThermalDynamics<f64>>, CalFileError> {
+        let bytes = self.check()?;
+        Ok(blob::parse(&bytes).map_err(CalFileError::Blob)?.dynamics)
     }
 
     /// The file for parameters, a vibration-error model and traceability data.

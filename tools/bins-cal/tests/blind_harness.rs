@@ -4,7 +4,7 @@
 //! -- --ignored --nocapture`): `BLIND_CASES` cases (default 200) from seed `BLIND_SEED`
 //! (default 1), scorecard on stdout, `blind_cases.csv` and `blind_detectability.png` in
 //! `BLIND_OUT` (default `target/blind`). `BLIND_ONLY=seed,seed,…` runs just those seeds and
-//! prints their draws. `BLIND_THREADS` (default 2). `BLIND_ASSERT=1` fails the test unless
+//! prints their draws (`BLIND_REPORT=1`: and the diagnosis's JSON report). `BLIND_THREADS` (default 2). `BLIND_ASSERT=1` fails the test unless
 //! ≥ 90 % of the effects ≥ 5 σ are named exactly and ≤ 5 % of the cases have a false discovery.
 //!
 //! `blind_fixed_cases` (always run): six fixed cases — two nulls (one with a random walk) and
@@ -29,6 +29,9 @@ fn blind_harness() {
         for r in run_list(&cases, threads, false) {
             println!("{}", blind::line(&r));
             println!("{:#?}", r.case);
+            if std::env::var("BLIND_REPORT").is_ok_and(|v| v == "1") {
+                println!("{}", blind::report_json(&r.case));
+            }
         }
         return;
     }

@@ -4,6 +4,7 @@
 
 use bins_cal::calfile::{CalFileError, CalibrationFile};
 use bins_comp::blob::{self, CalDate, Meta};
+use bins_comp::dynamics::ThermalDynamics;
 use bins_comp::temperature::{MAX_KNOTS, MAX_POLY_ORDER};
 use bins_comp::vibration::tables;
 use bins_comp::{
@@ -356,5 +357,105 @@ proptest! {
         let again = CalibrationFile::from_blob(&blob).expect("blob parses");
         prop_assert_eq!(again.to_toml(), text);
         prop_assert_eq!(again, file);
+    }
+}
+
+// ---- thermal dynamics -----------------------------------------------------------------------
+
+fn dynamics_path() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../calibrations/paper-two-range-dynamics.toml")
+}
+
+#[test]
+fn thermal_dynamics_table_round_trips_in_mg_and_reaches_the_core_in_g() {
+    let file = CalibrationFile::read(&dynamics_path()).unwrap();
+    let d = file.dynamics().unwrap().expect("the file has [thermal_dynamics]");
+    // Written independently of the conversion: the file's mg as g.
+    let want = ThermalDynamics {
+        lag_tau_s: 2.0,
+        hysteresis_width_c: 0.05,
+        self_heating_c: 0.5,
+        self_heating_tau_s: 3.0,
+        bias_play_width_c: 0.1,
+        bias_play_g: [0.02e-3, -0.015e-3, 0.01e-3],
+    };
+    for (a, b) in d.to_array().iter().zip(want.to_array()) {
+        assert!((a - b).abs() <= 1e-18 + 1e-15 * b.abs(), "{a} != {b}");
+    }
+    // The blob carries the section; file → blob → file is lossless, text included.
+    let bytes = file.check().unwrap();
+    assert_eq!(blob::parse(&bytes).unwrap().dynamics, Some(d));
+    let back = CalibrationFile::from_blob(&bytes).unwrap();
+    assert_eq!(back.thermal_dynamics, file.thermal_dynamics);
+    let text = back.to_toml();
+    assert!(text.contains("[thermal_dynamics]\nlag_tau_s = 2.0\nhysteresis_width_C = 0.05\n"), "{text}");
+    assert!(text.contains("bias_play_mg = [0.02, -0.015, 0.01]"), "{text}");
+    assert_eq!(CalibrationFile::from_toml(&text).unwrap(), back);
+    // Without the table: no dynamics, no section.
+    let plain = CalibrationFile::from_toml(&sample_text()).unwrap();
+    assert_eq!(plain.dynamics().unwrap(), None);
+    assert_eq!(blob::parse(&plain.to_blob().unwrap()).unwrap().dynamics, None);
+}
+
+#[test]
+fn thermal_dynamics_keys_may_be_omitted() {
+    let s = sample_text() + "\n[thermal_dynamics]\nlag_tau_s = 150.0\n";
+    let d = CalibrationFile::from_toml(&s).unwrap().dynamics().unwrap().unwrap();
+    assert_eq!(d, ThermalDynamics { lag_tau_s: 150.0, ..ThermalDynamics::none() });
+}
+
+#[test]
+fn malformed_thermal_dynamics_are_rejected_naming_the_key() {
+    let s = CalibrationFile::read(&dynamics_path()).unwrap().to_toml();
+    let cases: [(String, &str); 9] = [
+        (s.replace("lag_tau_s = 2.0", "lag_tau_s = -2.0"), "thermal_dynamics.lag_tau_s out of range"),
+        (s.replace("hysteresis_width_C = 0.05", "hysteresis_width_C = 60.0"), "thermal_dynamics.hysteresis_width_C"),
+        (s.replace("self_heating_C = 0.5", "self_heating_C = nan"), "thermal_dynamics.self_heating_C"),
+        (s.replace("self_heating_tau_s = 3.0", "self_heating_tau_s = 1e6"), "thermal_dynamics.self_heating_tau_s"),
+        (s.replace("bias_play_width_C = 0.1", "bias_play_width_C = -0.1"), "thermal_dynamics.bias_play_width_C"),
+        (s.replace("[0.02, -0.015, 0.01]", "[0.02, -150.0, 0.01]"), "thermal_dynamics.bias_play_mg[1]"),
+        (s.replace("bias_play_width_C = 0.1", "bias_play_width_C = 0.0"), "thermal_dynamics.bias_play_mg[0]"),
+        (s.replace("lag_tau_s = 2.0", "lag_tau_min = 2.0"), "lag_tau_min"),
+        (s.replace("lag_tau_s = 2.0", "lag_tau_s = \"slow\""), "lag_tau_s"),
+    ];
+    for (text, key) in &cases {
+        assert_ne!(text, &s, "edit applies for {key}");
+        let e = error_of(text);
+        assert!(e.contains(key), "error {e:?} should name {key:?}");
+        assert!(!e.contains('\n'), "one line: {e:?}");
+        assert!(!e.contains("byte"), "{e}");
+    }
+    let e = error_of(&s.replace("[0.02, -0.015, 0.01]", "[0.02, -150.0, 0.01]"));
+    assert!(e.contains("[-100, 100] mg"), "the limit in the file's unit: {e}");
+}
+
+fn round_trip_mg(mg: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+    let s = sample_text()
+        + &format!(
+            "\n[thermal_dynamics]\nbias_play_width_C = 0.2\nbias_play_mg = [{:?}, {:?}, {:?}]\n",
+            mg[0], mg[1], mg[2]
+        );
+    let file = CalibrationFile::from_toml(&s).unwrap();
+    let g = file.dynamics().unwrap().unwrap().bias_play_g;
+    let back = CalibrationFile::from_blob(&file.check().unwrap()).unwrap();
+    let g_back = back.dynamics().unwrap().unwrap().bias_play_g;
+    assert_eq!(g.map(f64::to_bits), g_back.map(f64::to_bits), "g changed: {mg:?}");
+    (back.thermal_dynamics.unwrap().bias_play_mg, g)
+}
+
+proptest! {
+    /// The bias the core uses (g) survives file → blob → file → blob bit for bit. The mg
+    /// written back is the one nearest g·1000 that gives the same g: the file's own value
+    /// when it has up to 12 significant digits, else within an ulp of it (two mg values
+    /// can give the same g).
+    #[test]
+    fn bias_play_round_trips(mg in prop::array::uniform3(-100.0f64..=100.0), n in prop::array::uniform3(-100_000_000i64..=100_000_000)) {
+        let (back, _) = round_trip_mg(mg);
+        for (a, b) in back.iter().zip(mg) {
+            prop_assert!((a.to_bits() as i64 - b.to_bits() as i64).abs() <= 1, "{a:?} vs {b:?}");
+        }
+        let decimal = n.map(|k| k as f64 / 1e6);
+        let (back, _) = round_trip_mg(decimal);
+        prop_assert_eq!(back.map(f64::to_bits), decimal.map(f64::to_bits));
     }
 }

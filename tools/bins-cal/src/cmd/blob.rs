@@ -148,6 +148,12 @@ fn summary(p: &ParsedCalibration<'_>) -> String {
         };
         s += &format!(", vibration model ({variant}, {} profile(s))", v.n_profiles);
     }
+    if let Some(d) = &p.dynamics {
+        s += &format!(
+            ", thermal dynamics (lag {} s, hysteresis {} °C, self-heating {} °C τ {} s, bias play {} °C)",
+            d.lag_tau_s, d.hysteresis_width_c, d.self_heating_c, d.self_heating_tau_s, d.bias_play_width_c
+        );
+    }
     if !p.meta.serial.is_empty() {
         s += &format!(", serial {}", p.meta.serial);
     }

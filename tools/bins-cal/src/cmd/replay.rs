@@ -40,6 +40,11 @@ pub struct Args {
     /// firmware takes the same choice as `REPLAY_VE` at build time.
     #[arg(long, value_name = "SOURCE", default_value = "online", value_parser = parse_source)]
     ve: VibrationSource,
+    /// The sampling rate of the interrupt being reproduced [Hz]: the thermal dynamics (if the
+    /// calibration has them) run at the period 1/RATE, as the replay firmware's SysTick does
+    /// (`REPLAY_TICK_HZ` at build time, 1000 by default).
+    #[arg(long, value_name = "RATE", default_value_t = 1000, value_parser = clap::value_parser!(u32).range(1..))]
+    tick_hz: u32,
 }
 
 fn parse_source(name: &str) -> Result<VibrationSource, String> {
@@ -90,7 +95,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     } else {
         let Some(calib) = &args.calib else { bail!("--calib is required") };
-        let mut tick = Tick::<f32, WINDOW>::new(load_pipeline(calib)?);
+        let mut tick = Tick::<f32, WINDOW>::new(load_pipeline(calib, args.tick_hz)?);
         while reader.read_row(&mut row)? {
             write_row(csv.writer(), row.t_s, &tick.step(&input_of(&row), args.ve))?;
         }
@@ -142,11 +147,12 @@ fn write_row(w: &mut impl Write, t_s: f64, s: &Sample<f32>) -> std::io::Result<(
     writeln!(w, ",{}", s.status.0)
 }
 
-/// The `f32` calibration and vibration-error model of a blob or (by its `.toml` extension) a
-/// calibration file: the pipeline the firmware builds from the same blob. A calibration file
-/// is encoded into its blob first ([`CalibrationFile::read_checked`]), so both containers
+/// The `f32` calibration, vibration-error model and thermal dynamics (at the period
+/// `1/tick_hz`, computed as the firmware computes it) of a blob or (by its `.toml` extension)
+/// a calibration file: the pipeline the firmware builds from the same blob. A calibration
+/// file is encoded into its blob first ([`CalibrationFile::read_checked`]), so both containers
 /// pass the same checks and the firmware's parser.
-pub fn load_pipeline(path: &Path) -> anyhow::Result<Pipeline<f32>> {
+pub fn load_pipeline(path: &Path, tick_hz: u32) -> anyhow::Result<Pipeline<f32>> {
     let err = |e: String| anyhow::anyhow!("{}: {e}", path.display());
     let bytes = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml")) {
         CalibrationFile::read_checked(path)?.1
@@ -155,5 +161,9 @@ pub fn load_pipeline(path: &Path) -> anyhow::Result<Pipeline<f32>> {
     };
     let parsed = bins_comp::blob::parse(&bytes).map_err(|e| err(describe(&e)))?;
     let (cal, vib) = parsed.configs::<f32>().map_err(|e| err(describe(&e)))?;
-    Ok(Pipeline::new(cal, vib))
+    let pipeline = Pipeline::new(cal, vib);
+    Ok(match parsed.dynamics_at_rate(1.0 / tick_hz as f32).map_err(|e| err(describe(&e)))? {
+        Some(d) => pipeline.with_dynamics(d),
+        None => pipeline,
+    })
 }

@@ -177,7 +177,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !replayed.is_empty() {
         names.push(REPLAYED);
     }
-    let dynamics = file.to_dynamics();
+    let dynamics = file.dynamics().map_err(|e| anyhow!("{}: {e}", args.calib.display()))?;
     let own = Calibration::new(&params).map_err(|e| anyhow!("{}: {e}", args.calib.display()))?;
     if dynamics.is_some() {
         names.insert(METHODS.len(), WITH_DYNAMICS);

@@ -133,14 +133,79 @@ pub fn smooth_level(t: &[f64], r: &[f64], q: f64, x: &[f64]) -> Vec<f64> {
 /// model (the plain profile likelihood is, by the variance the regressors take).
 /// Returns `(ll, sse, n_used, β)`.
 pub fn profile_ll(t: &[f64], r: &[f64], q: f64, y: &[f64], xs: &[&[f64]]) -> (f64, f64, usize, Vec<f64>) {
-    let filt = Filter::new(t, r, q, |_| true);
-    let wy = filt.whitened(y);
-    let wx: Vec<Vec<f64>> = xs.iter().map(|x| filt.whitened(x)).collect();
-    let (sse, beta, log_det_x, p) = ls_fit(&wy, &wx);
-    let n = filt.n_used.max(1) as f64;
+    let (gram, log_det, n_used) = whitened_gram(t, r, q, y, xs);
+    let (sse, beta, log_det_x, p) = ls_from_gram(&gram, xs.len());
+    let n = n_used.max(1) as f64;
     let m = (n - p as f64).max(1.0);
-    let ll = -0.5 * (m * (sse.max(1e-300) / m).ln() + filt.log_det + log_det_x + m);
-    (ll, sse, filt.n_used, beta)
+    let ll = -0.5 * (m * (sse.max(1e-300) / m).ln() + log_det + log_det_x + m);
+    (ll, sse, n_used, beta)
+}
+
+/// The Gram matrix of the whitened columns `[xs…, y]` (row-major, `(p+1)²`), the filter's
+/// `Σ ln F` and its number of updated rows, for every row observed: the filter and the
+/// whitening run block by block of rows beside the Gram's products, so no whitened column is
+/// ever stored whole (the likelihood is evaluated many times over hundreds of thousands of
+/// rows; storing them cost more than the arithmetic). The blocks are
+/// [`GRAM_BLOCK`](super::stats::GRAM_BLOCK) rows, as in [`gram_blocked`](super::stats::gram_blocked),
+/// so the sums are the same as whitening first and multiplying after.
+fn whitened_gram(t: &[f64], r: &[f64], q: f64, y: &[f64], xs: &[&[f64]]) -> (Vec<f64>, f64, usize) {
+    use super::stats::{GRAM_BLOCK, dot};
+    let cols: Vec<&[f64]> = xs.iter().copied().chain(std::iter::once(y)).collect();
+    let m = cols.len();
+    let n = cols.iter().map(|c| c.len()).min().unwrap_or(0).min(t.len()).min(r.len());
+    let mut g = vec![0.0; m * m];
+    let (mut log_det, mut n_used) = (0.0, 0usize);
+    if n == 0 {
+        return (g, log_det, n_used);
+    }
+    // The first row sets the level (diffuse start) and gives no innovation.
+    let mut mu: Vec<f64> = cols.iter().map(|c| c[0]).collect();
+    let (mut p, mut last_t) = (r[0], t[0]);
+    let mut gain = [0.0; GRAM_BLOCK];
+    let mut inv_sqrt_f = [0.0; GRAM_BLOCK];
+    let mut w = vec![0.0; m * GRAM_BLOCK];
+    let mut c0 = 0;
+    while c0 < n {
+        let c1 = (c0 + GRAM_BLOCK).min(n);
+        let len = c1 - c0;
+        for i in c0.max(1)..c1 {
+            let pp = p + q * (t[i] - last_t).max(0.0);
+            let f = pp + r[i];
+            let k = pp / f;
+            p = (1.0 - k) * pp;
+            last_t = t[i];
+            gain[i - c0] = k;
+            inv_sqrt_f[i - c0] = 1.0 / f.sqrt();
+            log_det += f.ln();
+            n_used += 1;
+        }
+        if c0 == 0 {
+            (gain[0], inv_sqrt_f[0]) = (0.0, 0.0);
+        }
+        for (c, x) in cols.iter().enumerate() {
+            let out = &mut w[c * GRAM_BLOCK..c * GRAM_BLOCK + len];
+            let mut level = mu[c];
+            for (k, o) in out.iter_mut().enumerate() {
+                let v = x[c0 + k] - level;
+                *o = v * inv_sqrt_f[k];
+                level += gain[k] * v;
+            }
+            mu[c] = level;
+        }
+        for a in 0..m {
+            let wa = &w[a * GRAM_BLOCK..a * GRAM_BLOCK + len];
+            for b in a..m {
+                g[a * m + b] += dot(wa, &w[b * GRAM_BLOCK..b * GRAM_BLOCK + len]);
+            }
+        }
+        c0 = c1;
+    }
+    for a in 0..m {
+        for b in 0..a {
+            g[a * m + b] = g[b * m + a];
+        }
+    }
+    (g, log_det, n_used)
 }
 
 /// Least squares of `y` on the columns `xs` (already whitened): residual sum of squares and
@@ -152,17 +217,21 @@ pub fn ls_sse(y: &[f64], xs: &[Vec<f64>]) -> (f64, Vec<f64>) {
 
 /// [`ls_sse`] plus `ln det` of the kept columns' Gram matrix and their number.
 fn ls_fit(y: &[f64], xs: &[Vec<f64>]) -> (f64, Vec<f64>, f64, usize) {
-    use super::stats::{chol_logdet, chol_solve, dot, gram_blocked};
-    let p = xs.len();
-    let yy = dot(y, y);
+    let mut cols: Vec<&[f64]> = xs.iter().map(Vec::as_slice).collect();
+    cols.push(y);
+    ls_from_gram(&super::stats::gram_blocked(&cols, None), xs.len())
+}
+
+/// Least squares from the Gram matrix `raw` of `[x_1 … x_p, y]` (row-major, `(p+1)²`):
+/// residual sum of squares, coefficients, `ln det` of the kept columns' Gram matrix and their
+/// number. Greedy: a column is kept when it is not collinear with those kept, judged on the
+/// Gram matrix of the normalised columns.
+fn ls_from_gram(raw: &[f64], p: usize) -> (f64, Vec<f64>, f64, usize) {
+    use super::stats::{chol_logdet, chol_solve};
+    let yy = raw[p * (p + 1) + p];
     if p == 0 {
         return (yy, Vec::new(), 0.0, 0);
     }
-    // Greedy: keep the columns that are not collinear with those kept, on the Gram matrix of
-    // the normalised columns (computed once).
-    let mut cols: Vec<&[f64]> = xs.iter().map(Vec::as_slice).collect();
-    cols.push(y);
-    let raw = gram_blocked(&cols, None);
     let norms: Vec<f64> = (0..p).map(|u| raw[u * (p + 1) + u].sqrt()).collect();
     let mut full = vec![0.0; p * p];
     let mut xy = vec![0.0; p];
@@ -353,6 +422,33 @@ mod tests {
         let lag1 = super::super::stats::dot(&w[1..], &w[..n - 1]) / m / var;
         assert!((var - 1.0).abs() < 0.05, "{var}");
         assert!(lag1.abs() < 0.03, "{lag1}");
+    }
+
+    #[test]
+    fn blocked_likelihood_equals_whitening_first() {
+        // Over several blocks, with irregular times and a column collinear with another: the
+        // block-by-block Gram gives the likelihood of whitening every column whole.
+        let n = 1000;
+        let t: Vec<f64> = (0..n).map(|i| i as f64 * 0.5 + if i % 7 == 0 { 0.3 } else { 0.0 }).collect();
+        let r: Vec<f64> = (0..n).map(|i| 1e-8 * (1.0 + 0.5 * (i as f64 * 0.01).sin())).collect();
+        let x1: Vec<f64> = t.iter().map(|v| (v * 0.01).sin()).collect();
+        let x2: Vec<f64> = t.iter().map(|v| (v * 0.003).cos() * 1e-3).collect();
+        let x3: Vec<f64> = x1.iter().map(|v| -2.0 * v).collect();
+        let y: Vec<f64> = (0..n).map(|i| 2e-4 * x1[i] + 0.3 * x2[i] + 1e-4 * ((i * 7919) % 13) as f64).collect();
+        for q in [0.0, 1e-10, 1e-6] {
+            let (ll, sse, n_used, beta) = profile_ll(&t, &r, q, &y, &[&x1, &x2, &x3]);
+            let f = Filter::new(&t, &r, q, |_| true);
+            let (sse_ref, beta_ref, log_det_x, p) =
+                ls_fit(&f.whitened(&y), &[f.whitened(&x1), f.whitened(&x2), f.whitened(&x3)]);
+            let m = f.n_used as f64 - p as f64;
+            let ll_ref = -0.5 * (m * (sse_ref / m).ln() + f.log_det + log_det_x + m);
+            assert_eq!((n_used, p), (f.n_used, 2));
+            assert!((ll - ll_ref).abs() < 1e-9 * ll_ref.abs(), "q {q}: {ll} vs {ll_ref}");
+            assert!((sse - sse_ref).abs() < 1e-9 * sse_ref, "q {q}: {sse} vs {sse_ref}");
+            for (b, b_ref) in beta.iter().zip(&beta_ref) {
+                assert!((b - b_ref).abs() <= 1e-9 * b_ref.abs().max(1e-12), "q {q}: {beta:?} vs {beta_ref:?}");
+            }
+        }
     }
 
     #[test]

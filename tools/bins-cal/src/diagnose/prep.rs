@@ -48,9 +48,9 @@ pub struct Prepared {
     pub k_determined: [bool; 3],
     /// Median sample period \[s\].
     pub dt: f64,
-    /// `temp_C` smoothed by a centred moving average over ±10 s (at least ±1 row): the
-    /// thermal terms are built from it, so the thermistor's own noise does not enter the
-    /// regressors (errors in variables).
+    /// `temp_C` smoothed over ±10 s (at least ±1 row, at most ±50 rows) without rounding the
+    /// turns of a ramp ([`smooth_temperature`]): the thermal terms are built from it, so the
+    /// thermistor's own noise does not enter the regressors (errors in variables).
     pub temp_s: Vec<f64>,
     /// Temperature rate (centred difference over about a minute) [°C/s].
     pub dtemp: Vec<f64>,
@@ -315,17 +315,7 @@ pub fn prepare(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> 
             dtemp[i] = (temp[hi] - temp[lo]) / (t[hi] - t[lo]);
         }
     }
-    let half = ((10.0 / dt).round() as usize).clamp(1, 50);
-    let mut prefix = vec![0.0; n + 1];
-    for k in 0..n {
-        prefix[k + 1] = prefix[k] + temp[k];
-    }
-    let temp_s: Vec<f64> = (0..n)
-        .map(|k| {
-            let h = half.min(k).min(n - 1 - k);
-            (prefix[k + h + 1] - prefix[k - h]) / (2 * h + 1) as f64
-        })
-        .collect();
+    let temp_s = smooth_temperature(&t, &temp, ((10.0 / dt).round() as usize).clamp(1, 50));
     // White noise per vibration class from within-segment differences (robust: median of
     // squared differences / (2·0.4549)).
     let mut r_white: [Vec<f64>; 3] = Default::default();
@@ -374,4 +364,75 @@ pub fn prepare(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> 
         r_white,
         notes,
     })
+}
+/// Mean square residual of the least-squares line through `(t, x)` over rows `lo..=hi`, and
+/// the line's value at `t_at`.
+fn line_fit(t: &[f64], x: &[f64], lo: usize, hi: usize, t_at: f64) -> (f64, f64) {
+    let m = (hi - lo + 1) as f64;
+    let (tm, xm) = (t[lo..=hi].iter().sum::<f64>() / m, x[lo..=hi].iter().sum::<f64>() / m);
+    let (mut stt, mut stx, mut sxx) = (0.0, 0.0, 0.0);
+    for k in lo..=hi {
+        let (dt, dx) = (t[k] - tm, x[k] - xm);
+        stt += dt * dt;
+        stx += dt * dx;
+        sxx += dx * dx;
+    }
+    let slope = if stt > 0.0 { stx / stt } else { 0.0 };
+    let sse = (sxx - slope * stx).max(0.0);
+    (sse / (m - 2.0).max(1.0), xm + slope * (t_at - tm))
+}
+
+/// The temperature the thermal regressors are built from: `temp` smoothed over ±`half` rows,
+/// so the thermistor's noise does not enter the regressors (errors in variables), without
+/// rounding the turns of a ramp. A centred average over the window is used where a straight
+/// line fits it; where it does not (a turn, a step) and a line through the rows on one side
+/// only fits at least four times better, that one-sided line's value is used. A centred
+/// average alone stays below the peak of a triangle by about the rate times half the window,
+/// and a play started from that lower peak is offset for the whole next leg.
+pub fn smooth_temperature(t: &[f64], temp: &[f64], half: usize) -> Vec<f64> {
+    let n = temp.len().min(t.len());
+    let mut prefix = vec![0.0; n + 1];
+    for k in 0..n {
+        prefix[k + 1] = prefix[k] + temp[k];
+    }
+    (0..n)
+        .map(|k| {
+            let h = half.min(k).min(n - 1 - k);
+            let mean = (prefix[k + h + 1] - prefix[k - h]) / (2 * h + 1) as f64;
+            if h < 2 {
+                return mean;
+            }
+            let (mse_c, _) = line_fit(t, temp, k - h, k + h, t[k]);
+            let (mse_l, at_l) = line_fit(t, temp, k - h, k, t[k]);
+            let (mse_r, at_r) = line_fit(t, temp, k, k + h, t[k]);
+            let (mse_side, at_side) = if mse_l <= mse_r { (mse_l, at_l) } else { (mse_r, at_r) };
+            if mse_side * 4.0 < mse_c { at_side } else { mean }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::smooth_temperature;
+
+    #[test]
+    fn smoothing_keeps_a_ramps_turn_and_averages_the_noise_on_a_leg() {
+        // A triangle at 0.04 °C/s, 2 Hz, turning at 500 s, with ±0.003 °C of deterministic
+        // pseudo-noise.
+        let t: Vec<f64> = (0..2000).map(|k| k as f64 * 0.5).collect();
+        let truth: Vec<f64> = t.iter().map(|&x| 20.0 + 0.04 * (500.0 - (x - 500.0).abs())).collect();
+        let noise = |k: usize| 0.003 * (((k * 7919) % 101) as f64 / 50.0 - 1.0);
+        let read: Vec<f64> = truth.iter().enumerate().map(|(k, v)| v + noise(k)).collect();
+        let s = smooth_temperature(&t, &read, 20);
+        // At the turn a centred ±10 s average is 0.1 °C low; the one-sided lines are not.
+        let turn = 1000;
+        assert!((s[turn] - truth[turn]).abs() < 0.005, "{} vs {}", s[turn], truth[turn]);
+        let worst = (0..2000).map(|k| (s[k] - truth[k]).abs()).fold(0.0, f64::max);
+        assert!(worst < 0.006, "worst {worst}");
+        // On a straight leg the centred average is used: the noise shrinks.
+        let rms = |v: &[f64], r: std::ops::Range<usize>| {
+            (r.clone().map(|k| (v[k] - truth[k]).powi(2)).sum::<f64>() / r.len() as f64).sqrt()
+        };
+        assert!(rms(&s, 200..800) < 0.5 * rms(&read, 200..800), "{} vs {}", rms(&s, 200..800), rms(&read, 200..800));
+    }
 }

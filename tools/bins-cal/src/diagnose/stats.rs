@@ -212,7 +212,7 @@ pub fn hadamard_var(segments: &[&[f64]], ms: &[usize]) -> Vec<(usize, f64, usize
 
 /// Rows per block of [`gram_blocked`]: the block of every column stays in cache while all
 /// pairs are multiplied (the columns themselves are far larger than the cache).
-const GRAM_BLOCK: usize = 256;
+pub const GRAM_BLOCK: usize = 256;
 
 /// `Σ w_a·w_b` over the rows of `rows` (all rows when `None`), every pair `a ≤ b`, computed
 /// block by block of rows; the full symmetric matrix, row-major.

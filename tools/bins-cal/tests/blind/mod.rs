@@ -130,6 +130,15 @@ pub fn classify(case: &Case, axis_size: &[f64; 3], r: &Report) -> (Outcome, Vec<
     (outcome, false_ids)
 }
 
+/// The diagnosis's report of one case as JSON (or the error), for looking into a failure.
+pub fn report_json(case: &Case) -> String {
+    let (sim, real, _) = generator::generate(case);
+    match diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")) {
+        Ok(d) => serde_json::to_string_pretty(&d.report).unwrap_or_else(|e| e.to_string()),
+        Err(e) => e.to_string(),
+    }
+}
+
 /// Generates, diagnoses and classifies one case.
 pub fn run_case(case: &Case) -> CaseResult {
     let (sim, real, truth) = generator::generate(case);
