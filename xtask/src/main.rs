@@ -763,7 +763,7 @@ const DEMO_STEPS: [(&str, StepFn); 8] = [
 /// The thermal-dynamics scenario: the paper's unit whose die lags its case and whose bias has
 /// a heating/cooling play, tilter and checks during ramps and soaks.
 const DEMO_DYNAMICS: &str = "scenarios/dynamics-tilter.toml";
-/// Its truth: die lag [s], play [°C], bias play width [°C] (`scenarios/dynamics-tilter.toml`).
+/// Its truth: die lag \[s\], play [°C], bias play width [°C] (`scenarios/dynamics-tilter.toml`).
 const DEMO_DYNAMICS_TRUTH: [(&str, f64); 3] =
     [("lag_tau_s", 180.0), ("hysteresis_width_C", 1.0), ("bias_play_width_C", 4.0)];
 

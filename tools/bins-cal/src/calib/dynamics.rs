@@ -20,7 +20,7 @@
 //! residual beyond what the noise allows (`Component::on`); a lag below the resolution of the
 //! recording (three sample periods, at least 1 s) is reported as off.
 //!
-//! Dwells are found as for the static calibration ([`segments`](super::segments)), but dwells
+//! Dwells are found as for the static calibration ([`segments`] finds them), but dwells
 //! during temperature ramps are used too (they are what tells the dynamics); each dwell is cut
 //! into blocks of at most `block_s` whose means enter the fit. The lag and play run over every
 //! row of the recording, moves included, so the state at a dwell carries the whole temperature

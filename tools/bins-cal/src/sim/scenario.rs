@@ -103,7 +103,7 @@ pub struct UnitSpec {
     /// Warm-up time constant \[s\].
     #[serde(default)]
     pub warmup_tau_s: f64,
-    /// Additive bias play: heating/cooling bias difference per axis [mg] (±this beyond the play).
+    /// Additive bias play: heating/cooling bias difference per axis \[mg\] (±this beyond the play).
     #[serde(default, rename = "bias_play_mg")]
     pub bias_play_mg: [f64; 3],
     /// Width of the bias play [°C] (on the temperature the constants follow).
