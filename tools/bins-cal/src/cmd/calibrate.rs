@@ -278,7 +278,13 @@ fn finish(
     };
     let method = params.method;
     // Model residual: the constants the model gives at each temperature vs the measured ones.
-    println!("\ntemperature model residual (model − measured at each calibration temperature):");
+    if dynamics.is_some() && matches!(dynamics_arg(&args.dynamics), Some(DynamicsArg::Identify)) {
+        println!(
+            "\ntemperature model residual (the joint model with dynamics, at the reading, − the constants measured in the soaks; the soaks' dwells carry the plays, so this is not zero):"
+        );
+    } else {
+        println!("\ntemperature model residual (model − measured at each calibration temperature):");
+    }
     println!("  {:>9} {:>12} {:>14}", "temp_C", "max|dU0| mg", "max|dK/K| ppm");
     for (t, c) in points {
         let (du, dk) = bins_cal::calib::tilter::model_residual(&params, *t, c);
