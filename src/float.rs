@@ -178,6 +178,14 @@ pub fn two_sum<F: Float>(a: F, b: F) -> (F, F) {
     (s, e)
 }
 
+/// Dekker's Fast2Sum: `s + e = a + b` exactly, `s = fl(a + b)`, provided `|a| ≥ |b|` (or
+/// `a = 0`).
+#[inline(always)]
+pub fn fast_two_sum<F: Float>(a: F, b: F) -> (F, F) {
+    let s = a + b;
+    (s, b - (s - a))
+}
+
 /// Veltkamp's split: `hi + lo = a` exactly, each half holding at most half the mantissa, so
 /// that products of halves are exact. Overflows (to a non-finite result) only for
 /// `|a| > MAX/SPLITTER`, which the callers' final finiteness check catches.

@@ -62,7 +62,7 @@ pub struct CalibrationFile {
 /// `[thermal_dynamics]`: what `bins-cal diagnose` names `thermal_lag`, `thermal_hysteresis`,
 /// `self_heating` and `bias_hysteresis`, in the units of the keys (the bias play in mg; the
 /// core takes g). A missing key is 0 (that stage off).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DynamicsSpec {
     /// τ of the die's lag behind the thermistor \[s\].
@@ -108,6 +108,23 @@ impl DynamicsSpec {
             bias_play_width_c: d.bias_play_width_c,
             bias_play_mg: d.bias_play_g.map(g_to_mg),
         }
+    }
+
+    /// Reads the `[thermal_dynamics]` table of a TOML file (a calibration file, or the model
+    /// `bins-cal diagnose --model` writes; other tables are ignored) and checks it as the
+    /// firmware would. Errors name the file and the key.
+    pub fn read_table(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let value: toml::Table =
+            toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), one_line(&e.to_string())))?;
+        let table = value
+            .get("thermal_dynamics")
+            .ok_or_else(|| anyhow::anyhow!("{}: no [thermal_dynamics] table", path.display()))?;
+        let spec: DynamicsSpec = table.clone().try_into().map_err(|e: toml::de::Error| {
+            anyhow::anyhow!("{}: thermal_dynamics: {}", path.display(), one_line(&e.to_string()))
+        })?;
+        spec.to_dynamics().validate().map_err(|e| anyhow::anyhow!("{}: thermal_dynamics.{e}", path.display()))?;
+        Ok(spec)
     }
 }
 

@@ -13,6 +13,11 @@
 //!    ([`shaker`](bins_cal::calib::shaker)), written as the file's `[vibration]` table and the blob's
 //!    vibration section.
 //!
+//! 5. With `--dynamics identify`: the thermal dynamics (die lag, play, bias play) fitted
+//!    jointly with the polynomial model on every dwell, ramps included
+//!    ([`dynamics`](bins_cal::calib::dynamics)), written as `[thermal_dynamics]` with the joint
+//!    model; with `--dynamics MODEL.toml` that file's `[thermal_dynamics]` is written as given.
+//!
 //! Without a tilter (`--free`, or when no recording has a reference): the static intervals
 //! are found in the signals, the 9 frame-independent constants fitted per temperature to
 //! `|f| = 1 g` (`calib::free`), then the temperature model as above. With `--tilt`, the
@@ -23,13 +28,14 @@
 //! [`bins_cal::calib`]; this module parses the arguments and prints.
 
 use anyhow::{anyhow, bail};
-use bins_cal::calfile::CalibrationFile;
+use bins_cal::calfile::{CalibrationFile, DynamicsSpec};
+use bins_cal::calib::dynamics::{self, Request, Series};
 use bins_cal::calib::free::{self, FrameFree, FreeParams, StaticOptions};
 use bins_cal::calib::segments::{self, Reference, Segment};
 use bins_cal::calib::tilter::{ModelArg, ModelRequest, TempFit, fit_temperature, parse_model};
 use bins_cal::{fsio, ihex, memmap};
 use bins_comp::blob::Meta;
-use bins_comp::{Constants, Form, Method};
+use bins_comp::{CalibrationParams, Constants, Form, Method};
 use std::path::PathBuf;
 
 /// Arguments of `bins-cal calibrate`.
@@ -102,6 +108,25 @@ pub struct Args {
     /// The rig's tilt tolerance [mrad]: the prior of `--tilt`, and a dwell beyond it is warned of.
     #[arg(long, default_value_t = 10.0)]
     tilt_tol_mrad: f64,
+    /// Thermal dynamics: `identify` (lag, play and bias play fitted jointly with the
+    /// polynomial model from every dwell, ramps included; needs `--model poly:N`), or a TOML
+    /// file whose `[thermal_dynamics]` table is written as given (a calibration file, or the
+    /// model of `bins-cal diagnose --model`).
+    #[arg(long, value_name = "identify|MODEL.toml", conflicts_with = "free")]
+    dynamics: Option<String>,
+    /// `--dynamics identify`: dwells enter the fit as means over blocks of at most this [s].
+    #[arg(long, default_value_t = 10.0)]
+    dynamics_block_s: f64,
+}
+
+/// What `--dynamics` asks for.
+enum DynamicsArg {
+    Identify,
+    Given(PathBuf),
+}
+
+fn dynamics_arg(a: &Option<String>) -> Option<DynamicsArg> {
+    a.as_ref().map(|s| if s == "identify" { DynamicsArg::Identify } else { DynamicsArg::Given(PathBuf::from(s)) })
 }
 
 /// The method requested on the command line.
@@ -150,11 +175,24 @@ fn rms(v: &[[f64; 3]]) -> f64 {
 
 /// Runs `bins-cal calibrate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let given: Option<PathBuf> = match dynamics_arg(&args.dynamics) {
+        Some(DynamicsArg::Given(p)) => Some(p),
+        _ => None,
+    };
     fsio::refuse_overwriting_inputs(
-        args.tilter.iter().chain(&args.shaker).chain(&args.memory_x),
+        args.tilter.iter().chain(&args.shaker).chain(&args.memory_x).chain(&given),
         [&args.output].into_iter().chain(&args.blob).chain(&args.ihex),
     )?;
     let model_arg = parse_model(&args.model)?;
+    if matches!(dynamics_arg(&args.dynamics), Some(DynamicsArg::Identify)) && !matches!(model_arg, ModelArg::Poly(_)) {
+        bail!(
+            "--dynamics identify: needs --model poly:N (the dynamics are fitted jointly with a polynomial model), got --model {}",
+            args.model
+        );
+    }
+    if !(args.dynamics_block_s > 0.0) {
+        bail!("--dynamics-block-s {}: must be positive", args.dynamics_block_s);
+    }
     let method = parse_method(args.method, &args.form)?;
     let ve_variant = match args.ve_variant.as_str() {
         "exact" => bins_comp::Variant::Exact,
@@ -222,11 +260,31 @@ fn finish(
         temp_tol_c: args.seg.temp_tol_c,
         method,
     };
-    let (params, model_notes) = bins_cal::calib::tilter::calibration_params(points, kept_temps_c, &req, files)?;
+    let (mut params, model_notes) = bins_cal::calib::tilter::calibration_params(points, kept_temps_c, &req, files)?;
     notes.splice(0..0, model_notes);
+    let dynamics = match dynamics_arg(&args.dynamics) {
+        None => None,
+        Some(DynamicsArg::Given(path)) => {
+            let spec = DynamicsSpec::read_table(&path)?;
+            notes.push(format!("thermal dynamics as given in {} ([thermal_dynamics])", path.display()));
+            Some(spec)
+        }
+        Some(DynamicsArg::Identify) => {
+            let (p, d, n) = identify_dynamics(args, &params, files)?;
+            params = p;
+            notes.extend(n);
+            Some(d)
+        }
+    };
     let method = params.method;
     // Model residual: the constants the model gives at each temperature vs the measured ones.
-    println!("\ntemperature model residual (model − measured at each calibration temperature):");
+    if dynamics.is_some() && matches!(dynamics_arg(&args.dynamics), Some(DynamicsArg::Identify)) {
+        println!(
+            "\ntemperature model residual (the joint model with dynamics, at the reading, − the constants measured in the soaks; the soaks' dwells carry the plays, so this is not zero):"
+        );
+    } else {
+        println!("\ntemperature model residual (model − measured at each calibration temperature):");
+    }
     println!("  {:>9} {:>12} {:>14}", "temp_C", "max|dU0| mg", "max|dK/K| ppm");
     for (t, c) in points {
         let (du, dk) = bins_cal::calib::tilter::model_residual(&params, *t, c);
@@ -240,7 +298,8 @@ fn finish(
         Some(r.params)
     };
     let meta = Meta { serial: args.serial.as_deref().unwrap_or(""), date: None, tool_version: bins_cal::TOOL_VERSION };
-    let file = CalibrationFile::from_parts(&params, vibration.as_ref(), &meta);
+    let mut file = CalibrationFile::from_parts(&params, vibration.as_ref(), &meta);
+    file.thermal_dynamics = dynamics;
     // Everything is computed and checked before anything is written.
     let blob = file.to_blob().map_err(|e| anyhow!("{files}: the calibration is not valid: {e}"))?;
     let hex = match &args.ihex {
@@ -284,6 +343,88 @@ fn finish(
         println!("wrote {}", p.display());
     }
     Ok(())
+}
+
+/// `--dynamics identify`: the dynamics and the polynomial model fitted jointly on every dwell
+/// of the tilter recordings (`static_params`: the model from the settled dwells, whose order,
+/// T0, K (for what the dwells cannot determine) and method it keeps). Prints the search, the
+/// components and the residuals; returns the joint parameters, the table and the notes.
+fn identify_dynamics(
+    args: &Args,
+    static_params: &CalibrationParams,
+    files: &str,
+) -> anyhow::Result<(CalibrationParams, DynamicsSpec, Vec<String>)> {
+    let ModelArg::Poly(order) = parse_model(&args.model)? else { bail!("--dynamics identify: needs --model poly:N") };
+    let series: Vec<Series> = args
+        .tilter
+        .iter()
+        .map(|p| Series::read(p, &args.seg, &args.pos_prefix, args.dynamics_block_s))
+        .collect::<anyhow::Result<_>>()?;
+    let req = Request {
+        order,
+        t0_c: static_params.t0_c,
+        k_prior: static_params.constants.k_v_per_g,
+        method: static_params.method,
+    };
+    println!("\nthermal dynamics (every dwell, ramps included, in blocks of ≤ {} s):", args.dynamics_block_s);
+    let id = dynamics::identify(&series, &req, &mut |l| println!("  {l}")).map_err(|e| anyhow!("{files}: {e}"))?;
+    println!("  {:<11} {:>12} {:>14}  status", "component", "value", "dropped: SSE");
+    for c in &id.components {
+        let unit = if c.name == "lag" { "s" } else { "°C" };
+        println!(
+            "  {:<11} {:>9.3} {:<2} {:>+13.1}%  {}",
+            c.name,
+            c.value,
+            unit,
+            100.0 * c.gain,
+            c.why_off.as_deref().unwrap_or("kept")
+        );
+    }
+    let b = id.fit.bias_play_g;
+    println!("  bias play amplitude x/y/z: {:+.4} / {:+.4} / {:+.4} mg", b[0] * 1e3, b[1] * 1e3, b[2] * 1e3);
+    let (r0, r1) = (id.static_fit.rms_g(), id.fit.rms_g());
+    println!(
+        "  block residual RMS x/y/z: static poly:{order} {:.4} / {:.4} / {:.4} mg → with the dynamics {:.4} / {:.4} / {:.4} mg ({} blocks, {} evaluations)",
+        r0[0] * 1e3,
+        r0[1] * 1e3,
+        r0[2] * 1e3,
+        r1[0] * 1e3,
+        r1[1] * 1e3,
+        r1[2] * 1e3,
+        id.fit.n_blocks,
+        id.evaluations
+    );
+    let th = id.fit.theta;
+    let spec = DynamicsSpec {
+        lag_tau_s: th.lag_tau_s,
+        hysteresis_width_c: th.hysteresis_width_c,
+        self_heating_c: 0.0,
+        self_heating_tau_s: 0.0,
+        bias_play_width_c: th.bias_play_width_c,
+        bias_play_mg: if th.bias_play_width_c > 0.0 { b.map(|x| x * 1e3) } else { [0.0; 3] },
+    };
+    let off: Vec<String> =
+        id.components.iter().filter_map(|c| c.why_off.as_ref().map(|w| format!("{} off: {w}", c.name))).collect();
+    let mut notes = vec![format!(
+        "thermal dynamics identified jointly with the poly:{order} model on {} blocks of every dwell (ramps included): τ = {:.1} s, h = {:.3} °C, h_b = {:.3} °C; block residual RMS {:.4} → {:.4} mg (worst axis)",
+        id.fit.n_blocks,
+        th.lag_tau_s,
+        th.hysteresis_width_c,
+        th.bias_play_width_c,
+        r0.iter().fold(0.0f64, |a, b| a.max(*b)) * 1e3,
+        r1.iter().fold(0.0f64, |a, b| a.max(*b)) * 1e3
+    )];
+    if !off.is_empty() {
+        notes.push(off.join("; "));
+    }
+    notes.push("self-heating is not identified from a tilter recording without a power-on (0)".into());
+    let mut params = id.fit.params;
+    // The calibrated range covers the static model's too.
+    params.temp_range_c = (
+        params.temp_range_c.0.min(static_params.temp_range_c.0),
+        params.temp_range_c.1.max(static_params.temp_range_c.1),
+    );
+    Ok((params, spec, notes))
 }
 
 /// True when no recording has a reference (absent or empty columns): the free fit is then

@@ -26,7 +26,8 @@ pub struct Args {
     /// Also write PNG plots into this directory.
     #[arg(long, value_name = "DIR")]
     plots: Option<PathBuf>,
-    /// Also write the augmented model (the found terms) as TOML.
+    /// Also write the augmented model (the found terms) as TOML, with the thermal dynamics
+    /// they name as a `[thermal_dynamics]` table (`bins-cal calibrate --dynamics MODEL.toml`).
     #[arg(long, value_name = "MODEL.toml")]
     model: Option<PathBuf>,
     /// The sensor's random walk [mg/√h] (its specification) to test mechanisms against;
@@ -54,7 +55,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     fsio::write_atomic(&args.report, json.as_bytes())?;
     if let Some(m) = &args.model {
         let text = toml::to_string(&r.model).with_context(|| format!("{}", m.display()))?;
-        let head = "# bins-cal diagnose: terms missing from the simulation (add to its model).\n";
+        let head = "# bins-cal diagnose: terms missing from the simulation (add to its model); [thermal_dynamics]:\n\
+                    # the dynamics they name, for `bins-cal calibrate --dynamics` (calibration-file keys).\n";
         fsio::write_atomic(m, format!("{head}{text}").as_bytes())?;
     }
     let mut plots = Vec::new();

@@ -13,8 +13,11 @@
 
 use anyhow::{Context, anyhow, bail};
 use bins_cal::calfile::CalibrationFile;
+use bins_cal::calib::dynamics;
 use bins_cal::calib::segments::{self, Segment};
 use bins_cal::fsio;
+use bins_cal::recording::read_all;
+use bins_comp::dynamics::Effective;
 use bins_comp::{Calibration, CalibrationParams, Form, Method, Status};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -39,9 +42,16 @@ pub struct Args {
     /// Δg in the same dwells is added as the method `replayed`.
     #[arg(long, num_args = 1.., value_name = "OUT.csv")]
     replayed: Vec<PathBuf>,
+    /// Also check the dwells during temperature ramps (faster than `--max-rate-c-per-min`),
+    /// in two panels: heating and cooling.
+    #[arg(long)]
+    ramps: bool,
     #[command(flatten)]
     seg: segments::Options,
 }
+
+/// The label of the column compensated with the calibration's thermal dynamics.
+pub const WITH_DYNAMICS: &str = "with dynamics";
 
 /// The methods compared, with their labels.
 pub const METHODS: [(&str, Method); 5] = [
@@ -69,9 +79,9 @@ pub fn dg(cal: &Calibration<f64>, s: &Segment) -> f64 {
 /// The label of the `--replayed` column.
 pub const REPLAYED: &str = "replayed";
 
-/// One panel: check temperature, then (position, Δg \[mg\] per method, in the order of the
-/// method labels).
-pub type Panel = (f64, Vec<(String, Vec<f64>)>);
+/// One panel: its title and phase (`hold`, `heating`, `cooling`), then per dwell (position,
+/// mean temperature [°C], Δg \[mg\] per method, in the order of the method labels).
+pub type Panel = (String, &'static str, Vec<(String, f64, Vec<f64>)>);
 
 /// A replayed output CSV: rows `(t_s, accel \[g\], status bits)` in file order.
 pub struct Replayed {
@@ -167,23 +177,81 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !replayed.is_empty() {
         names.push(REPLAYED);
     }
-    let (all, files) = segments::find_all(&args.check, &args.seg)?;
+    let dynamics = file.dynamics().map_err(|e| anyhow!("{}: {e}", args.calib.display()))?;
+    let own = Calibration::new(&params).map_err(|e| anyhow!("{}: {e}", args.calib.display()))?;
+    if dynamics.is_some() {
+        names.insert(METHODS.len(), WITH_DYNAMICS);
+    }
+    let seg_opt =
+        if args.ramps { segments::Options { max_rate_c_per_min: f64::INFINITY, ..args.seg } } else { args.seg };
+    let (all, files) = segments::find_all(&args.check, &seg_opt)?;
     let all: Vec<Segment> = all.into_iter().filter(|s| s.pos.starts_with(&args.pos_prefix)).collect();
-    let groups = segments::by_temperature(&all, args.seg.temp_tol_c);
-    if groups.is_empty() {
+    // With dynamics: the effective temperature of every row of each check recording.
+    let mut effective: Vec<(Vec<f64>, Vec<Effective<f64>>)> = Vec::new();
+    if let Some(d) = &dynamics {
+        for p in &args.check {
+            let (_, rows) = read_all(p).map_err(|e| anyhow!("{e}"))?;
+            let e = dynamics::run_core(&rows, d);
+            effective.push((rows.iter().map(|r| r.t_s).collect(), e));
+        }
+    }
+    let dg_dyn = |s: &Segment| -> anyhow::Result<f64> {
+        let (Some(d), Some(k)) = (&dynamics, args.check.iter().position(|p| *p == s.file)) else { return Ok(f64::NAN) };
+        let (t, e) = &effective[k];
+        let a = t.partition_point(|&x| x < s.t_s.0);
+        if a + s.rows.len() > e.len() {
+            bail!("{}: dwell {} at {} s: rows out of step with the recording", s.file.display(), s.pos, s.t_s.0);
+        }
+        let mut sum = [0.0; 3];
+        for (j, (u, _)) in s.rows.iter().enumerate() {
+            let acc = dynamics::compensate(&own, d, *u, &e[a + j]);
+            for i in 0..3 {
+                sum[i] += acc[i];
+            }
+        }
+        let n = s.rows.len() as f64;
+        let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        Ok(norm(sum.map(|x| x / n)) - norm(s.f_g))
+    };
+    let ramp = |s: &Segment| s.rate_c_per_min.abs() > args.seg.max_rate_c_per_min;
+    let holds: Vec<Segment> = all.iter().filter(|s| !ramp(s)).cloned().collect();
+    let groups = segments::by_temperature(&holds, args.seg.temp_tol_c);
+    if groups.is_empty() && !args.ramps {
         bail!("{files}: no stationary check dwell with a settled temperature");
     }
+    let values = |s: &Segment| -> anyhow::Result<Vec<f64>> {
+        let mut v: Vec<f64> = cals.iter().map(|c| dg(c, s) * 1e3).collect();
+        if dynamics.is_some() {
+            v.push(dg_dyn(s)? * 1e3);
+        }
+        if let Some(r) = args.check.iter().position(|p| *p == s.file).and_then(|k| replayed.get(k)) {
+            v.push(r.dg(s)? * 1e3);
+        }
+        Ok(v)
+    };
     let mut panels: Vec<Panel> = Vec::new();
     for (t, segs) in &groups {
         let mut rows = Vec::new();
         for s in segs {
-            let mut v: Vec<f64> = cals.iter().map(|c| dg(c, s) * 1e3).collect();
-            if let Some(r) = args.check.iter().position(|p| *p == s.file).and_then(|k| replayed.get(k)) {
-                v.push(r.dg(s)? * 1e3);
-            }
-            rows.push((s.pos.clone(), v));
+            rows.push((s.pos.clone(), *t, values(s)?));
         }
-        panels.push((*t, rows));
+        panels.push((format!("check at {t:+.1} °C"), "hold", rows));
+    }
+    if args.ramps {
+        for (phase, heating) in [("heating", true), ("cooling", false)] {
+            let mut rows = Vec::new();
+            for s in all.iter().filter(|s| ramp(s) && (s.rate_c_per_min > 0.0) == heating) {
+                rows.push((format!("{} {:+.0}", s.pos, s.temp_c), s.temp_c, values(s)?));
+            }
+            if !rows.is_empty() {
+                let (lo, hi) =
+                    rows.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, r| (a.0.min(r.1), a.1.max(r.1)));
+                panels.push((format!("checks during {phase} ramps, {lo:+.0} … {hi:+.0} °C"), phase, rows));
+            }
+        }
+        if panels.is_empty() {
+            bail!("{files}: no stationary check dwell");
+        }
     }
     let (csv, table) = tables(&panels, &params, &names);
     std::fs::create_dir_all(&args.output).with_context(|| format!("{}", args.output.display()))?;
@@ -195,34 +263,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The CSV (`temp_C,pos,method,dg_mg`) and the printed table (Δg \[mg\] per dwell and method,
-/// then max |Δg| per temperature); `names` labels the methods of each row's values.
+/// The CSV (`temp_C,pos,method,dg_mg,phase`) and the printed table (Δg \[mg\] per dwell and
+/// method, then max |Δg| per panel); `names` labels the methods of each row's values.
 pub fn tables(panels: &[Panel], params: &CalibrationParams, names: &[&str]) -> (String, String) {
-    let mut csv = String::from("temp_C,pos,method,dg_mg\n");
+    let mut csv = String::from("temp_C,pos,method,dg_mg,phase\n");
     let mut t = String::new();
     let _ = writeln!(
         t,
         "|g| error Δg = |a| − 1 g [mg], T(13); calibration T0 = {:.2} °C, range {:.1} … {:.1} °C",
         params.t0_c, params.temp_range_c.0, params.temp_range_c.1
     );
-    let _ = write!(t, "{:>9} {:<6}", "temp_C", "pos");
-    for name in names {
-        let _ = write!(t, " {name:>20}");
-    }
-    let _ = writeln!(t);
-    for (temp, rows) in panels {
+    for (title, phase, rows) in panels {
+        let _ = writeln!(t, "{title}:");
+        let _ = write!(t, "{:>9} {:<10}", "temp_C", "pos");
+        for name in names {
+            let _ = write!(t, " {name:>20}");
+        }
+        let _ = writeln!(t);
         let mut max = vec![0.0f64; names.len()];
-        for (pos, v) in rows {
-            let _ = write!(t, "{temp:>9.2} {pos:<6}");
+        for (pos, temp, v) in rows {
+            let pos_only = pos.split(' ').next().unwrap_or(pos);
+            let _ = write!(t, "{temp:>9.2} {pos_only:<10}");
             for (k, name) in names.iter().enumerate() {
                 let x = v.get(k).copied().unwrap_or(f64::NAN);
                 let _ = write!(t, " {x:>+20.4}");
-                let _ = writeln!(csv, "{temp},{pos},{name},{x}");
+                let _ = writeln!(csv, "{temp},{pos_only},{name},{x},{phase}");
                 max[k] = max[k].max(x.abs());
             }
             let _ = writeln!(t);
         }
-        let _ = write!(t, "{temp:>9.2} {:<6}", "max||");
+        let _ = write!(t, "{:>9} {:<10}", "", "max||");
         for m in max {
             let _ = write!(t, " {m:>20.4}");
         }
@@ -234,7 +304,7 @@ pub fn tables(panels: &[Panel], params: &CalibrationParams, names: &[&str]) -> (
 /// The font the plots use (DejaVu Sans, embedded; licence in `assets/DejaVuSans.LICENSE`).
 static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
-/// Renders the panels as a PNG (bytes): a bar per method of `names` (at most six).
+/// Renders the panels as a PNG (bytes): a bar per method of `names` (at most seven).
 pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec<u8>> {
     use plotters::prelude::*;
     use plotters::style::{FontStyle, register_font};
@@ -260,6 +330,7 @@ pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec
             RGBColor(255, 127, 14),
             RGBColor(44, 160, 44),
             RGBColor(148, 103, 189),
+            RGBColor(23, 190, 207),
         ];
         let m = names.len().min(colors.len());
         // The legend, once, under the title.
@@ -275,11 +346,15 @@ pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec
             top.draw(&Text::new(label.to_string(), (x + 26, 45), font.clone())).map_err(|e| anyhow!("plot: {e}"))?;
             x += 100;
         }
-        for ((temp, rows), area) in panels.iter().zip(areas) {
-            let lim = rows.iter().flat_map(|r| r.1.iter()).fold(1.2f64, |a, b| a.max(b.abs() * 1.1));
+        for ((title, phase, rows), area) in panels.iter().zip(areas) {
+            if *phase != "hold" {
+                ramp_panel(&area, title, rows, &colors[..m])?;
+                continue;
+            }
+            let lim = rows.iter().flat_map(|r| r.2.iter()).fold(1.2f64, |a, b| a.max(b.abs() * 1.1));
             let n = rows.len().max(1);
             let mut chart = ChartBuilder::on(&area)
-                .caption(format!("check at {temp:+.1} °C"), ("sans-serif", 18))
+                .caption(title.as_str(), ("sans-serif", 18))
                 .margin(10)
                 .x_label_area_size(30)
                 .y_label_area_size(60)
@@ -307,7 +382,7 @@ pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec
                 chart
                     .draw_series(rows.iter().enumerate().map(|(i, r)| {
                         let x0 = i as f64 + 0.1 + k as f64 * bw;
-                        Rectangle::new([(x0, 0.0), (x0 + bw * 0.9, r.1.get(k).copied().unwrap_or(0.0))], c.filled())
+                        Rectangle::new([(x0, 0.0), (x0 + bw * 0.9, r.2.get(k).copied().unwrap_or(0.0))], c.filled())
                     }))
                     .map_err(|e| anyhow!("plot: {e}"))?;
             }
@@ -324,6 +399,51 @@ pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec
     let bytes = std::fs::read(&path).with_context(|| format!("{}", path.display()))?;
     let _ = std::fs::remove_dir_all(&dir);
     Ok(bytes)
+}
+
+/// A panel of dwells during a ramp: Δg against the dwell's temperature, a point per dwell and
+/// method (the T0 constants, whose error is tens of times larger, are left out: they are in
+/// `verify.csv`).
+fn ramp_panel<DB: plotters::prelude::DrawingBackend>(
+    area: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    rows: &[(String, f64, Vec<f64>)],
+    colors: &[plotters::style::RGBColor],
+) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    let (lo, hi) = rows.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, r| (a.0.min(r.1), a.1.max(r.1)));
+    let lim = rows.iter().flat_map(|r| r.2.iter().skip(1)).fold(1.2f64, |a, b| a.max(b.abs() * 1.1));
+    let mut chart = ChartBuilder::on(area)
+        .caption(format!("{title} (T0 constants off scale, in verify.csv)"), ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(60)
+        .build_cartesian_2d((lo - 2.0)..(hi + 2.0), -lim..lim)
+        .map_err(|e| anyhow!("plot: {e}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("temperature read by the unit [°C]")
+        .y_desc("Δg [mg]")
+        .label_style(("sans-serif", 14))
+        .draw()
+        .map_err(|e| anyhow!("plot: {e}"))?;
+    for (k, c) in colors.iter().enumerate().skip(1) {
+        chart
+            .draw_series(
+                rows.iter().filter_map(|r| {
+                    r.2.get(k).filter(|v| v.is_finite()).map(|v| Circle::new((r.1, *v), 3, c.filled()))
+                }),
+            )
+            .map_err(|e| anyhow!("plot: {e}"))?;
+    }
+    for (tol, style) in [(0.3, BLACK.stroke_width(2)), (1.0, RGBColor(150, 0, 150).stroke_width(1))] {
+        for s in [-1.0, 1.0] {
+            chart
+                .draw_series(LineSeries::new([(lo - 2.0, s * tol), (hi + 2.0, s * tol)], style))
+                .map_err(|e| anyhow!("plot: {e}"))?;
+        }
+    }
+    Ok(())
 }
 
 /// A private scratch directory for the bitmap backend (which writes files only).

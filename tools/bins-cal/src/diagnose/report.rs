@@ -98,6 +98,59 @@ pub struct AugmentedModel {
     pub sensitivity: PerAxis<Vec<[f64; 4]>>,
     /// The terms.
     pub term: Vec<ModelTerm>,
+    /// The thermal dynamics the terms name, as the calibration file's `[thermal_dynamics]`
+    /// (`bins-cal calibrate --dynamics MODEL.toml` merges it): absent when none is named.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub thermal_dynamics: Option<crate::calfile::DynamicsSpec>,
+}
+
+/// The `[thermal_dynamics]` table of the named terms: `thermal_lag` → `lag_tau_s`,
+/// `thermal_hysteresis` → `hysteresis_width_C`, `self_heating` → `self_heating_C` and
+/// `self_heating_tau_s` (in °C only when SIM's temperature sensitivity was fitted),
+/// `bias_hysteresis` → `bias_play_width_C` and `bias_play_mg` (its constant amplitude; the
+/// term linear in ΔT has no counterpart in the core). The core has one lag, one play and one
+/// self-heating for the unit: a parameter found on several accelerometers is their median.
+/// Terms the data could not tell from another mechanism are left out.
+pub fn dynamics_table(terms: &[ModelTerm]) -> Option<crate::calfile::DynamicsSpec> {
+    let median = |id: &str, key: &str| -> Option<f64> {
+        let mut v: Vec<f64> = terms
+            .iter()
+            .filter(|t| t.id == id && !t.ambiguous)
+            .filter_map(|t| t.params.get(key).copied())
+            .filter(|x| x.is_finite())
+            .collect();
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        Some(if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) })
+    };
+    let mut d = crate::calfile::DynamicsSpec::default();
+    let mut any = false;
+    if let Some(tau) = median("thermal_lag", "tau_s") {
+        d.lag_tau_s = tau;
+        any = true;
+    }
+    if let Some(h) = median("thermal_hysteresis", "width_C") {
+        d.hysteresis_width_c = h;
+        any = true;
+    }
+    if let (Some(rise), Some(tau)) = (median("self_heating", "rise_C"), median("self_heating", "tau_s")) {
+        d.self_heating_c = rise;
+        d.self_heating_tau_s = tau;
+        any = true;
+    }
+    if let Some(hb) = median("bias_hysteresis", "width_C") {
+        d.bias_play_width_c = hb;
+        for t in terms.iter().filter(|t| t.id == "bias_hysteresis" && !t.ambiguous) {
+            if let (Some(k), Some(a)) = (AXES.iter().position(|a| *a == t.axis), t.params.get("amp_mg")) {
+                d.bias_play_mg[k] = *a;
+            }
+        }
+        any = true;
+    }
+    any.then_some(d)
 }
 
 /// The report.
@@ -499,6 +552,7 @@ pub fn build(
                 .filter(|&i| sens[i].from_sim)
                 .map(|i| (AXES[i].to_string(), sens[i].c.to_vec()))
                 .collect(),
+            thermal_dynamics: dynamics_table(&terms),
             term: terms,
         },
     }

@@ -122,7 +122,7 @@ impl Simulation {
                 }
                 let rect_g = rectify::rectified_g(&self.unit.cf, &f, &vib);
                 let power_s = r.power_s.unwrap_or(self.power_on_s + r.t_s);
-                row.u_v = self.unit.signals_v(r.temp_c, &f, &[0.0; 3], &rect_g, power_s);
+                row.u_v = self.unit.signals_v(r.temp_c, &f, &[0.0; 3], &rect_g, power_s, 0.0);
                 row
             })
             .collect()
@@ -184,6 +184,7 @@ pub struct RowGen<'a> {
     seg_start: f64,
     cache: Option<RectCache>,
     chamber_q: Quantiser,
+    bias_play: unit::BiasPlay,
 }
 
 impl<'a> RowGen<'a> {
@@ -192,10 +193,12 @@ impl<'a> RowGen<'a> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut noise = NoiseState::new(sim.noise, dt);
         noise.start(&mut rng);
+        let thermal = Thermal::new(sim.thermal, dt, sim.power_on_s);
         RowGen {
             sim,
             rng,
-            thermal: Thermal::new(sim.thermal, dt, sim.power_on_s),
+            bias_play: unit::BiasPlay::new(sim.unit.bias_play_width_c, thermal.effective_c),
+            thermal,
             noise,
             dt,
             k: 0,
@@ -272,7 +275,8 @@ impl<'a> RowGen<'a> {
             }
         }
         let power_s = self.sim.power_on_s + t;
-        let mut u = self.sim.unit.signals_v(self.thermal.effective_c, &f, &vib_mean, &rect_g, power_s);
+        let bias_d = self.bias_play.step(self.thermal.effective_c);
+        let mut u = self.sim.unit.signals_v(self.thermal.effective_c, &f, &vib_mean, &rect_g, power_s, bias_d);
         self.noise.apply_signals(&mut self.rng, &mut u);
         let temp_c = self.noise.apply_temp(&mut self.rng, self.thermal.thermistor_c);
 

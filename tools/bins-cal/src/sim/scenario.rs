@@ -103,6 +103,12 @@ pub struct UnitSpec {
     /// Warm-up time constant \[s\].
     #[serde(default)]
     pub warmup_tau_s: f64,
+    /// Additive bias play: heating/cooling bias difference per axis \[mg\] (±this beyond the play).
+    #[serde(default, rename = "bias_play_mg")]
+    pub bias_play_mg: [f64; 3],
+    /// Width of the bias play [°C] (on the temperature the constants follow).
+    #[serde(default, rename = "bias_play_width_C")]
+    pub bias_play_width_c: f64,
 }
 
 /// `unit.preset`
@@ -880,6 +886,14 @@ impl UnitSpec {
             cf,
             warmup_v: self.warmup_v,
             warmup_tau_s: non_negative("unit.warmup_tau_s", self.warmup_tau_s)?,
+            bias_play_g: {
+                let mut g = [0.0; 3];
+                for (i, a) in self.bias_play_mg.iter().enumerate() {
+                    g[i] = finite(&format!("unit.bias_play_mg[{i}]"), *a)? * 1e-3;
+                }
+                g
+            },
+            bias_play_width_c: non_negative("unit.bias_play_width_C", self.bias_play_width_c)?,
         })
     }
 

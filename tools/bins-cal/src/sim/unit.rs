@@ -1,12 +1,14 @@
 //! The truth model of one unit: what its signals are for a given specific force, vibration,
 //! temperature and time since power-on, before and after noise.
 //!
-//! `U_i = Σ_j K_ij(T)·f_j + U0_i(T) + K_ii(T)·⟨N_i(f + ã)⟩ + w_i(t_p) + b_i(t) + n_i`
+//! `U_i = Σ_j K_ij(T)·f_j + U0_i(T) + K_ii(T)·(⟨N_i(f + ã)⟩ + b_i·d) + w_i(t_p) + b_i(t) + n_i`
 //!
 //! - `K(T)`, `U0(T)`: the core's [`CalibrationParams::constants_at`] at the temperature the
 //!   constants follow (die through hysteresis), forward model T(1) by
 //!   [`Constants::signals_v`](bins_comp::Constants::signals_v);
 //! - `⟨N_i⟩`: the rectified mean of V(2)'s nonlinear part ([`super::rectify`]);
+//! - `K_ii(T)·b_i·d`: the additive bias play ([`BiasPlay`]), a heating/cooling difference of
+//!   the bias independent of the temperature sensitivity;
 //! - `w_i`: the warm-up transient after power-on, `A_i·e^(−t_p/τ)`;
 //! - `b_i`: bias random walk plus bias instability (first-order Gauss–Markov);
 //! - `n_i`: white noise per sample, then ADC quantisation.
@@ -53,6 +55,37 @@ pub struct UnitModel {
     pub warmup_v: [f64; 3],
     /// Warm-up time constant \[s\].
     pub warmup_tau_s: f64,
+    /// Additive bias play: amplitude per axis \[g\] (0 = none).
+    pub bias_play_g: [f64; 3],
+    /// Its play width [°C].
+    pub bias_play_width_c: f64,
+}
+
+/// The additive bias play of the unit: a play (backlash) of width `h_b` on the temperature the
+/// constants follow, whose output `d = (play(T) − T)/(h_b/2)` ∈ [−1, 1] is −1 while heating,
+/// +1 while cooling (beyond the play) and in between after a reversal; the bias on axis `i` is
+/// `K_ii·b_i·d`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BiasPlay {
+    width_c: f64,
+    state_c: f64,
+}
+
+impl BiasPlay {
+    /// Width `width_c` [°C] (0: none), starting centred on `temp_c` (d = 0).
+    pub fn new(width_c: f64, temp_c: f64) -> Self {
+        BiasPlay { width_c, state_c: temp_c }
+    }
+
+    /// Advances the play to the temperature `temp_c`; returns `d`.
+    pub fn step(&mut self, temp_c: f64) -> f64 {
+        if !(self.width_c > 0.0) {
+            return 0.0;
+        }
+        let h = 0.5 * self.width_c;
+        self.state_c = self.state_c.clamp(temp_c - h, temp_c + h);
+        (self.state_c - temp_c) / h
+    }
 }
 
 /// A quantiser that prints short: for a step whose inverse is an integer (1e-7 V, 0.01 °C)
@@ -167,8 +200,8 @@ impl NoiseState {
 impl UnitModel {
     /// The noise-free signals \[V\] at the constants' temperature `temp_c` for the static
     /// specific force `f_g` plus the sample's mean vibration `vib_mean_g` (zero unless the
-    /// sampling fluctuation is on), with the rectified means `rect_g` \[g\] and `power_s` since
-    /// power-on.
+    /// sampling fluctuation is on), with the rectified means `rect_g` \[g\], `power_s` since
+    /// power-on and the bias play's output `bias_d` ([`BiasPlay::step`]).
     #[inline]
     pub fn signals_v(
         &self,
@@ -177,14 +210,42 @@ impl UnitModel {
         vib_mean_g: &[f64; 3],
         rect_g: &[f64; 3],
         power_s: f64,
+        bias_d: f64,
     ) -> [f64; 3] {
         let c = self.params.constants_at(temp_c);
         let f = [f_g[0] + vib_mean_g[0], f_g[1] + vib_mean_g[1], f_g[2] + vib_mean_g[2]];
         let mut u = c.signals_v(&f);
         let w = if self.warmup_tau_s > 0.0 { (-power_s / self.warmup_tau_s).exp() } else { 0.0 };
         for i in 0..3 {
-            u[i] += c.k_v_per_g[i][i] * rect_g[i] + self.warmup_v[i] * w;
+            u[i] += c.k_v_per_g[i][i] * (rect_g[i] + self.bias_play_g[i] * bias_d) + self.warmup_v[i] * w;
         }
         u
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::BiasPlay;
+
+    #[test]
+    fn bias_play_follows_a_hand_computed_trace() {
+        // Width 1 °C (half-width 0.5), starting at 20 °C: heat to 21, reverse to 20.2, heat to 20.6.
+        let mut p = BiasPlay::new(1.0, 20.0);
+        let trace = [
+            (20.0, 0.0),   // centred
+            (20.25, -0.5), // state 20 stays (within 19.75..20.75): (20 − 20.25)/0.5
+            (20.5, -1.0),  // state at the lower edge 20.0
+            (21.0, -1.0),  // dragged: state 20.5
+            (20.7, -0.4),  // reversed, inside the play: state 20.5, (20.5 − 20.7)/0.5
+            (20.2, 0.6),   // state 20.5: (20.5 − 20.2)/0.5
+            (19.8, 1.0),   // dragged down: state 20.3
+            (20.6, -0.6),  // reversed again: state 20.3 within 20.1..21.1, (20.3 − 20.6)/0.5
+        ];
+        for (k, (t, d)) in trace.iter().enumerate() {
+            let got = p.step(*t);
+            assert!((got - d).abs() < 1e-12, "step {k} at {t} °C: d = {got}, expected {d}");
+        }
+        let mut none = BiasPlay::new(0.0, 20.0);
+        assert_eq!(none.step(30.0), 0.0);
     }
 }
