@@ -46,6 +46,13 @@ const OUT_PATH: &core::ffi::CStr = c"target/fw-replay/out.bin";
 const CORE_CLOCK_HZ: u32 = 25_000_000;
 /// Sampling rate \[Hz\]: `REPLAY_TICK_HZ` at build time, else 1000.
 const TICK_HZ: u32 = parse_hz(option_env!("REPLAY_TICK_HZ"), 1000);
+/// The rate \[Hz\] the pipeline is configured for (the thermal dynamics' time step):
+/// `REPLAY_SAMPLE_HZ` at build time, else [`TICK_HZ`]. A recording logged slower than SysTick
+/// can tick (1 Hz rows) is replayed one row per tick with the time step of its rows.
+const SAMPLE_HZ: u32 = match parse_u32(option_env!("REPLAY_SAMPLE_HZ")) {
+    Some(v) if v > 0 => v,
+    _ => TICK_HZ,
+};
 /// The VE subtracted: `REPLAY_VE` at build time (`none`, `online` or `profile:N`, see
 /// [`VibrationSource::parse`]), else [`replay::SOURCE`], the flight image's. Any other value
 /// stops the build.
@@ -172,7 +179,12 @@ fn run() -> Result<(), RunError> {
     cp.SYST.clear_current();
     cp.SYST.enable_interrupt();
     cp.SYST.enable_counter();
-    defmt::info!("replay: SysTick at {} Hz, VE source {}", TICK_HZ, defmt::Debug2Format(&VE_SOURCE));
+    defmt::info!(
+        "replay: SysTick at {} Hz, samples of {} Hz, VE source {}",
+        TICK_HZ,
+        SAMPLE_HZ,
+        defmt::Debug2Format(&VE_SOURCE)
+    );
 
     let mut outbuf = [0u8; CHUNK * OUTPUT_BYTES];
     let mut out_len = 0usize;
@@ -255,7 +267,7 @@ fn read_full(file: &mut File, buf: &mut [u8]) -> Result<usize, RunError> {
 /// flagged `INVALID_CALIBRATION`).
 fn flashed_pipeline() -> Pipeline<f32> {
     let region = calib::read_region();
-    match calib::calibration(&region, 1.0 / TICK_HZ as f32) {
+    match calib::calibration(&region, 1.0 / SAMPLE_HZ as f32) {
         Ok((pipeline, parsed)) => {
             defmt::info!(
                 "CALIB: valid calibration blob, unit {=str}, {=usize} vibration profiles, thermal dynamics {=bool}",
@@ -275,19 +287,30 @@ fn flashed_pipeline() -> Pipeline<f32> {
 /// `s` as a decimal rate in Hz, or `default` if it is absent, not a number, zero, or too low
 /// for SysTick's 24-bit reload.
 const fn parse_hz(s: Option<&str>, default: u32) -> u32 {
-    let Some(s) = s else { return default };
+    match parse_u32(s) {
+        Some(v) if v > 0 && CORE_CLOCK_HZ / v <= (1 << 24) => v,
+        _ => default,
+    }
+}
+
+/// `s` as a decimal number up to 10⁹, or `None` if it is absent or not one.
+const fn parse_u32(s: Option<&str>) -> Option<u32> {
+    let Some(s) = s else { return None };
     let b = s.as_bytes();
+    if b.is_empty() {
+        return None;
+    }
     let mut v: u32 = 0;
     let mut i = 0;
     while i < b.len() {
         let d = b[i];
         if d < b'0' || d > b'9' || v > 100_000_000 {
-            return default;
+            return None;
         }
         v = v * 10 + (d - b'0') as u32;
         i += 1;
     }
-    if v == 0 || CORE_CLOCK_HZ / v > (1 << 24) { default } else { v }
+    Some(v)
 }
 
 /// Set by the first panic, so a panic while logging the panic does not recurse.

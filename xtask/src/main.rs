@@ -54,6 +54,9 @@ const DEBIAN_PACKAGES: [&str; 7] =
 /// Variables a parent cargo/rustup sets that must not leak into a child of another toolchain.
 const TOOLCHAIN_VARS: [&str; 6] =
     ["RUSTUP_TOOLCHAIN", "RUSTC", "RUSTDOC", "CARGO", "RUSTC_WORKSPACE_WRAPPER", "CLIPPY_ARGS"];
+/// The sampling rate [Hz] the replay firmware's pipeline is configured for (its
+/// `REPLAY_SAMPLE_HZ`; SysTick stays at 1 kHz), unless a recording needs its own.
+const REPLAY_SAMPLE_HZ: u32 = 1000;
 /// Default limit on one QEMU run; override with `XTASK_QEMU_TIMEOUT` (seconds).
 const QEMU_TIMEOUT_S: u64 = 300;
 
@@ -325,9 +328,9 @@ impl Xtask {
 
     /// The replay firmware subtracting the VE of `ve` (`REPLAY_VE`; cargo rebuilds the image
     /// when it changes).
-    fn build_replay(&self, ve: &str) -> Result {
+    fn build_replay(&self, ve: &str, sample_hz: u32) -> Result {
         let mut c = self.thumb_cargo("build", ["--release", "--features", "firmware-log", "--bin", "replay"])?;
-        c.env("REPLAY_VE", ve);
+        c.env("REPLAY_VE", ve).env("REPLAY_SAMPLE_HZ", sample_hz.to_string());
         self.run(c)
     }
 
@@ -362,7 +365,10 @@ impl Xtask {
             && {
                 let t = Instant::now();
                 let work = self.root.join("target/replay");
-                match self.calib_hex(&work).and_then(|hex| self.replay_firmware(&rec, &calib, &hex, &out, &work, &ve)) {
+                match self
+                    .calib_hex(&work)
+                    .and_then(|hex| self.replay_firmware(&rec, &calib, &hex, &out, &work, &ve, REPLAY_SAMPLE_HZ))
+                {
                     Ok(()) => {
                         println!("replay: {} in {:.1} s wall", out.display(), t.elapsed().as_secs_f64());
                         true
@@ -440,14 +446,24 @@ impl Xtask {
     /// A recording through the replay firmware in QEMU, in `work`: the recording as the input
     /// stream, the blob in CALIB (at the address of the Intel HEX file `hex`), the VE of `ve`
     /// subtracted, the output stream back to CSV (`t_s` from the recording).
-    fn replay_firmware(&self, rec: &Path, calib: &Path, hex: &Path, out: &Path, work: &Path, ve: &str) -> Result {
+    #[allow(clippy::too_many_arguments)]
+    fn replay_firmware(
+        &self,
+        rec: &Path,
+        calib: &Path,
+        hex: &Path,
+        out: &Path,
+        work: &Path,
+        ve: &str,
+        sample_hz: u32,
+    ) -> Result {
         let stream_dir = work.join("target/fw-replay");
         std::fs::create_dir_all(&stream_dir).map_err(|e| format!("{}: {e}", stream_dir.display()))?;
         // `bins-cal` checks the source's name before the firmware is built with it.
         let mut c = self.bins_cal();
         c.arg("replay").arg("--rec").arg(rec).arg("--ve").arg(ve).arg("--write-stream").arg(stream_dir.join("in.bin"));
         self.run(c)?;
-        self.build_replay(ve)?;
+        self.build_replay(ve, sample_hz)?;
         self.run_qemu_with_blob(&self.elf("replay"), work, calib, hex)?;
         let mut c = self.bins_cal();
         c.arg("replay").arg("--rec").arg(rec).arg("--read-stream").arg(stream_dir.join("out.bin")).arg("-o").arg(out);
@@ -501,8 +517,8 @@ impl Xtask {
             ("method1-dynamics", &dyn_m1_blob, DEFAULT_VE),
         ] {
             let (fw, host) = (dir.join(format!("{name}-qemu.csv")), dir.join(format!("{name}-host.csv")));
-            self.replay_firmware(&rec, blob, &self.root.join(BLOB_HEX), &fw, &dir, ve)?;
-            self.replay_host_identical(name, &rec, blob, &fw, &host, ve)?;
+            self.replay_firmware(&rec, blob, &self.root.join(BLOB_HEX), &fw, &dir, ve, REPLAY_SAMPLE_HZ)?;
+            self.replay_host_identical(name, &rec, blob, &fw, &host, ve, REPLAY_SAMPLE_HZ)?;
         }
         // The source reached the firmware: profile 0's VE is not the online estimate.
         if read(&dir.join("method2-qemu.csv"))? == read(&dir.join("method2-profile0-qemu.csv"))? {
@@ -518,9 +534,20 @@ impl Xtask {
 
     /// `bins-cal replay` of `rec` with `blob` on the host into `host`, which must equal the
     /// firmware's output `fw` byte for byte.
-    fn replay_host_identical(&self, name: &str, rec: &Path, blob: &Path, fw: &Path, host: &Path, ve: &str) -> Result {
+    #[allow(clippy::too_many_arguments)]
+    fn replay_host_identical(
+        &self,
+        name: &str,
+        rec: &Path,
+        blob: &Path,
+        fw: &Path,
+        host: &Path,
+        ve: &str,
+        sample_hz: u32,
+    ) -> Result {
         let mut c = self.bins_cal();
-        c.arg("replay").arg("--rec").arg(rec).arg("--calib").arg(blob).arg("--ve").arg(ve).arg("-o").arg(host);
+        c.arg("replay").arg("--rec").arg(rec).arg("--calib").arg(blob).arg("--ve").arg(ve);
+        c.arg("--tick-hz").arg(sample_hz.to_string()).arg("-o").arg(host);
         self.run(c)?;
         let (a, b) = (read(fw)?, read(host)?);
         let rows = a.iter().filter(|&&c| c == b'\n').count().saturating_sub(1);
@@ -755,7 +782,7 @@ const DEMO_STEPS: [(&str, StepFn); 8] = [
     ("firmware test vectors in QEMU", demo_vectors),
     ("summary", |x| demo_summary(&x.root.join(DEMO_DIR))),
     (
-        "thermal dynamics: die lag and bias play, calibrated from the tilter alone, checked in ramps and holds",
+        "thermal dynamics: die lag and bias play, calibrated from the tilter alone, checked in ramps and holds; replayed in QEMU",
         demo_dynamics,
     ),
 ];
@@ -763,6 +790,10 @@ const DEMO_STEPS: [(&str, StepFn); 8] = [
 /// The thermal-dynamics scenario: the paper's unit whose die lags its case and whose bias has
 /// a heating/cooling play, tilter and checks during ramps and soaks.
 const DEMO_DYNAMICS: &str = "scenarios/dynamics-tilter.toml";
+/// Its logging rate [Hz]: the replay firmware's pipeline is configured for it, so the dynamics
+/// stage advances the recording's own time step (at the default 1 kHz a row would count as
+/// 1 ms, and a 180 s lag as 50 h of the recording).
+const DEMO_DYNAMICS_SAMPLE_HZ: u32 = 1;
 /// Its truth: die lag \[s\], play [°C], bias play width [°C] (`scenarios/dynamics-tilter.toml`).
 const DEMO_DYNAMICS_TRUTH: [(&str, f64); 3] =
     [("lag_tau_s", 180.0), ("hysteresis_width_C", 1.0), ("bias_play_width_C", 4.0)];
@@ -792,12 +823,30 @@ fn demo_dynamics(x: &mut Xtask) -> Result {
             &dynm,
             "--blob",
             &demo_path(x, "cal-dyn.bin"),
+            "--ihex",
+            &demo_path(x, "cal-dyn.hex"),
         ],
     ))?;
-    for (cal, out) in [(&stat, "verify-dyn-static"), (&dynm, "verify-dyn")] {
-        x.run(demo_bins_cal(x, &["verify", "--check", &rec, "--calib", cal, "--ramps", "-o", &demo_path(x, out)]))?;
-    }
+    // The firmware with the identified dynamics in its blob replays the recording in QEMU; its
+    // output must be the host's f32 pipeline bit for bit, and its |g| error is read in the same
+    // check dwells as the host's (`verify --replayed`).
     let dir = x.root.join(DEMO_DIR);
+    let (blob, hex) = (dir.join("cal-dyn.bin"), dir.join("cal-dyn.hex"));
+    let (fw, host) = (dir.join("replay-dyn-qemu.csv"), dir.join("replay-dyn-host.csv"));
+    let t = Instant::now();
+    x.replay_firmware(Path::new(&rec), &blob, &hex, &fw, &dir, DEMO_VE, DEMO_DYNAMICS_SAMPLE_HZ)?;
+    println!("replay firmware with dynamics: {} in {:.1} s wall", fw.display(), t.elapsed().as_secs_f64());
+    x.replay_host_identical("dynamics-tilter", Path::new(&rec), &blob, &fw, &host, DEMO_VE, DEMO_DYNAMICS_SAMPLE_HZ)?;
+    let fw_arg = fw.to_string_lossy().into_owned();
+    for (cal, out, replayed) in [(&stat, "verify-dyn-static", None), (&dynm, "verify-dyn", Some(fw_arg.as_str()))] {
+        let mut args = vec!["verify", "--check", &rec, "--calib", cal, "--ramps"];
+        if let Some(r) = replayed {
+            args.extend(["--replayed", r]);
+        }
+        let out = demo_path(x, out);
+        args.extend(["-o", &out]);
+        x.run(demo_bins_cal(x, &args))?;
+    }
     // max |Δg| per phase: (phase, method) → max.
     let max_of = |sub: &str, method: &str| -> Result<Vec<(String, f64)>> {
         let path = dir.join(sub).join("verify.csv");
@@ -821,9 +870,13 @@ fn demo_dynamics(x: &mut Xtask) -> Result {
     };
     let without = max_of("verify-dyn-static", "method 1")?;
     let with = max_of("verify-dyn", "with dynamics")?;
+    let firmware = max_of("verify-dyn", "replayed")?;
     println!("\nthermal dynamics (simulated: {DEMO_DYNAMICS}, seed 1), max |Δg| [mg] over CP1..CP6:");
-    println!("| checks | poly:2, method 1, static (soaks) | poly:2, method 1 + dynamics (identified) | ratio |");
-    println!("|---|---:|---:|---:|");
+    println!(
+        "| checks | poly:2, method 1, static (soaks) | poly:2, method 1 + dynamics (identified), host f64 | the same, firmware in QEMU (f32) | ratio |"
+    );
+    println!("|---|---:|---:|---:|---:|");
+    let mut bad = Vec::new();
     let mut worst_ramp_ratio = f64::INFINITY;
     for (phase, a) in &without {
         let b = with.iter().find(|w| w.0 == *phase).map_or(f64::NAN, |w| w.1);
@@ -832,13 +885,16 @@ fn demo_dynamics(x: &mut Xtask) -> Result {
             "heating" => "during heating ramps (1 °C/min)",
             _ => "during cooling ramps (1 °C/min)",
         };
-        println!("| {label} | {a:.3} | {b:.3} | {:.0}× |", a / b);
+        let f = firmware.iter().find(|w| w.0 == *phase).map_or(f64::NAN, |w| w.1);
+        println!("| {label} | {a:.3} | {b:.3} | {f:.3} | {:.0}× |", a / b);
+        if !((f - b).abs() <= 0.005) {
+            bad.push(format!("{label}: the firmware's max |Δg| {f:.4} mg is not within 5 µg of the host's {b:.4} mg"));
+        }
         if phase != "hold" {
             worst_ramp_ratio = worst_ramp_ratio.min(a / b);
         }
     }
     let text = std::fs::read_to_string(&dynm).map_err(|e| format!("{dynm}: {e}"))?;
-    let mut bad = Vec::new();
     for (key, truth) in DEMO_DYNAMICS_TRUTH {
         let got = text
             .lines()
@@ -907,9 +963,9 @@ fn demo_replay(x: &mut Xtask) -> Result {
     let (rec, blob, hex) = (dir.join("paper-tilter.csv"), dir.join("cal-poly2.bin"), dir.join("cal-poly2.hex"));
     let (fw, host) = (dir.join("replay-qemu.csv"), dir.join("replay-host.csv"));
     let t = Instant::now();
-    x.replay_firmware(&rec, &blob, &hex, &fw, &dir, DEMO_VE)?;
+    x.replay_firmware(&rec, &blob, &hex, &fw, &dir, DEMO_VE, REPLAY_SAMPLE_HZ)?;
     println!("replay firmware: {} in {:.1} s wall", fw.display(), t.elapsed().as_secs_f64());
-    x.replay_host_identical("paper-tilter", &rec, &blob, &fw, &host, DEMO_VE)
+    x.replay_host_identical("paper-tilter", &rec, &blob, &fw, &host, DEMO_VE, REPLAY_SAMPLE_HZ)
 }
 
 fn demo_verify(x: &mut Xtask) -> Result {
