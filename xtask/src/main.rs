@@ -54,7 +54,7 @@ const DEBIAN_PACKAGES: [&str; 7] =
 /// Variables a parent cargo/rustup sets that must not leak into a child of another toolchain.
 const TOOLCHAIN_VARS: [&str; 6] =
     ["RUSTUP_TOOLCHAIN", "RUSTC", "RUSTDOC", "CARGO", "RUSTC_WORKSPACE_WRAPPER", "CLIPPY_ARGS"];
-/// The sampling rate [Hz] the replay firmware's pipeline is configured for (its
+/// The sampling rate \[Hz\] the replay firmware's pipeline is configured for (its
 /// `REPLAY_SAMPLE_HZ`; SysTick stays at 1 kHz), unless a recording needs its own.
 const REPLAY_SAMPLE_HZ: u32 = 1000;
 /// Default limit on one QEMU run; override with `XTASK_QEMU_TIMEOUT` (seconds).
@@ -790,7 +790,7 @@ const DEMO_STEPS: [(&str, StepFn); 8] = [
 /// The thermal-dynamics scenario: the paper's unit whose die lags its case and whose bias has
 /// a heating/cooling play, tilter and checks during ramps and soaks.
 const DEMO_DYNAMICS: &str = "scenarios/dynamics-tilter.toml";
-/// Its logging rate [Hz]: the replay firmware's pipeline is configured for it, so the dynamics
+/// Its logging rate \[Hz\]: the replay firmware's pipeline is configured for it, so the dynamics
 /// stage advances the recording's own time step (at the default 1 kHz a row would count as
 /// 1 ms, and a 180 s lag as 50 h of the recording).
 const DEMO_DYNAMICS_SAMPLE_HZ: u32 = 1;
