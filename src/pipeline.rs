@@ -216,6 +216,7 @@ impl<F: Float> Pipeline<F> {
     /// tested against.
     pub fn exact_effective_temperature(mut self) -> Self {
         self.round_c = F::ZERO;
+        self.dynamics = self.dynamics.map(|d| d.unheld());
         self
     }
 
