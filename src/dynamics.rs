@@ -216,10 +216,13 @@ pub fn one_minus_exp_neg<F: Float>(x: F) -> F {
         k += 1;
     }
     // y·(1 − y/2·(1 − y/3·(1 − y/4·(1 − y/5·(1 − y/6)))))
-    let mut acc = F::ONE;
-    for d in [6.0, 5.0, 4.0, 3.0, 2.0] {
-        acc = F::ONE - y / F::of(d) * acc;
-    }
+    // Written out: a loop over the divisors would convert each from `f64` at run time (a
+    // soft-float call on the target); as literals they are FPU immediates.
+    let mut acc = F::ONE - y / F::of(6.0);
+    acc = F::ONE - y / F::of(5.0) * acc;
+    acc = F::ONE - y / F::of(4.0) * acc;
+    acc = F::ONE - y / F::of(3.0) * acc;
+    acc = F::ONE - y / F::of(2.0) * acc;
     let mut g = y * acc;
     for _ in 0..k {
         g = g * (F::of(2.0) - g);
@@ -581,10 +584,27 @@ impl<F: Float> FixedRate<F> {
             hi + lo
         };
         let h = k.half_width_c;
-        st.play = clamp(st.play, x - h, x + h);
-        let t_eff = st.play + heating;
+        let e = push(&mut st.play, x - h, x + h);
+        let t_eff = e + heating;
         let hb = k.bias_half_width_c;
-        st.bias_play = clamp(st.bias_play, t_eff - hb, t_eff + hb);
-        Effective { temp_eff_c: t_eff, bias_play: (st.bias_play - t_eff) * k.inv_bias_half_width }
+        let p = push(&mut st.bias_play, t_eff - hb, t_eff + hb);
+        Effective { temp_eff_c: t_eff, bias_play: (p - t_eff) * k.inv_bias_half_width }
+    }
+}
+
+/// A play's output `y` pushed into `[lo, hi]` (`lo ≤ hi`): the clamp, by branches that store
+/// only when it moves (one comparison less than a clamp by selects when pushed from below,
+/// none more otherwise).
+#[inline(always)]
+fn push<F: Float>(y: &mut F, lo: F, hi: F) -> F {
+    let v = *y;
+    if v < lo {
+        *y = lo;
+        lo
+    } else if v > hi {
+        *y = hi;
+        hi
+    } else {
+        v
     }
 }
