@@ -31,15 +31,21 @@
 //! Two ways to run it: [`ThermalDynamics::step`] with any period and the time since
 //! power-on (host tools; the gains and the self-heating term are computed in the call), and
 //! [`FixedRate`], the same stages with the constants of one fixed period precomputed
-//! ([`ThermalDynamics::at_rate`]) and the self-heating term advanced recursively,
-//! `s ← s + (ΔT_sh − s)·(1 − e^(−Δt/τ_sh))`, which after n samples is
-//! `ΔT_sh·(1 − e^(−n·Δt/τ_sh))` (the closed form at `t_on = n·Δt`, time counted from the
-//! first sample) without an exponential per sample. The sampling interrupt uses [`FixedRate`].
+//! ([`ThermalDynamics::at_rate`]) and the self-heating term advanced recursively every
+//! N = [`HEATING_EVERY`] samples, `s ← s + (ΔT_sh − s)·(1 − e^(−N·Δt/τ_sh))`, which after k
+//! updates is `ΔT_sh·(1 − e^(−k·N·Δt/τ_sh))` (the closed form at `t_on = k·N·Δt`, time counted
+//! from the first finite reading), held in between: within `|ΔT_sh|·(N − 1)·Δt/τ_sh` of the
+//! closed form at the sample's own time (7.5·10⁻⁵ °C for 1.5 °C, τ_sh = 300 s at 1 kHz), with
+//! no exponential per sample. The sampling interrupt uses [`FixedRate`];
+//! [`FixedRate::unheld`] advances the term on every sample (the tests' reference).
 //!
 //! Precision: the lagged temperature is kept as a double-word (hi + lo, compensated
 //! summation). Its increment per sample is small (1.7·10⁻⁵ of the gap at Δt = 1 ms, τ = 60
 //! s) beside the `f32` spacing of the temperature (3.8·10⁻⁶ °C at 50 °C), so a plain `f32`
-//! sum would lose a few per cent of each increment.
+//! sum would lose a few per cent of each increment. [`FixedRate`] adds each increment to the
+//! low part and carries the low part into the high part every N samples (Fast2Sum): the low
+//! part then holds at most N increments, so it is rounded to 2⁻²⁴ of them in `f32`. The
+//! self-heating term is a double-word too (the high part is used).
 //!
 //! A reading that is not a temperature (NaN, ±∞, or beyond ±[`MAX_READING_C`]): the state is
 //! not touched (the next good reading continues from it), and the reading is passed through
@@ -481,7 +487,7 @@ impl<F: Float> Constants<F> {
 }
 
 /// [`ThermalDynamics`] at one fixed sample period: the gains precomputed, the self-heating
-/// term advanced recursively from the first step (module docs). A few additions, multiplies
+/// term advanced recursively every N steps from the first finite reading (module docs). A few additions, multiplies
 /// and compares per sample, no exponential.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FixedRate<F> {
