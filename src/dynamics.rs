@@ -31,15 +31,21 @@
 //! Two ways to run it: [`ThermalDynamics::step`] with any period and the time since
 //! power-on (host tools; the gains and the self-heating term are computed in the call), and
 //! [`FixedRate`], the same stages with the constants of one fixed period precomputed
-//! ([`ThermalDynamics::at_rate`]) and the self-heating term advanced recursively,
-//! `s ← s + (ΔT_sh − s)·(1 − e^(−Δt/τ_sh))`, which after n samples is
-//! `ΔT_sh·(1 − e^(−n·Δt/τ_sh))` (the closed form at `t_on = n·Δt`, time counted from the
-//! first sample) without an exponential per sample. The sampling interrupt uses [`FixedRate`].
+//! ([`ThermalDynamics::at_rate`]) and the self-heating term advanced recursively every
+//! N = [`HEATING_EVERY`] samples, `s ← s + (ΔT_sh − s)·(1 − e^(−N·Δt/τ_sh))`, which after k
+//! updates is `ΔT_sh·(1 − e^(−k·N·Δt/τ_sh))` (the closed form at `t_on = k·N·Δt`, time counted
+//! from the first finite reading), held in between: within `|ΔT_sh|·(N − 1)·Δt/τ_sh` of the
+//! closed form at the sample's own time (7.5·10⁻⁵ °C for 1.5 °C, τ_sh = 300 s at 1 kHz), with
+//! no exponential per sample. The sampling interrupt uses [`FixedRate`];
+//! [`FixedRate::unheld`] advances the term on every sample (the tests' reference).
 //!
 //! Precision: the lagged temperature is kept as a double-word (hi + lo, compensated
 //! summation). Its increment per sample is small (1.7·10⁻⁵ of the gap at Δt = 1 ms, τ = 60
 //! s) beside the `f32` spacing of the temperature (3.8·10⁻⁶ °C at 50 °C), so a plain `f32`
-//! sum would lose a few per cent of each increment.
+//! sum would lose a few per cent of each increment. [`FixedRate`] adds each increment to the
+//! low part and carries the low part into the high part every N samples (Fast2Sum): the low
+//! part then holds at most N increments, so it is rounded to 2⁻²⁴ of them in `f32`. The
+//! self-heating term is a double-word too (the high part is used).
 //!
 //! A reading that is not a temperature (NaN, ±∞, or beyond ±[`MAX_READING_C`]): the state is
 //! not touched (the next good reading continues from it), and the reading is passed through
@@ -145,9 +151,11 @@ pub struct DynamicsState<F> {
     play: F,
     /// The bias play's output [°C].
     bias_play: F,
-    /// The self-heating term of [`FixedRate`], high and low part [°C] (advanced on every
-    /// step from power-on).
+    /// The self-heating term of [`FixedRate`], high and low part [°C] (advanced every N steps
+    /// from power-on).
     heating: (F, F),
+    /// Steps of [`FixedRate`] until the self-heating term is next advanced.
+    countdown: u32,
     /// A finite reading has set the lag and the plays.
     initialised: bool,
 }
@@ -160,6 +168,7 @@ impl<F: Float> DynamicsState<F> {
             play: F::ZERO,
             bias_play: F::ZERO,
             heating: (F::ZERO, F::ZERO),
+            countdown: 0,
             initialised: false,
         }
     }
@@ -167,6 +176,12 @@ impl<F: Float> DynamicsState<F> {
     /// The lagged temperature x [°C] (0 before the first finite reading).
     pub fn lagged_c(&self) -> F {
         self.lag.0 + self.lag.1
+    }
+
+    /// The outputs of the hysteresis play and of the bias play [°C] (0 before the first finite
+    /// reading).
+    pub fn plays_c(&self) -> (F, F) {
+        (self.play, self.bias_play)
     }
 
     /// True once a finite reading has set the state.
@@ -207,10 +222,13 @@ pub fn one_minus_exp_neg<F: Float>(x: F) -> F {
         k += 1;
     }
     // y·(1 − y/2·(1 − y/3·(1 − y/4·(1 − y/5·(1 − y/6)))))
-    let mut acc = F::ONE;
-    for d in [6.0, 5.0, 4.0, 3.0, 2.0] {
-        acc = F::ONE - y / F::of(d) * acc;
-    }
+    // Written out: a loop over the divisors would convert each from `f64` at run time (a
+    // soft-float call on the target); as literals they are FPU immediates.
+    let mut acc = F::ONE - y / F::of(6.0);
+    acc = F::ONE - y / F::of(5.0) * acc;
+    acc = F::ONE - y / F::of(4.0) * acc;
+    acc = F::ONE - y / F::of(3.0) * acc;
+    acc = F::ONE - y / F::of(2.0) * acc;
     let mut g = y * acc;
     for _ in 0..k {
         g = g * (F::of(2.0) - g);
@@ -252,12 +270,16 @@ impl<F: Float> ThermalDynamics<F> {
     /// True when every stage is off: the effective temperature is the reading and no bias is
     /// subtracted.
     pub fn is_none(&self) -> bool {
-        let z = F::ZERO;
-        self.lag_tau_s == z
-            && self.hysteresis_width_c == z
-            && self.self_heating_c == z
-            && self.bias_play_width_c == z
-            && self.bias_play_g.iter().all(|&b| b == z)
+        // One comparison: a sum of magnitudes is 0 only when each is (and NaN when one is).
+        let [bx, by, bz] = self.bias_play_g;
+        (self.lag_tau_s.abs()
+            + self.hysteresis_width_c.abs()
+            + self.self_heating_c.abs()
+            + self.bias_play_width_c.abs()
+            + bx.abs()
+            + by.abs()
+            + bz.abs())
+            == F::ZERO
     }
 
     /// Checks every parameter: finite, within its physical limit ([`limits`]), and the bias
@@ -371,22 +393,28 @@ impl<F: Float> ThermalDynamics<F> {
         if !(dt_s.is_finite() && dt_s > F::ZERO) {
             return Err(DynamicsError::SamplePeriod);
         }
+        let lag = lag_gain(dt_s, self.lag_tau_s);
         Ok(FixedRate {
             k: Constants {
-                lag_gain: lag_gain(dt_s, self.lag_tau_s),
+                lag_gain: lag,
                 half_width_c: self.hysteresis_width_c * F::of(0.5),
                 bias_half_width_c: self.bias_play_width_c * F::of(0.5),
                 inv_bias_half_width: inv_half(self.bias_play_width_c),
             },
-            lag: (lag_gain(dt_s, self.lag_tau_s) < F::ONE) as u32,
-            heating_c: self.self_heating_c,
-            heating_gain: lag_gain(dt_s, self.self_heating_tau_s),
-            bias_play_g: self.bias_play_g,
+            lag: (lag < F::ONE) as u32,
+            heating_gain: lag_gain(F::of(HEATING_EVERY as f64) * dt_s, self.self_heating_tau_s),
+            every: HEATING_EVERY,
             params: *self,
             dt_s,
         })
     }
 }
+
+/// How often [`FixedRate`] advances the self-heating term \[samples\]: it is held over
+/// N = 16 samples, where it moves by at most |ΔT_sh|·(1 − e^(−(N−1)·Δt/τ_sh)) ≤
+/// |ΔT_sh|·(N − 1)·Δt/τ_sh (7.5·10⁻⁵ °C for 1.5 °C, τ_sh = 300 s at 1 kHz; with τ_sh = 0 it is
+/// ΔT_sh from the second sample on, as without the hold).
+pub const HEATING_EVERY: u32 = 16;
 
 /// `x ← x + (target − x)·gain` on a double-word `x` = (hi, lo): the low part is carried
 /// into the increment and the sum's rounding error becomes the new low part, so an
@@ -459,18 +487,18 @@ impl<F: Float> Constants<F> {
 }
 
 /// [`ThermalDynamics`] at one fixed sample period: the gains precomputed, the self-heating
-/// term advanced recursively from the first step (module docs). A few additions, multiplies
+/// term advanced recursively every N steps from the first finite reading (module docs). A few additions, multiplies
 /// and compares per sample, no exponential.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FixedRate<F> {
     k: Constants<F>,
     /// The lag is on (its gain below 1): 1, else 0 (a word: one integer test per sample).
     lag: u32,
-    /// ΔT_sh [°C].
-    heating_c: F,
-    /// `1 − e^(−Δt/τ_sh)` (1 for τ_sh = 0).
+    /// `1 − e^(−N·Δt/τ_sh)` (1 for τ_sh = 0).
     heating_gain: F,
-    bias_play_g: Vec3<F>,
+    /// N: the self-heating term is advanced every N samples ([`HEATING_EVERY`]; 1 without
+    /// the hold).
+    every: u32,
     params: ThermalDynamics<F>,
     dt_s: F,
 }
@@ -488,21 +516,101 @@ impl<F: Float> FixedRate<F> {
 
     /// The bias per unit of the play fraction \[g\].
     pub fn bias_play_g(&self) -> &Vec3<F> {
-        &self.bias_play_g
+        &self.params.bias_play_g
+    }
+
+    /// N: the self-heating term is advanced every N samples and held in between
+    /// ([`HEATING_EVERY`]).
+    pub fn heating_every(&self) -> u32 {
+        self.every
+    }
+
+    /// The same stages with the self-heating term advanced on every sample (N = 1): the
+    /// recursion without the hold, the reference the held one is tested against.
+    pub fn unheld(mut self) -> Self {
+        self.every = 1;
+        self.heating_gain = lag_gain(self.dt_s, self.params.self_heating_tau_s);
+        self
     }
 
     /// One sample (period `dt_s`): the thermistor reading [°C] to the effective temperature
-    /// and the bias-play fraction. The self-heating term is the one at `n·Δt` after the first
-    /// step, n the steps taken before this one.
+    /// and the bias-play fraction.
+    ///
+    /// The self-heating term is advanced by N samples ([`heating_every`](Self::heating_every))
+    /// every N steps from the first finite reading and held in between: step n (counted from
+    /// that reading) uses the closed form at `k·N·Δt`, k·N the first multiple of N from n on,
+    /// within the bound of [`HEATING_EVERY`] of the one at `n·Δt`. The lag's increments are
+    /// summed in its low part, carried into the high part on the same steps: the low part holds
+    /// at most N increments and the carry's residue, so its rounding is 2⁻²⁴ of those in `f32`.
     ///
     /// Out of line: inlined into the step, it costs the path without dynamics registers and
     /// instructions (about 15 per sample in the benchmark).
     #[inline(never)]
     pub fn step(&self, st: &mut DynamicsState<F>, temp_c: F) -> Effective<F> {
+        let u = temp_c;
+        // Not a temperature (NaN, ±∞, beyond ±1000 °C): passed through, the state untouched.
+        // One comparison, false for NaN too.
+        let good = u.abs() <= F::of(MAX_READING_C);
         // The high part: within half its spacing of hi + lo.
         let heating = st.heating.0;
-        // s ← s + (ΔT_sh − s)·g_sh: after n steps ΔT_sh·(1 − (1 − g_sh)ⁿ) = ΔT_sh·(1 − e^(−nΔt/τ_sh)).
-        follow(&mut st.heating, self.heating_c, self.heating_gain);
-        self.k.advance(st, temp_c, heating, self.lag != 0)
+        if st.countdown == 0 {
+            // Every N steps, and on each step before the first finite reading (the clock starts
+            // with it).
+            if !st.initialised {
+                if !good {
+                    return Effective { temp_eff_c: u, bias_play: F::ZERO };
+                }
+                // The lag and both plays set to the first reading (the path below then leaves
+                // them so: x = u, e = u, p = T_eff, d = 0).
+                st.lag = (u, F::ZERO);
+                st.play = u;
+                st.bias_play = u + heating;
+                st.initialised = true;
+            }
+            // The lag's low part carried into its high part (exact but within one increment of
+            // 0 °C, see `follow`).
+            st.lag = float::fast_two_sum(st.lag.0, st.lag.1);
+            // s ← s + (ΔT_sh − s)·g_N: after k updates ΔT_sh·(1 − (1 − g_N)ᵏ) = ΔT_sh·(1 − e^(−kNΔt/τ_sh)).
+            follow(&mut st.heating, self.params.self_heating_c, self.heating_gain);
+            st.countdown = self.every;
+        }
+        st.countdown -= 1;
+        if !good {
+            return Effective { temp_eff_c: u, bias_play: F::ZERO };
+        }
+        let k = &self.k;
+        let x = if self.lag == 0 {
+            // Without the lag x is the reading (its low part stays 0 from the first reading).
+            st.lag.0 = u;
+            u
+        } else {
+            let (hi, lo) = st.lag;
+            let lo = lo + ((u - hi) - lo) * k.lag_gain;
+            st.lag.1 = lo;
+            hi + lo
+        };
+        let h = k.half_width_c;
+        let e = push(&mut st.play, x - h, x + h);
+        let t_eff = e + heating;
+        let hb = k.bias_half_width_c;
+        let p = push(&mut st.bias_play, t_eff - hb, t_eff + hb);
+        Effective { temp_eff_c: t_eff, bias_play: (p - t_eff) * k.inv_bias_half_width }
+    }
+}
+
+/// A play's output `y` pushed into `[lo, hi]` (`lo ≤ hi`): the clamp, by branches that store
+/// only when it moves (one comparison less than a clamp by selects when pushed from below,
+/// none more otherwise).
+#[inline(always)]
+fn push<F: Float>(y: &mut F, lo: F, hi: F) -> F {
+    let v = *y;
+    if v < lo {
+        *y = lo;
+        lo
+    } else if v > hi {
+        *y = hi;
+        hi
+    } else {
+        v
     }
 }

@@ -212,10 +212,11 @@ impl<F: Float> Pipeline<F> {
     }
 
     /// The same pipeline evaluating the temperature model at the exact effective temperature
-    /// on every sample (no rounding to [`TEMP_EFF_STEP_C`]): the reference the rounded one is
-    /// tested against.
+    /// on every sample (no rounding to [`TEMP_EFF_STEP_C`], the self-heating term advanced on
+    /// every sample, [`FixedRate::unheld`]): the reference the rounded one is tested against.
     pub fn exact_effective_temperature(mut self) -> Self {
         self.round_c = F::ZERO;
+        self.dynamics = self.dynamics.map(|d| d.unheld());
         self
     }
 

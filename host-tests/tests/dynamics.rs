@@ -74,21 +74,42 @@ fn bias_play_fraction_matches_a_hand_computed_trace() {
 
 #[test]
 fn self_heating_recursion_equals_its_closed_form() {
-    let d = ThermalDynamics { self_heating_c: 1.5, self_heating_tau_s: 30.0, ..off() };
+    let (dt_sh, tau_sh) = (1.5, 30.0);
+    let d = ThermalDynamics { self_heating_c: dt_sh, self_heating_tau_s: tau_sh, ..off() };
+    let closed = |t: f64| 25.0 + dt_sh * (1.0 - (-t / tau_sh).exp());
     let fixed = d.at_rate(DT).unwrap();
     let fixed32 = d.cast::<f32>().at_rate(DT as f32).unwrap();
-    let (mut st, mut st32) = (DynamicsState::new(), DynamicsState::new());
-    let (mut worst, mut worst32) = (0.0f64, 0.0f64);
-    for n in 0..400_000 {
-        let want = 25.0 + 1.5 * (1.0 - (-(n as f64) * DT / 30.0).exp());
+    let every = fixed.heating_every() as usize;
+    assert_eq!(every, bins_comp::dynamics::HEATING_EVERY as usize);
+    // Advanced on every sample (the reference of the hold).
+    let (unheld, unheld32) = (fixed.unheld(), fixed32.unheld());
+    let (mut st, mut st32, mut su, mut su32) =
+        (DynamicsState::new(), DynamicsState::new(), DynamicsState::new(), DynamicsState::new());
+    let (mut worst, mut worst32, mut worst_u, mut worst_u32, mut worst_hold) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for n in 0..400_000usize {
+        let want = closed(n as f64 * DT);
         let general = d.step(&mut DynamicsState::new(), 25.0, DT, n as f64 * DT).temp_eff_c;
         assert!((general - want).abs() < 1e-13, "n = {n}: {general} != {want}");
-        worst = worst.max((fixed.step(&mut st, 25.0).temp_eff_c - want).abs());
-        worst32 = worst32.max((fixed32.step(&mut st32, 25.0).temp_eff_c as f64 - want).abs());
+        worst_u = worst_u.max((unheld.step(&mut su, 25.0).temp_eff_c - want).abs());
+        worst_u32 = worst_u32.max((unheld32.step(&mut su32, 25.0).temp_eff_c as f64 - want).abs());
+        // Held: step n uses the closed form at the first multiple of N from n on.
+        let held = closed(n.div_ceil(every) as f64 * every as f64 * DT);
+        let t = fixed.step(&mut st, 25.0).temp_eff_c;
+        worst = worst.max((t - held).abs());
+        worst32 = worst32.max((fixed32.step(&mut st32, 25.0).temp_eff_c as f64 - held).abs());
+        worst_hold = worst_hold.max((t - want).abs());
     }
-    println!("self-heating recursion vs closed form: f64 {worst:.2e} °C, f32 {worst32:.2e} °C");
+    // The hold's bound: |ΔT_sh|·(N − 1)·Δt/τ_sh.
+    let bound = dt_sh * (every - 1) as f64 * DT / tau_sh;
+    println!(
+        "self-heating recursion vs closed form: f64 {worst_u:.2e} °C, f32 {worst_u32:.2e} °C; held every {every} samples, vs the held closed form: f64 {worst:.2e} °C, f32 {worst32:.2e} °C; the hold {worst_hold:.3e} °C (bound {bound:.3e} °C)"
+    );
+    assert!(worst_u < 1e-11, "{worst_u}");
+    assert!(worst_u32 < 4e-6, "{worst_u32}");
     assert!(worst < 1e-11, "{worst}");
     assert!(worst32 < 4e-6, "{worst32}");
+    assert!(worst_hold <= bound, "{worst_hold} > {bound}");
+    assert!(worst_hold > 0.5 * bound, "{worst_hold}: the hold is not exercised");
 }
 
 #[test]
@@ -114,7 +135,8 @@ fn non_finite_readings_leave_the_state_and_pass_through() {
         let e = d.step(&mut st, bad);
         assert!(!e.temp_eff_c.is_finite());
         assert_eq!(e.bias_play, 0.0);
-        assert_eq!(st, before);
+        // The lag and the plays untouched (the self-heating's clock runs on).
+        assert_eq!((st.lagged_c(), st.plays_c()), (before.lagged_c(), before.plays_c()));
     }
     // A finite reading beyond ±1000 °C is not a temperature either: passed through, the
     // state untouched.
@@ -247,7 +269,8 @@ fn cached_terms_at_the_rounded_effective_temperature_stay_within_2_ug_of_the_exa
             worst_rounding * 1e6
         );
         // The rounding alone is the model's slope at 1 g times at most 1/512 °C (the offsets
-        // alone move by 220 µg/°C below T0 for this unit: 0.43 µg).
+        // alone move by 220 µg/°C below T0 for this unit: 0.43 µg), plus the self-heating's
+        // hold, at most 1.5 °C·15 ms/300 s = 7.5·10⁻⁵ °C (0.02 µg).
         assert!(worst_rounding <= 0.6e-6, "{method:?}: {worst_rounding}");
         assert!(worst <= 2e-6, "{method:?}: {worst}");
     }
@@ -263,7 +286,7 @@ fn the_effective_temperature_drives_the_model_and_the_bias_play_is_subtracted() 
     let p = Pipeline::new(cal, VibrationConfig::none())
         .with_dynamics(dynamics.at_rate(DT).unwrap())
         .exact_effective_temperature();
-    let stage = dynamics.at_rate(DT).unwrap();
+    let stage = dynamics.at_rate(DT).unwrap().unheld();
     let mut st: PipelineState<f64, 64> = PipelineState::new();
     let mut ds = DynamicsState::new();
     let mut saw_play = false;
