@@ -76,14 +76,7 @@ pub fn halves(order: usize) -> Vec<(String, [f64; 3], [f64; 3], Theta)> {
             p
         };
         let th = id.fit.theta;
-        let d = ThermalDynamics {
-            lag_tau_s: th.lag_tau_s,
-            hysteresis_width_c: th.hysteresis_width_c,
-            self_heating_c: 0.0,
-            self_heating_tau_s: 0.0,
-            bias_play_width_c: th.bias_play_width_c,
-            bias_play_g: if th.bias_play_width_c > 0.0 { id.fit.bias_play_g } else { [0.0; 3] },
-        };
+        let d = id.dynamics();
         let stat = heldout_rms(&path, &wide(&id.static_fit.params), &ThermalDynamics::none(), &|t| !fit_in(t));
         let dynm = heldout_rms(&path, &wide(&id.fit.params), &d, &|t| !fit_in(t));
         out.push((name.to_string(), stat, dynm, th));

@@ -391,6 +391,22 @@ pub struct Identification {
     pub evaluations: usize,
 }
 
+impl Identification {
+    /// The identified dynamics as the core's parameters (self-heating 0: a tilter recording has
+    /// no power-on to identify it from; the bias play only with its play).
+    pub fn dynamics(&self) -> ThermalDynamics<f64> {
+        let th = self.fit.theta;
+        ThermalDynamics {
+            lag_tau_s: th.lag_tau_s,
+            hysteresis_width_c: th.hysteresis_width_c,
+            self_heating_c: 0.0,
+            self_heating_tau_s: 0.0,
+            bias_play_width_c: th.bias_play_width_c,
+            bias_play_g: if th.bias_play_width_c > 0.0 { self.fit.bias_play_g } else { [0.0; 3] },
+        }
+    }
+}
+
 /// A component is kept when dropping it raises the residual by more than this fraction …
 pub const MIN_GAIN: f64 = 0.05;
 /// … and by more than this many times the residual variance per block (the block means are

@@ -395,14 +395,7 @@ fn identify_dynamics(
         id.evaluations
     );
     let th = id.fit.theta;
-    let spec = DynamicsSpec {
-        lag_tau_s: th.lag_tau_s,
-        hysteresis_width_c: th.hysteresis_width_c,
-        self_heating_c: 0.0,
-        self_heating_tau_s: 0.0,
-        bias_play_width_c: th.bias_play_width_c,
-        bias_play_mg: if th.bias_play_width_c > 0.0 { b.map(|x| x * 1e3) } else { [0.0; 3] },
-    };
+    let spec = DynamicsSpec::from_dynamics(&id.dynamics());
     let off: Vec<String> =
         id.components.iter().filter_map(|c| c.why_off.as_ref().map(|w| format!("{} off: {w}", c.name))).collect();
     let mut notes = vec![format!(
