@@ -221,6 +221,7 @@ fn calibrate_reports_the_unlevel_holds_and_calibrates_empty_references_freely() 
         p.to_str().unwrap(),
         "--free-params",
         "bias-scale",
+        "--tilt",
         "-o",
         out.to_str().unwrap(),
     ]);
@@ -228,6 +229,8 @@ fn calibrate_reports_the_unlevel_holds_and_calibrates_empty_references_freely() 
         text.contains("the reference columns are empty in every row") && text.contains("free fit at 20.00"),
         "{text}"
     );
+    // `--tilt` needs labelled references: ignored, and said so, not silently.
+    assert!(text.contains("--tilt ignored"), "{text}");
     assert!(out.exists());
     // Absent reference columns: the same, and the note says so.
     let absent = ["fx_g", "fy_g", "fz_g"].iter().fold(csv.clone(), |t, c| common::without_column(&t, c));

@@ -213,6 +213,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("{files}: no stationary dwell with a settled temperature (see the table above)");
     }
     if free {
+        if args.tilt {
+            notes.push(format!(
+                "{files}: --tilt ignored: the free fit (|f| = 1 g) has no labelled references whose tilts it could fit"
+            ));
+        }
         return run_free(&args, groups, &all, &files, notes, (model_arg, method, ve_variant));
     }
     let mut fits = Vec::new();
