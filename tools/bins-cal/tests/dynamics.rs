@@ -92,19 +92,15 @@ fn a_diagnosis_merges_into_a_calibration_and_bad_tables_name_the_file_and_key() 
     // The diagnosis names the die lag (150 s in the scenario) and writes it as the table.
     let model = bins_cal::calfile::DynamicsSpec::read_table(Path::new(&p("model.toml"))).unwrap();
     assert!((model.lag_tau_s - 150.0).abs() < 0.2 * 150.0, "{model:?}");
-    common::ok(&[
-        "calibrate",
-        "--tilter",
-        &p("cal.csv"),
-        "--model",
-        "poly:2",
-        "--dynamics",
-        &p("model.toml"),
-        "-o",
-        &p("unit-dyn.toml"),
-        "--blob",
-        &p("unit-dyn.bin"),
-    ]);
+    // `calibrate` of the tilter recording with the table of `table` merged, written to `out`.
+    let merge = |table: &str, out: &str| -> Vec<String> {
+        ["calibrate", "--tilter", &p("cal.csv"), "--model", "poly:2", "--dynamics", &p(table), "-o", &p(out)]
+            .map(String::from)
+            .to_vec()
+    };
+    let mut args = merge("model.toml", "unit-dyn.toml");
+    args.extend(["--blob".into(), p("unit-dyn.bin")]);
+    common::ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
     let file = bins_cal::calfile::CalibrationFile::read(Path::new(&p("unit-dyn.toml"))).unwrap();
     assert_eq!(file.thermal_dynamics, Some(model));
     // The blob carries it: back to the same table.
@@ -118,17 +114,7 @@ fn a_diagnosis_merges_into_a_calibration_and_bad_tables_name_the_file_and_key() 
         ("[other]\nx = 1\n", "[thermal_dynamics]"),
     ] {
         std::fs::write(p("bad.toml"), text).unwrap();
-        let e = common::err(&[
-            "calibrate",
-            "--tilter",
-            &p("cal.csv"),
-            "--model",
-            "poly:2",
-            "--dynamics",
-            &p("bad.toml"),
-            "-o",
-            &p("out.toml"),
-        ]);
+        let e = common::err(&merge("bad.toml", "out.toml").iter().map(String::as_str).collect::<Vec<_>>());
         assert!(e.contains("bad.toml") && e.contains(key), "{text:?}: {e}");
         assert!(!tmp.path().join("out.toml").exists());
     }
