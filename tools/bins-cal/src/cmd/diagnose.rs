@@ -67,16 +67,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for n in &r.notes {
         println!("note: {n}");
     }
-    if r.verdict.values().all(|v| v == "at the noise") {
-        println!("no mechanism found above the noise: the raw residual is at the noise floor on every axis");
+    if r.effects.is_empty() && r.ambiguous.is_empty() && r.verdict.values().all(|v| v == "at the noise") {
+        println!(
+            "no mechanism found above the noise: no averaging time from 1 s to a tenth of the record shows structure above the noise on any axis"
+        );
     } else if r.effects.is_empty() && r.ambiguous.is_empty() {
         println!("no mechanism in the library explains the residual");
     }
     for e in &r.effects {
         println!("effect {} on {}: {}", e.id, e.axes.join(","), e.explanation);
         for (ax, ps) in &e.params {
-            let list: Vec<String> = ps.iter().map(|(k, v)| format!("{k} = {v:.6}")).collect();
-            println!("    {ax}: {}", list.join(", "));
+            let open = e.undetermined.get(ax);
+            let list: Vec<String> = ps
+                .iter()
+                .map(|(k, v)| match (open.is_some_and(|u| u.contains(k)), e.ci.get(ax).and_then(|c| c.get(k))) {
+                    (true, Some(c)) => format!("{k} undetermined ({:.3} … {:.3})", c[0], c[1]),
+                    _ => format!("{k} = {v:.6}"),
+                })
+                .collect();
+            let cut = e.heldout_cut_mg.get(ax).map_or(String::new(), |c| {
+                format!("; cuts the held-out RMS by {:.4} mg (fold-to-fold standard error {:.4} mg)", c[0], c[1])
+            });
+            println!("    {ax}: {}{cut}", list.join(", "));
         }
     }
     for a in &r.ambiguous {
@@ -91,8 +103,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let rw_from = if r.random_walk_source == "given" { "given" } else { "estimated with the whole library in" };
     for ax in ["x", "y", "z"] {
         let g = |m: &std::collections::BTreeMap<String, f64>| m.get(ax).copied().unwrap_or(f64::NAN);
+        let scale = r.unexplained_scale_s.get(ax).map_or(String::new(), |s| format!(" at {s:.0} s averaging"));
         println!(
-            "{ax}: {}; noise floor {:.4} mg; held-out RMS of the raw residual {:.4} → {:.4} mg; unexplained {:.4} mg",
+            "{ax}: {}; noise floor {:.4} mg; held-out RMS of the raw residual {:.4} → {:.4} mg; unexplained {:.4} mg{scale}",
             r.verdict.get(ax).map_or("", String::as_str),
             g(&r.noise_floor_mg),
             g(&r.heldout_rms_before_mg),

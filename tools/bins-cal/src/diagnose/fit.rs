@@ -58,7 +58,7 @@ impl Bank {
         let mut cols: Vec<Vec<f64>> = ctx.nuisance.iter().filter_map(|c| unit_rms(c)).collect();
         let forced: Vec<usize> = (0..cols.len()).collect();
         let mut cands = Vec::new();
-        for m in Mech::ALL {
+        for m in Mech::ALL.into_iter().chain(Mech::ALTERNATIVES) {
             if !ctx.available(m) {
                 continue;
             }
@@ -271,6 +271,73 @@ pub struct AxisFit {
     pub rms: (f64, f64),
     /// The same on held-out blocks (coefficients and offset fitted without them).
     pub heldout_rms: (f64, f64),
+    /// The held-out raw residual at every row \[g\] (each row predicted from the folds it is
+    /// not in, offset removed), before and after the model: what `heldout_rms` is the RMS of,
+    /// and what the verdicts look at on every time scale ([`super::noise::structure_scales`]).
+    pub heldout_resid: (Vec<f64>, Vec<f64>),
+    /// Per term (as in `terms`): the cut of the raw held-out RMS the term brings \[g\] (the
+    /// model without it minus the model) and that cut's fold-to-fold standard error.
+    pub heldout_gain: Vec<(f64, f64)>,
+}
+
+/// The raw held-out residual of a model: per fold, coefficients (GLS under the noise model)
+/// and offset fitted on the other folds, the fold's rows predicted.
+pub struct RawHeldout {
+    /// Held-out residual at every row \[g\].
+    pub resid: Vec<f64>,
+    /// Per fold: sum of squares and rows.
+    pub fold_ss: [(f64, usize); FOLDS],
+}
+
+impl RawHeldout {
+    /// RMS over all rows \[g\].
+    pub fn rms(&self) -> f64 {
+        let (s, c) = self.fold_ss.iter().fold((0.0, 0usize), |a, f| (a.0 + f.0, a.1 + f.1));
+        (s / c.max(1) as f64).sqrt()
+    }
+
+    /// What `self` cuts from `without`'s RMS \[g\] and the standard error of that cut from
+    /// its spread over the folds.
+    pub fn gain_over(&self, without: &RawHeldout) -> (f64, f64) {
+        let g = without.rms() - self.rms();
+        let d: Vec<f64> = (0..FOLDS)
+            .map(|k| {
+                let r = |h: &RawHeldout| (h.fold_ss[k].0 / h.fold_ss[k].1.max(1) as f64).sqrt();
+                r(without) - r(self)
+            })
+            .collect();
+        let m = d.iter().sum::<f64>() / FOLDS as f64;
+        let var = d.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (FOLDS - 1) as f64;
+        (g, (var / FOLDS as f64).sqrt())
+    }
+}
+
+/// [`RawHeldout`] of `y` on the columns `refs` (none: the offset alone) under the noise model
+/// (times `t`, white variances `r`, random walk `q`).
+pub fn raw_heldout(t: &[f64], r: &[f64], q: f64, y: &[f64], refs: &[&[f64]], fold: &[usize]) -> RawHeldout {
+    let n = y.len();
+    let mut resid = vec![0.0; n];
+    let mut fold_ss = [(0.0, 0usize); FOLDS];
+    for (k, fs) in fold_ss.iter_mut().enumerate() {
+        let bk = if refs.is_empty() {
+            Vec::new()
+        } else {
+            let fk = Filter::new(t, r, q, |i| fold[i] != k);
+            match gls(&fk, y, refs) {
+                Some(g) => g.0,
+                None => gls(&Filter::new(t, r, q, |_| true), y, refs).map_or_else(|| vec![0.0; refs.len()], |g| g.0),
+            }
+        };
+        let ek: Vec<f64> = (0..n).map(|i| y[i] - refs.iter().zip(&bk).map(|(c, b)| c[i] * b).sum::<f64>()).collect();
+        let (s, c) = (0..n).filter(|&i| fold[i] != k).fold((0.0, 0usize), |(s, c), i| (s + ek[i], c + 1));
+        let off = s / c.max(1) as f64;
+        for i in (0..n).filter(|&i| fold[i] == k) {
+            resid[i] = ek[i] - off;
+            fs.0 += resid[i] * resid[i];
+            fs.1 += 1;
+        }
+    }
+    RawHeldout { resid, fold_ss }
 }
 
 /// RMS of `v` about its mean (over the rows of `mask`, all when `None`).
@@ -537,16 +604,46 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
             })
             .max_by(|a, b| a.1.p_drop.total_cmp(&b.1.p_drop))
             .map(|(k, _)| k);
+        // The report's own figure decides: a term is kept only if it cuts the raw held-out
+        // RMS by more than that cut's fold-to-fold standard error, and the model never leaves
+        // "after" above "before". Whitened innovations under the random walk alone would keep
+        // a drift-shaped term (a time constant of the record's length) that wins on
+        // differences while the levels, the figure the report prints, come out worse.
+        let weakest = weakest.or_else(|| {
+            let worst = fit
+                .heldout_gain
+                .iter()
+                .enumerate()
+                .min_by(|a, b| (a.1.0 - a.1.1).total_cmp(&(b.1.0 - b.1.1)))
+                .map(|(k, g)| (k, g.0 - g.1));
+            match worst {
+                Some((k, margin)) if margin <= 0.0 || fit.heldout_rms.1 >= fit.heldout_rms.0 => Some(k),
+                _ => None,
+            }
+        });
         match weakest {
             Some(k) => {
                 model.remove(k);
             }
             None => {
-                fit.trace = trace;
-                fit.ambiguous = match &last_grams {
+                let amb = match &last_grams {
                     Some(g) => ambiguity(&bank, &model, g, fit.inflation),
                     None => Vec::new(),
                 };
+                // A temperature form that a drift in time explains clearly better is not a
+                // finding: it competes with drift, not with the null.
+                let drift_wins = amb.iter().find_map(|(m, alts)| {
+                    alts.iter()
+                        .any(|(a, d)| Mech::ALTERNATIVES.contains(a) && *d <= -AMBIGUOUS_LR)
+                        .then(|| fit.terms.iter().position(|t| t.mech == *m))
+                        .flatten()
+                });
+                if let Some(k) = drift_wins {
+                    model.remove(k);
+                    continue;
+                }
+                fit.trace = trace;
+                fit.ambiguous = amb;
                 return fit;
             }
         }
@@ -565,7 +662,10 @@ fn ambiguity(bank: &Bank, model: &[usize], grams: &Grams, infl: f64) -> Vec<(Mec
     for (k, &c) in model.iter().enumerate() {
         let mut alts = Vec::new();
         let rest: Vec<usize> = model.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, c)| *c).collect();
-        for m in Mech::ALL {
+        // A drift in time is the alternative of a temperature form only (a turn-on term is
+        // already a settling, since power-on).
+        let alternatives = Mech::ALTERNATIVES.into_iter().filter(|_| bank.cands[c].mech.temperature_form());
+        for m in Mech::ALL.into_iter().chain(alternatives) {
             if model.iter().any(|&mc| bank.cands[mc].mech == m) {
                 continue;
             }
@@ -789,29 +889,27 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     // the model; held-out rows use coefficients and offset fitted without their fold. The
     // drift (the random-walk level of what the model leaves) is its own figure, never
     // subtracted.
+    if members.is_empty() {
+        prediction.iter_mut().for_each(|v| *v = 0.0);
+    }
     let e: Vec<f64> = y.iter().zip(&prediction).map(|(a, b)| a - b).collect();
     let drift = smooth_level(t, r, q, &e);
     let before = centred_rms(y, None);
     let after = centred_rms(&e, None);
     let drift_rms = centred_rms(&drift, None);
-    let (mut sb, mut sa, mut cnt) = (0.0, 0.0, 0usize);
-    for k in 0..FOLDS {
-        let fk = Filter::new(t, r, q, |i| fold[i] != k);
-        let bk = if refs.is_empty() { Some(Vec::new()) } else { gls(&fk, y, &refs).map(|g| g.0) };
-        let bk = bk.unwrap_or_else(|| beta.clone());
-        let ek: Vec<f64> = (0..n).map(|i| y[i] - refs.iter().zip(&bk).map(|(c, b)| c[i] * b).sum::<f64>()).collect();
-        let train = |v: &[f64]| {
-            let (s, c) = (0..n).filter(|&i| fold[i] != k).fold((0.0, 0usize), |(s, c), i| (s + v[i], c + 1));
-            s / c.max(1) as f64
-        };
-        let (oy, oe) = (train(y), train(&ek));
-        for i in (0..n).filter(|&i| fold[i] == k) {
-            sb += (y[i] - oy).powi(2);
-            sa += (ek[i] - oe).powi(2);
-            cnt += 1;
-        }
+    let hb = raw_heldout(t, r, q, y, &[], fold);
+    // With nothing named the model is SIM itself: its own terms re-fitted alone are not a
+    // finding, and "after" is "before".
+    let ha = if members.is_empty() { raw_heldout(t, r, q, y, &[], fold) } else { raw_heldout(t, r, q, y, &refs, fold) };
+    // Each term's cut of the raw held-out RMS: the model without it, the others as fitted.
+    let mut heldout_gain = Vec::new();
+    let mut off = ctx.nuisance.len();
+    for (m, th) in &members {
+        let nc = ctx.columns(*m, th.unwrap_or(0.0)).len();
+        let without: Vec<&[f64]> = refs[..off].iter().chain(&refs[off + nc..]).copied().collect();
+        heldout_gain.push(ha.gain_over(&raw_heldout(t, r, q, y, &without, fold)));
+        off += nc;
     }
-    let c = cnt.max(1) as f64;
     AxisFit {
         axis,
         q,
@@ -823,6 +921,8 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
         drift_rms,
         prediction,
         rms: (before, after),
-        heldout_rms: ((sb / c).sqrt(), (sa / c).sqrt()),
+        heldout_rms: (hb.rms(), ha.rms()),
+        heldout_resid: (hb.resid, ha.resid),
+        heldout_gain,
     }
 }

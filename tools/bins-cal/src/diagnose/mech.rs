@@ -24,6 +24,11 @@ pub const GRID_PER_DECADE: f64 = 3.0;
 /// Reference temperature of the polynomial terms [°C] (the paper's normal conditions).
 pub const T0_C: f64 = 20.0;
 
+/// A turn-on term (`warmup`, `self_heating`) is offered at a time constant τ only when
+/// `e^(−P/τ)` changes by at least this much over the recording's `power_s`: the recording has
+/// rows near power-on on the scale of τ.
+pub const TURN_ON_MIN_RANGE: f64 = 0.25;
+
 /// A mechanism.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Mech {
@@ -58,6 +63,10 @@ pub enum Mech {
     NonlinearityK3,
     /// Multiplicative cross-coupling m31, m32: `a3 a1`, `a3 a2`, `⟨ã3 ã1⟩`, `⟨ã3 ã2⟩`.
     VibrationCross,
+    /// A settling or drift in time, `e^(−(t − t₀)/τ)` (t₀ the first row): never named on its
+    /// own (slow drift is noise, [`super::noise`]), only the alternative a temperature form
+    /// must beat ([`Mech::ALTERNATIVES`]).
+    Drift,
 }
 
 impl Mech {
@@ -79,6 +88,24 @@ impl Mech {
         Mech::VibrationCross,
     ];
 
+    /// Forms that are never named but are offered as the alternative explanation of what a
+    /// named mechanism fits: a temperature term and a drift in time are confounded when the
+    /// temperature changes one way only.
+    pub const ALTERNATIVES: [Mech; 1] = [Mech::Drift];
+
+    /// Whether `self` is a temperature form (a drift in time is its alternative).
+    pub fn temperature_form(self) -> bool {
+        matches!(
+            self,
+            Mech::ThermalLag
+                | Mech::ThermalHysteresis
+                | Mech::BiasHysteresis
+                | Mech::BiasTempOrder
+                | Mech::ScaleTemp
+                | Mech::CrossCouplingTemp
+        )
+    }
+
     /// The report id.
     pub fn id(self) -> &'static str {
         match self {
@@ -96,18 +123,19 @@ impl Mech {
             Mech::NonlinearityK2 => "nonlinearity_k2",
             Mech::NonlinearityK3 => "nonlinearity_k3",
             Mech::VibrationCross => "vibration_cross",
+            Mech::Drift => "drift",
         }
     }
 
     /// The mechanism with report id `id`.
     pub fn from_id(id: &str) -> Option<Mech> {
-        Mech::ALL.into_iter().find(|m| m.id() == id)
+        Mech::ALL.into_iter().chain(Mech::ALTERNATIVES).find(|m| m.id() == id)
     }
 
     /// Name and unit of the nonlinear parameter θ, if any.
     pub fn theta(self) -> Option<&'static str> {
         match self {
-            Mech::ThermalLag | Mech::SelfHeating | Mech::Warmup => Some("tau_s"),
+            Mech::ThermalLag | Mech::SelfHeating | Mech::Warmup | Mech::Drift => Some("tau_s"),
             Mech::ThermalHysteresis | Mech::BiasHysteresis => Some("width_C"),
             _ => None,
         }
@@ -150,6 +178,7 @@ impl Mech {
             Mech::VibrationCross => {
                 "multiplicative cross-coupling m31, m32 of V(2): a3·a1, a3·a2 statically and ⟨ã3 ã1⟩, ⟨ã3 ã2⟩ under vibration"
             }
+            Mech::Drift => "a settling or drift of the bias in time, A·e^(−(t − t₀)/τ), independent of the temperature",
         }
     }
 }
@@ -159,6 +188,7 @@ pub fn separating_test(a: Mech, b: Mech) -> String {
     use Mech::*;
     let (a, b) = if a <= b { (a, b) } else { (b, a) };
     match (a, b) {
+        (_, Drift) => "a temperature reversal (heat, then cool back through the same temperatures, or the reverse): a temperature term follows the temperature back, a drift in time does not".into(),
         (ThermalHysteresis, BiasHysteresis) => "positions or temperature ranges where the temperature sensitivity differs (e.g. +1 g and −1 g on an axis whose scale factor has a tempco): thermal hysteresis follows dS/dT, an additive bias play does not".into(),
         (ThermalLag, BiasHysteresis) => "two ramp rates with holds at the ends of the ramps: a lag's error scales with the rate and decays during a hold, an additive play does neither".into(),
         (BiasHysteresis, BiasTempOrder) => "holds at several temperatures, reached by heating and by cooling: the bias curve is the same both ways, a play is not".into(),
@@ -452,20 +482,37 @@ impl<'a> Context<'a> {
             Mech::CrossCouplingTemp => thermal && (varies(j) || varies(k)),
             Mech::CrossAxis => varies(j) || varies(k),
             Mech::ScaleFactor => varies(i),
-            Mech::SelfHeating => self.p.power.is_some(),
-            Mech::Warmup => self.p.power.is_some(),
+            Mech::SelfHeating | Mech::Warmup => self.p.power.is_some() && !self.grid(m).is_empty(),
+            Mech::Drift => self.p.t.len() >= 50,
             _ => true,
         }
     }
 
     /// The grid of θ for a nonlinear mechanism (empty for linear ones), log-spaced,
-    /// [`GRID_PER_DECADE`] points a decade.
+    /// [`GRID_PER_DECADE`] points a decade. A turn-on term keeps only the time constants whose
+    /// signature varies over the recording ([`TURN_ON_MIN_RANGE`]): far from power-on
+    /// `1 − e^(−P/τ)` is constant (a short τ) or a slow ramp in time (a τ far beyond the
+    /// recording), and the term would only be a constant or a drift under another name.
     pub fn grid(&self, m: Mech) -> Vec<f64> {
+        let g = self.grid_span(m);
+        match m {
+            Mech::SelfHeating | Mech::Warmup => {
+                let pw = self.p.power.as_deref().unwrap_or(&[]);
+                let (pmin, pmax) =
+                    pw.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+                g.into_iter().filter(|&tau| (-pmin / tau).exp() - (-pmax / tau).exp() >= TURN_ON_MIN_RANGE).collect()
+            }
+            _ => g,
+        }
+    }
+
+    fn grid_span(&self, m: Mech) -> Vec<f64> {
         let p = self.p;
         let dur = p.t.last().copied().unwrap_or(0.0) - p.t.first().copied().unwrap_or(0.0);
         let (lo, hi) = match m {
             Mech::ThermalLag => ((3.0 * p.dt).max(1.0), 0.25 * dur),
             Mech::ThermalHysteresis | Mech::BiasHysteresis => (0.02, 0.5 * self.temp_range),
+            Mech::Drift => (dur / 30.0, 3.0 * dur),
             Mech::SelfHeating | Mech::Warmup => {
                 let pmax = p.power.as_ref().map_or(0.0, |v| v.iter().fold(0.0, |a: f64, &b| a.max(b)));
                 ((3.0 * p.dt).max(1.0), 0.5 * pmax)
@@ -523,6 +570,10 @@ impl<'a> Context<'a> {
             Mech::NonlinearityK2 => vec![self.v2[1].clone()],
             Mech::NonlinearityK3 => vec![self.v2[2].clone()],
             Mech::VibrationCross => vec![self.v2[3].clone(), self.v2[4].clone()],
+            Mech::Drift => {
+                let t0 = p.t.first().copied().unwrap_or(0.0);
+                vec![p.t.iter().map(|t| (-(t - t0) / theta).exp()).collect()]
+            }
         }
     }
 }

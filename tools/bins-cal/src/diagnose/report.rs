@@ -3,7 +3,7 @@
 use super::fit::AxisFit;
 use super::locate::Stratum;
 use super::mech::{Mech, Sensitivity, separating_test};
-use super::noise::short_tau_q;
+use super::noise::{ScalePoint, short_tau_q, structure, structure_scales};
 use super::prep::{AXES, Prepared};
 use super::stats::allan_dev;
 use serde::Serialize;
@@ -28,7 +28,19 @@ pub struct Effect {
     pub explanation: String,
     /// Likelihood-ratio statistic and p-value for dropping it, per accelerometer.
     pub significance: PerAxis<[f64; 2]>,
+    /// Per accelerometer: the cut of the raw held-out RMS it brings (the model without it
+    /// minus the model) and that cut's fold-to-fold standard error \[mg\]; a term is named
+    /// only when the cut exceeds its standard error.
+    pub heldout_cut_mg: PerAxis<[f64; 2]>,
+    /// Per accelerometer, parameters the data does not determine: a 95 % interval spanning
+    /// [`UNDETERMINED_RATIO`] or more. Their values are not findings.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub undetermined: PerAxis<Vec<String>>,
 }
+
+/// A time constant or width whose 95 % interval spans this ratio (two decades) or more is
+/// reported as undetermined.
+pub const UNDETERMINED_RATIO: f64 = 100.0;
 
 /// Mechanisms the data cannot separate.
 #[derive(Clone, Debug, Serialize)]
@@ -52,6 +64,21 @@ pub struct AllanPoint {
     pub tau_s: f64,
     /// Allan deviation per accelerometer \[mg\] (absent where no segment is long enough).
     pub adev_mg: PerAxis<f64>,
+}
+
+/// One averaging time of [`Report::scales`].
+#[derive(Clone, Debug, Serialize)]
+pub struct ScaleRow {
+    /// Averaging time \[s\].
+    pub tau_s: f64,
+    /// Standard deviation of the block means of the held-out residual before the model \[mg\].
+    pub before_mg: f64,
+    /// After the model \[mg\].
+    pub after_mg: f64,
+    /// What the measured short-τ noise (coloured noise included) gives there \[mg\].
+    pub noise_mg: f64,
+    /// Above this the spread is structure \[mg\].
+    pub limit_mg: f64,
 }
 
 /// One step of the forward search.
@@ -86,6 +113,10 @@ pub struct ModelTerm {
     pub params: BTreeMap<String, f64>,
     /// Whether the data could not tell it from another mechanism.
     pub ambiguous: bool,
+    /// Parameters the data does not determine (see [`Effect::undetermined`]); left out of
+    /// the `[thermal_dynamics]` table.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub undetermined: Vec<String>,
 }
 
 /// The augmented model: the found terms, to add to the simulation.
@@ -115,7 +146,7 @@ pub fn dynamics_table(terms: &[ModelTerm]) -> Option<crate::calfile::DynamicsSpe
     let median = |id: &str, key: &str| -> Option<f64> {
         let mut v: Vec<f64> = terms
             .iter()
-            .filter(|t| t.id == id && !t.ambiguous)
+            .filter(|t| t.id == id && !t.ambiguous && t.undetermined.is_empty())
             .filter_map(|t| t.params.get(key).copied())
             .filter(|x| x.is_finite())
             .collect();
@@ -143,7 +174,7 @@ pub fn dynamics_table(terms: &[ModelTerm]) -> Option<crate::calfile::DynamicsSpe
     }
     if let Some(hb) = median("bias_hysteresis", "width_C") {
         d.bias_play_width_c = hb;
-        for t in terms.iter().filter(|t| t.id == "bias_hysteresis" && !t.ambiguous) {
+        for t in terms.iter().filter(|t| t.id == "bias_hysteresis" && !t.ambiguous && t.undetermined.is_empty()) {
             if let (Some(k), Some(a)) = (AXES.iter().position(|a| *a == t.axis), t.params.get("amp_mg")) {
                 d.bias_play_mg[k] = *a;
             }
@@ -185,11 +216,18 @@ pub struct Report {
     /// RMS of the drift (the random-walk level of what the model leaves, smoothed) \[mg\]:
     /// reported and drawn on its own, never subtracted from the figures.
     pub drift_rms_mg: PerAxis<f64>,
-    /// Structure above the white noise that the model does not explain: `√(after² − floor²)`
-    /// of the held-out RMS \[mg\].
+    /// Structure above the noise that the model does not explain, at the time scale where it
+    /// stands out most ([`structure`]): `√(sd² − noise²)` of the block means of the held-out
+    /// residual after the model \[mg\]; 0 where no time scale shows structure.
     pub unexplained_rms_mg: PerAxis<f64>,
-    /// Per accelerometer, one of `at the noise` (the raw residual is at the noise floor),
-    /// `explained` (the model brings it there), `partly explained`, `unexplained`.
+    /// The averaging time of [`Report::unexplained_rms_mg`] \[s\] (absent: none).
+    pub unexplained_scale_s: PerAxis<f64>,
+    /// The held-out residual at every averaging time from 1 s to a tenth of the record, before
+    /// and after the model, against the noise there ([`structure_scales`]).
+    pub scales: PerAxis<Vec<ScaleRow>>,
+    /// Per accelerometer, one of `at the noise` (nothing named, and no time scale shows
+    /// structure above the noise), `explained` (named terms, and what they leave shows none),
+    /// `partly explained` (they cut the structure by ≥ 30 %), `unexplained`.
     pub verdict: PerAxis<String>,
     /// SIM's own calibration terms re-fitted with every model, per accelerometer (when SIM is
     /// a least-squares calibration of this very recording); never named as a mechanism.
@@ -309,6 +347,7 @@ pub fn coef_names(m: Mech, s: &Sensitivity, axis: usize) -> Vec<(String, f64)> {
         Mech::NonlinearityK2 => vec![("k2_ug_per_g2".into(), 1e6)],
         Mech::NonlinearityK3 => vec![("k3_ug_per_g3".into(), 1e6)],
         Mech::VibrationCross => vec![("m31_ug_per_g2".into(), 1e6), ("m32_ug_per_g2".into(), 1e6)],
+        Mech::Drift => vec![("amp_mg".into(), 1e3)],
     }
 }
 
@@ -321,20 +360,39 @@ fn folds(m: Mech) -> Option<Mech> {
     }
 }
 
-/// A held-out RMS within this factor of the noise floor is "at the noise".
-pub const AT_NOISE: f64 = 1.2;
-
-/// The verdict on one accelerometer from the held-out figures and the floor.
-pub fn verdict(before: f64, after: f64, floor: f64, named: bool) -> &'static str {
-    if before <= AT_NOISE * floor {
-        "at the noise"
-    } else if after <= AT_NOISE * floor {
-        "explained"
-    } else if named && after <= 0.7 * before {
-        "partly explained"
-    } else {
-        "unexplained"
+/// The verdict on one accelerometer from the structure above the noise (its size at the
+/// scale where it stands out most, [`structure`]) before and after the model, and whether a
+/// term is named: one story per axis ("at the noise" never beside a named term or structure).
+pub fn verdict(before: Option<f64>, after: Option<f64>, named: bool) -> &'static str {
+    match (named, before, after) {
+        (false, None, None) => "at the noise",
+        (true, _, None) => "explained",
+        (true, Some(b), Some(a)) if a <= 0.7 * b => "partly explained",
+        _ => "unexplained",
     }
+}
+
+/// The structure scales of one accelerometer: the held-out residuals of `fit`, the noise
+/// level measured at ≈ 1 s (the Allan variance of the raw residual in the static segments,
+/// or of the held-out residual over all rows when none is long enough) against the white
+/// variances of [`Prepared::r_white`].
+pub fn axis_scales(p: &Prepared, fit: &AxisFit) -> Vec<ScalePoint> {
+    let axis = fit.axis;
+    let m0 = ((1.0 / p.dt.max(1e-9)).round() as usize).max(1);
+    let runs: Vec<(usize, usize)> = p.static_runs().into_iter().filter(|(a, b)| b - a > 2 * m0).collect();
+    let (segs, rw): (Vec<&[f64]>, Vec<&[f64]>) = if runs.is_empty() {
+        (vec![fit.heldout_resid.1.as_slice()], vec![p.r_white[axis].as_slice()])
+    } else {
+        runs.iter().map(|&(a, b)| (&p.r[axis][a..b], &p.r_white[axis][a..b])).unzip()
+    };
+    let measured = allan_dev(&segs, &[m0]).first().map(|x| x.1 * x.1);
+    let (sr, nr) = rw.iter().fold((0.0, 0usize), |(s, c), v| (s + v.iter().sum::<f64>(), c + v.len()));
+    let white = sr / nr.max(1) as f64 / m0 as f64;
+    let kappa = match measured {
+        Some(v) if white > 0.0 && v.is_finite() => v / white,
+        _ => 1.0,
+    };
+    structure_scales(&fit.heldout_resid.0, &fit.heldout_resid.1, &p.r_white[axis], kappa, m0, p.dt)
 }
 
 /// What the report names besides the data.
@@ -440,16 +498,23 @@ pub fn build(
             ci: BTreeMap::new(),
             explanation: m.explanation().into(),
             significance: BTreeMap::new(),
+            heldout_cut_mg: BTreeMap::new(),
+            undetermined: BTreeMap::new(),
         };
         for fit in axes {
             for t in fit.terms.iter().filter(|t| t.mech == m) {
                 let (mut params, mut ci) = term_params(t, &sens[fit.axis], fit.axis);
                 let amb = ambiguous_member[fit.axis].contains(&m);
+                let undetermined: Vec<String> = match (m.theta(), t.theta_ci) {
+                    (Some(name), Some((lo, hi))) if !(hi < UNDETERMINED_RATIO * lo) => vec![name.to_string()],
+                    _ => Vec::new(),
+                };
                 terms.push(ModelTerm {
                     id: m.id().into(),
                     axis: AXES[fit.axis].into(),
                     params: params.clone(),
                     ambiguous: amb,
+                    undetermined: undetermined.clone(),
                 });
                 if amb {
                     continue;
@@ -468,7 +533,15 @@ pub fn build(
                 e.axes.push(ax.clone());
                 e.params.insert(ax.clone(), params);
                 e.ci.insert(ax.clone(), ci);
-                e.significance.insert(ax, [t.lr_drop, t.p_drop]);
+                e.significance.insert(ax.clone(), [t.lr_drop, t.p_drop]);
+                if let Some(k) = fit.terms.iter().position(|u| std::ptr::eq(u, t))
+                    && let Some(g) = fit.heldout_gain.get(k)
+                {
+                    e.heldout_cut_mg.insert(ax.clone(), [g.0 * 1e3, g.1 * 1e3]);
+                }
+                if !undetermined.is_empty() {
+                    e.undetermined.insert(ax, undetermined);
+                }
             }
         }
         if !e.axes.is_empty() {
@@ -509,6 +582,8 @@ pub fn build(
         })
         .collect();
     let named = |i: usize| !axes[i].terms.is_empty();
+    let scales: Vec<Vec<ScalePoint>> = axes.iter().map(|f| axis_scales(p, f)).collect();
+    let left = |i: usize| structure(&scales[i], true);
     for (i, names) in input.nuisance.iter().enumerate() {
         if !names.is_empty() {
             notes.push(format!(
@@ -531,11 +606,23 @@ pub fn build(
         random_walk_source: if input.opt.random_walk_mg_per_sqrt_h.is_some() { "given" } else { "estimated" }.into(),
         sensor_random_walk_mg_per_sqrt_h: sensor_rw,
         drift_rms_mg: per_axis(|i| axes[i].drift_rms * 1e3),
-        unexplained_rms_mg: per_axis(|i| {
-            let (a, f) = (axes[i].heldout_rms.1, floor.0[i]);
-            (a * a - f * f).max(0.0).sqrt() * 1e3
+        unexplained_rms_mg: per_axis(|i| left(i).map_or(0.0, |s| s.0 * 1e3)),
+        unexplained_scale_s: (0..3).filter_map(|i| left(i).map(|s| (AXES[i].to_string(), s.1))).collect(),
+        scales: per_axis(|i| {
+            scales[i]
+                .iter()
+                .map(|s| ScaleRow {
+                    tau_s: s.tau_s,
+                    before_mg: s.before * 1e3,
+                    after_mg: s.after * 1e3,
+                    noise_mg: s.noise * 1e3,
+                    limit_mg: s.limit * 1e3,
+                })
+                .collect()
         }),
-        verdict: per_axis(|i| verdict(axes[i].heldout_rms.0, axes[i].heldout_rms.1, floor.0[i], named(i)).to_string()),
+        verdict: per_axis(|i| {
+            verdict(structure(&scales[i], false).map(|s| s.0), left(i).map(|s| s.0), named(i)).to_string()
+        }),
         sim_terms_refitted: per_axis(|i| input.nuisance[i].clone()),
         located,
         unexplained_located,

@@ -1,0 +1,163 @@
+//! A diagnosis a user can trust on a recording shaped like a real unit's long static
+//! warm-soak, generated here by code that shares nothing with the diagnosis or the simulator:
+//! a static unit in three orientations, warming slowly, 2 mg of per-sample noise, a random
+//! walk and slow structure of 0.6–1.3 mg RMS that no mechanism of the library has; SIM is the
+//! offset-only cubic-in-T model a user fits to that very recording.
+//!
+//! Asserted: a named effect never makes the raw held-out RMS (the figure the report prints)
+//! worse and cuts it by more than its fold-to-fold standard error; the verdicts tell one story
+//! with the report's own figures ("at the noise" never beside a named effect or an unexplained
+//! figure); the slow structure, far below the per-sample noise but far above what that noise
+//! leaves at minutes to hours, is reported as unexplained at its time scale, with its size.
+
+use bins_cal::diagnose::diagnose;
+use bins_cal::recording::Row;
+use bins_comp::vibration::Vibration;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use std::path::Path;
+
+/// Solves the normal equations `a·x = b` (n×n, Gaussian elimination with partial pivoting).
+fn solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
+    let n = b.len();
+    for c in 0..n {
+        let p = (c..n).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs())).unwrap();
+        a.swap(c, p);
+        b.swap(c, p);
+        for r in c + 1..n {
+            let f = a[r][c] / a[c][c];
+            for k in c..n {
+                a[r][k] -= f * a[c][k];
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    let mut x = vec![0.0; n];
+    for c in (0..n).rev() {
+        x[c] = (b[c] - (c + 1..n).map(|k| a[c][k] * x[k]).sum::<f64>()) / a[c][c];
+    }
+    x
+}
+
+/// SIM and REAL of the warm soak: `hours` at 1 Hz.
+fn warm_soak(hours: f64, seed: u64) -> (Vec<Row>, Vec<Row>, [f64; 3]) {
+    let n = (hours * 3600.0) as usize;
+    let dur = n as f64;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let white = Normal::new(0.0, 2e-3).unwrap(); // 2 mg per sample
+    let unit = Normal::new(0.0, 1.0).unwrap();
+    let rw_step = 0.2e-3 / 60.0; // 0.2 mg/√h: g per √s
+    let amp_g = [0.8e-3, 1.6e-3, 1.9e-3]; // slow structure: RMS 0.57 / 1.13 / 1.34 mg
+    let period_s = [dur / 2.3, dur / 1.7, dur / 3.1];
+    let phase = [0.3, 1.9, 4.0];
+    let cubic = [[1.5e-4, -4e-6, 1e-7], [-2e-4, 3e-6, -5e-8], [1e-4, 6e-6, 2e-8]]; // g/°Cᵖ
+    let mut rw = [0.0; 3];
+    let mut noise: [Vec<f64>; 3] = Default::default();
+    let mut real = Vec::with_capacity(n);
+    for k in 0..n {
+        let t = k as f64;
+        let f = match 3 * k / n {
+            0 => [0.0, 0.0, 1.0],
+            1 => [1.0, 0.0, 0.0],
+            _ => [0.0, 1.0, 0.0],
+        };
+        let temp = 20.0 + 12.0 * (1.0 - (-t / (0.35 * dur)).exp());
+        let read = ((temp + 0.005 * unit.sample(&mut rng)) * 100.0).round() / 100.0;
+        let mut row =
+            Row { line: k as u64 + 2, t_s: t, temp_c: read, pos: Some(format!("p{}", 3 * k / n)), ..Row::default() };
+        row.f_g = f.map(Some);
+        row.set_vibration(&Vibration::None);
+        for i in 0..3 {
+            rw[i] += rw_step * unit.sample(&mut rng);
+            let dtc = temp - 25.0;
+            let bias = ((cubic[i][2] * dtc + cubic[i][1]) * dtc + cubic[i][0]) * dtc;
+            let slow = amp_g[i] * (2.0 * std::f64::consts::PI * t / period_s[i] + phase[i]).sin();
+            let e = white.sample(&mut rng);
+            row.u_v[i] = f[i] + 0.01 * i as f64 + bias + slow + rw[i] + e;
+            noise[i].push(e);
+        }
+        real.push(row);
+    }
+    // SIM: the offset-only cubic in the thermistor's reading, fitted to REAL per axis.
+    let mut sim = real.clone();
+    let x: Vec<[f64; 4]> = real
+        .iter()
+        .map(|r| {
+            let d = (r.temp_c - 26.0) / 6.0;
+            [1.0, d, d * d, d * d * d]
+        })
+        .collect();
+    let mut slow_rms = [0.0; 3];
+    for i in 0..3 {
+        let mut a = vec![vec![0.0; 4]; 4];
+        let mut b = vec![0.0; 4];
+        for (r, xr) in real.iter().zip(&x) {
+            let y = r.u_v[i] - r.f_g[i].unwrap();
+            for u in 0..4 {
+                b[u] += xr[u] * y;
+                for v in 0..4 {
+                    a[u][v] += xr[u] * xr[v];
+                }
+            }
+        }
+        let c = solve(a, b);
+        for (s, xr) in sim.iter_mut().zip(&x) {
+            s.u_v[i] = s.f_g[i].unwrap() + (0..4).map(|u| c[u] * xr[u]).sum::<f64>();
+        }
+        // What REAL − SIM holds besides the white noise: the slow structure and the random
+        // walk less what SIM's cubic took of them.
+        let clean: Vec<f64> = sim.iter().zip(&real).zip(&noise[i]).map(|((s, r), e)| r.u_v[i] - e - s.u_v[i]).collect();
+        let m = clean.iter().sum::<f64>() / n as f64;
+        slow_rms[i] = (clean.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n as f64).sqrt() * 1e3;
+    }
+    (sim, real, slow_rms)
+}
+
+#[test]
+fn slow_warm_soak_named_effects_cut_the_printed_figure_and_verdicts_agree() {
+    let (sim, real, slow_rms_mg) = warm_soak(8.0, 74);
+    let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
+    let r = &d.report;
+    let summary = format!(
+        "effects {:?}; ambiguous {:?}; held-out {:?} → {:?}; verdict {:?}; unexplained {:?} at {:?} s; floor {:?}",
+        r.effects.iter().map(|e| (&e.id, &e.axes, &e.heldout_cut_mg)).collect::<Vec<_>>(),
+        r.ambiguous.iter().map(|g| (&g.ids, &g.axes)).collect::<Vec<_>>(),
+        r.heldout_rms_before_mg,
+        r.heldout_rms_after_mg,
+        r.verdict,
+        r.unexplained_rms_mg,
+        r.unexplained_scale_s,
+        r.noise_floor_mg
+    );
+    println!("{summary}");
+    for (i, ax) in ["x", "y", "z"].into_iter().enumerate() {
+        let named: Vec<_> = r.effects.iter().filter(|e| e.axes.iter().any(|a| a == ax)).collect();
+        let modelled = !named.is_empty() || r.ambiguous.iter().any(|g| g.axes.iter().any(|a| a == ax));
+        let (before, after) = (r.heldout_rms_before_mg[ax], r.heldout_rms_after_mg[ax]);
+        if modelled {
+            assert!(after < before, "{ax}: a modelled effect and held-out {before} → {after} mg: {summary}");
+        }
+        for e in &named {
+            let [cut, se] = e.heldout_cut_mg[ax];
+            assert!(cut > se, "{ax}: {} cuts the held-out RMS by {cut} mg, standard error {se}: {summary}", e.id);
+        }
+        // One story: "at the noise" only with nothing named and nothing unexplained.
+        let v = r.verdict[ax].as_str();
+        let unexplained = r.unexplained_rms_mg[ax];
+        if v == "at the noise" {
+            assert!(!modelled && unexplained == 0.0, "{ax}: at the noise beside a finding: {summary}");
+        }
+        if unexplained > 0.0 {
+            assert!(v == "unexplained" || v == "partly explained", "{ax}: unexplained {unexplained} mg but {v}");
+        }
+        // The slow structure (well below the 2 mg per-sample noise) is seen at its scale and
+        // sized: within a factor of two of what REAL − SIM holds besides the white noise.
+        assert!(v == "unexplained" || v == "partly explained", "{ax}: the slow structure is missed: {summary}");
+        let put_in = slow_rms_mg[i];
+        assert!(
+            unexplained > 0.5 * put_in && unexplained < 2.0 * put_in,
+            "{ax}: unexplained {unexplained:.3} mg, structure besides the white noise {put_in:.3} mg RMS: {summary}"
+        );
+    }
+}
