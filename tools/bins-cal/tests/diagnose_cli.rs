@@ -247,3 +247,81 @@ fn follow_and_calib_give_a_sim_for_a_real_recording() {
     assert!(!neither.status.success());
     assert!(String::from_utf8_lossy(&neither.stderr).contains("--sim"), "{}", String::from_utf8_lossy(&neither.stderr));
 }
+
+/// The README's recipe (calibrate on `test-tilter-3t`, diagnose `diagnose-ramps` seed 2; the
+/// die lags by 150 s, nothing else is concealed) with `--random-walk 0`, which the command
+/// allows: the given random walk is raised to what the residual shows at short averaging
+/// times (a note says so), no turn-on term is offered on a unit powered on 100 000 s before
+/// the recording, no hysteresis is taken for the drift, and the model holds the lag only.
+#[test]
+fn recipe_with_random_walk_zero_names_only_what_the_data_has() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scen = |n: &str| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios").join(n);
+    let run = |args: &[&std::ffi::OsStr]| {
+        let out = bins_cal().args(args).output().unwrap();
+        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stdout).to_string()
+    };
+    let os = |s: &str| std::ffi::OsString::from(s);
+    let (cal, unit, ramps) = (d.join("cal.csv"), d.join("unit.toml"), d.join("ramps.csv"));
+    let (rep, model) = (d.join("d.json"), d.join("model.toml"));
+    run(&[
+        &os("simulate"),
+        scen("test-tilter-3t.toml").as_os_str(),
+        &os("-o"),
+        cal.as_os_str(),
+        &os("--seed"),
+        &os("1"),
+    ]);
+    run(&[
+        &os("calibrate"),
+        &os("--tilter"),
+        cal.as_os_str(),
+        &os("--model"),
+        &os("poly:2"),
+        &os("-o"),
+        unit.as_os_str(),
+    ]);
+    run(&[
+        &os("simulate"),
+        scen("diagnose-ramps.toml").as_os_str(),
+        &os("-o"),
+        ramps.as_os_str(),
+        &os("--seed"),
+        &os("2"),
+    ]);
+    let stdout = run(&[
+        &os("diagnose"),
+        &os("--calib"),
+        unit.as_os_str(),
+        &os("--real"),
+        ramps.as_os_str(),
+        &os("--report"),
+        rep.as_os_str(),
+        &os("--model"),
+        model.as_os_str(),
+        &os("--random-walk"),
+        &os("0"),
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    let mut named: Vec<String> =
+        v["effects"].as_array().unwrap().iter().map(|e| e["id"].as_str().unwrap().to_string()).collect();
+    for g in v["ambiguous"].as_array().unwrap() {
+        named.extend(g["ids"].as_array().unwrap().iter().map(|i| i.as_str().unwrap().to_string()));
+    }
+    assert!(named.iter().any(|i| i == "thermal_lag"), "{stdout}");
+    for absent in ["warmup", "self_heating", "thermal_hysteresis", "bias_hysteresis"] {
+        assert!(!named.iter().any(|i| i == absent), "{absent} named: {stdout}");
+    }
+    assert!(stdout.contains("the given random walk 0.000 mg/√h is below"), "{stdout}");
+    let m: toml::Value = toml::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    for t in m["term"].as_array().unwrap() {
+        let id = t["id"].as_str().unwrap();
+        assert!(id == "thermal_lag" || id.starts_with("cross_"), "{id} in the model: {stdout}");
+        for (k, p) in t["params"].as_table().unwrap() {
+            let x = p.as_float().unwrap();
+            assert!(x.is_finite() && x.abs() < 1e4, "{id} {k} = {x}");
+        }
+    }
+}
