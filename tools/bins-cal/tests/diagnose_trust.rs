@@ -161,3 +161,70 @@ fn slow_warm_soak_named_effects_cut_the_printed_figure_and_verdicts_agree() {
         );
     }
 }
+
+/// SIM and REAL of a unit whose bias has a temperature term SIM lacks (`b·ΔT` on x,
+/// 0.02 mg/°C), 6 h at 1 Hz, three static orientations, 0.1 mg white noise. `reverse`: the
+/// temperature rises and falls back (a triangle); otherwise it approaches 30 °C from 20 °C
+/// once, exponentially — exactly an offset plus a settling in time.
+fn one_way_or_reversed(reverse: bool, seed: u64) -> (Vec<Row>, Vec<Row>) {
+    let n = 6 * 3600;
+    let dur = n as f64;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let white = Normal::new(0.0, 1e-4).unwrap();
+    let (mut sim, mut real) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for k in 0..n {
+        let t = k as f64;
+        let temp = if reverse {
+            20.0 + 10.0 * (1.0 - (2.0 * t / dur - 1.0).abs())
+        } else {
+            20.0 + 10.0 * (1.0 - (-t / (0.3162 * dur)).exp())
+        };
+        let f = match 3 * k / n {
+            0 => [0.0, 0.0, 1.0],
+            1 => [1.0, 0.0, 0.0],
+            _ => [0.0, 1.0, 0.0],
+        };
+        let mut row = Row { line: k as u64 + 2, t_s: t, temp_c: (temp * 100.0).round() / 100.0, ..Row::default() };
+        row.pos = Some(format!("p{}", 3 * k / n));
+        row.f_g = f.map(Some);
+        row.set_vibration(&Vibration::None);
+        let mut r = row.clone();
+        for i in 0..3 {
+            row.u_v[i] = f[i];
+            r.u_v[i] = f[i] + if i == 0 { 2e-5 * (temp - 20.0) } else { 0.0 } + white.sample(&mut rng);
+        }
+        sim.push(row);
+        real.push(r);
+    }
+    (sim, real)
+}
+
+#[test]
+fn a_one_way_temperature_term_is_ambiguous_with_a_drift_and_a_reversal_separates_them() {
+    let ids_on_x = |r: &bins_cal::diagnose::report::Report| -> (Vec<String>, Vec<(Vec<String>, String)>) {
+        let named = r.effects.iter().filter(|e| e.axes.iter().any(|a| a == "x")).map(|e| e.id.clone()).collect();
+        let groups = r
+            .ambiguous
+            .iter()
+            .filter(|g| g.axes.iter().any(|a| a == "x"))
+            .map(|g| (g.ids.clone(), g.separating_test.clone()))
+            .collect();
+        (named, groups)
+    };
+    let (sim, real) = one_way_or_reversed(false, 5);
+    let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
+    let (named, groups) = ids_on_x(&d.report);
+    println!("one way: named {named:?}, ambiguous {groups:?}");
+    let with_drift = groups.iter().find(|(ids, _)| ids.iter().any(|i| i == "drift"));
+    let (ids, test) = with_drift.unwrap_or_else(|| panic!("no drift alternative on x: {named:?} {groups:?}"));
+    assert!(ids.iter().any(|i| i == "bias_temp_order"), "the truth is not in the group: {ids:?}");
+    assert!(test.contains("temperature reversal"), "{test}");
+    assert!(named.is_empty(), "named as a finding beside the ambiguity: {named:?}");
+
+    let (sim, real) = one_way_or_reversed(true, 6);
+    let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
+    let (named, groups) = ids_on_x(&d.report);
+    println!("reversed: named {named:?}, ambiguous {groups:?}");
+    assert_eq!(named, ["bias_temp_order"], "{groups:?}");
+    assert!(groups.iter().all(|(ids, _)| !ids.iter().any(|i| i == "drift")), "{groups:?}");
+}

@@ -12,8 +12,11 @@
 //!   5 folds, block b in fold b mod 5, so every fold spans the whole record).
 //!
 //! After each addition the time constants of the model's members are re-optimised and members
-//! that no longer pass are dropped (backward step). The random-walk intensity is re-estimated
-//! with the selected model and the search repeated until the model is stable.
+//! that no longer pass are dropped (backward step). On the final model (θ refined off the grid)
+//! every term must also cut the raw held-out RMS (offset removed: the figure the report prints)
+//! by more than that cut's fold-to-fold standard error, with "after" below "before", and a
+//! temperature form must not be beaten by a drift in time ([`Mech::Drift`]); the weakest term
+//! that fails is dropped and the model refitted.
 //!
 //! Two mechanisms are ambiguous when replacing one by the other (θ re-searched) changes the
 //! deviance by less than [`AMBIGUOUS_LR`]: the data cannot tell them apart.
