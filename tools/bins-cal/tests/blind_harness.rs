@@ -14,13 +14,14 @@
 //! with the truth in the set and ≤ 5 % of the cases have a false discovery.
 //! `BLIND_ONLY=seed,…` runs just those combined seeds and prints their draws.
 //!
-//! `blind_detectability` (ignored): `BLIND_CASES` combined cases (default 300) whose members'
-//! sizes are drawn in `z = size·√rows`, log-uniform 1–100, white noise only; the table of named
+//! `blind_detectability` (ignored): `BLIND_CASES` combined cases (default 400) whose members'
+//! sizes are drawn in `z = size·√rows`, log-uniform 1–320, white noise only; the table of named
 //! members per mechanism and bin of z on stdout, `blind_detectability_z.png` and
 //! `blind_detectability_cases.csv` in `BLIND_OUT`.
 //!
-//! `blind_fixed_cases` (always run): six fixed cases — two nulls (one with a random walk) and
-//! strong effects — so the generator and the classification stay honest in CI.
+//! `blind_fixed_cases` (always run): eight fixed cases — two nulls (one with a random walk),
+//! strong single effects and two combined cases of two strong members — so the generator and
+//! the classification stay honest in CI.
 
 mod blind;
 
@@ -134,14 +135,14 @@ fn blind_combined() {
 }
 
 #[test]
-#[ignore = "300 diagnoses of combined cases: run in release with --ignored"]
+#[ignore = "400 diagnoses of combined cases: run in release with --ignored"]
 fn blind_detectability() {
     let threads = env_num("BLIND_THREADS", 2usize);
     let sizes = SizeDraw::Snr { lo: blind::Z_EDGES[0], hi: blind::Z_EDGES[blind::Z_EDGES.len() - 1] };
     if only_combined(sizes, threads) {
         return;
     }
-    let n = env_num("BLIND_CASES", 300usize);
+    let n = env_num("BLIND_CASES", 400usize);
     let seed = env_num("BLIND_SEED", 1u64);
     let out = out_dir();
     let t0 = std::time::Instant::now();
@@ -184,6 +185,21 @@ fn blind_fixed_cases() {
         }
         cases.push(c);
     }
+    // Two combined cases of 15 σ members: a warm-up with a misalignment, and a nearly
+    // first-order lag with a scale-factor asymmetry.
+    for (seed, ids) in [(23u64, ["warmup", "cross_axis"]), (22, ["thermal_lag", "sf_asymmetry"])] {
+        let mut c = Case::draw_combined_with(seed, &ids);
+        c.size_sigma = 15.0;
+        c.extra[0].size_sigma = 15.0;
+        c.rw_ratio = 0.0;
+        c.rows = 3000;
+        c.dwell_s = c.dwell_s.min(3000.0 / c.rate_hz / 24.0);
+        if ids[0] == "thermal_lag" {
+            c.mech = Mech::ThermalLag { tau1_s: 150.0, tau2_s: 5.0 };
+            c.profile = Profile::RampsHolds { rates: 2 };
+        }
+        cases.push(c);
+    }
     let res = run_list(&cases, 2, false);
     for r in &res {
         println!("{}", blind::line(r));
@@ -191,5 +207,6 @@ fn blind_fixed_cases() {
     for r in &res {
         let ok = if r.case.mech.id() == "none" { r.outcome == Outcome::Clean } else { r.outcome.named() };
         assert!(ok, "{}", blind::line(r));
+        assert!(r.members.iter().all(|m| m.named) && r.false_ids.is_empty(), "{}", blind::line(r));
     }
 }

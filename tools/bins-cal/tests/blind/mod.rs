@@ -719,12 +719,14 @@ impl CombinedTally {
 
     fn row(&self, name: &str) -> String {
         let fi: Vec<String> = self.false_ids.iter().map(|(k, v)| format!("{k}×{v}")).collect();
+        let frac =
+            |(a, b): (usize, usize)| if b == 0 { "—".to_string() } else { format!("{a}/{b} {:.0}%", pct(a, b)) };
         format!(
             "{:<40} {:>5} {:>13} {:>13} {:>5} {:>4}/{:<3}{:>4.0}%  {}",
             name,
             self.cases,
-            format!("{}/{} {:.0}%", self.strong.0, self.strong.1, pct(self.strong.0, self.strong.1)),
-            format!("{}/{} {:.0}%", self.all.0, self.all.1, pct(self.all.0, self.all.1)),
+            frac(self.strong),
+            frac(self.all),
             self.ambiguous,
             self.false_disc,
             self.cases,
@@ -890,7 +892,7 @@ pub fn write_combined_csv(res: &[CaseResult], dir: &Path, name: &str) -> std::io
 }
 
 /// Bin edges of the record-length-aware size `z = size·√rows` (log spaced).
-pub const Z_EDGES: [f64; 9] = [1.0, 2.0, 3.5, 6.0, 10.0, 18.0, 32.0, 56.0, 100.0];
+pub const Z_EDGES: [f64; 11] = [1.0, 2.0, 3.5, 6.0, 10.0, 18.0, 32.0, 56.0, 100.0, 180.0, 320.0];
 
 /// Detectability in `z`: per bin of [`Z_EDGES`], the fraction of the members (of mechanism `id`,
 /// or all) named; `(centre, p, n)`.
