@@ -806,8 +806,11 @@ pub fn summarize_combined(res: &[CaseResult]) -> CombinedSummary {
     for (k, t) in &s.per_kinds {
         let _ = writeln!(w, "{}", t.row(k));
     }
-    let _ = writeln!(w, "{}", s.by_rw[0].row("without random walk"));
-    let _ = writeln!(w, "{}", s.by_rw[1].row("with random walk"));
+    for (t, name) in s.by_rw.iter().zip(["without random walk", "with random walk"]) {
+        if t.cases > 0 {
+            let _ = writeln!(w, "{}", t.row(name));
+        }
+    }
     let _ = writeln!(w, "{}", s.total.row("all"));
     let _ = writeln!(
         w,
@@ -919,7 +922,7 @@ pub fn snr_table(res: &[CaseResult]) -> String {
     let mut w = String::new();
     let _ = write!(w, "{:<20}", "z = size·√rows");
     for e in Z_EDGES.windows(2) {
-        let _ = write!(w, " {:>9}", format!("{:.0}–{:.0}", e[0], e[1]));
+        let _ = write!(w, " {:>9}", format!("{}–{}", e[0], e[1]));
     }
     let _ = writeln!(w);
     let mut ids: Vec<Option<&str>> = MECH_IDS.iter().map(|i| Some(*i)).collect();
