@@ -7,9 +7,14 @@
 //! prints their draws (`BLIND_REPORT=1`: and the diagnosis's JSON report). `BLIND_THREADS` (default 2). `BLIND_ASSERT=1` fails the test unless
 //! ≥ 90 % of the effects ≥ 5 σ are named exactly and ≤ 5 % of the cases have a false discovery.
 //!
-//! `blind_fixed_cases` (always run): six fixed cases — two nulls (one with a random walk) and
-//! strong effects — so the generator and the classification stay honest in CI.
+//! The combined cases (several mechanisms at once) and the detectability curves are in
+//! `blind_combined.rs`.
+//!
+//! `blind_fixed_cases` (always run): eight fixed cases — two nulls (one with a random walk),
+//! strong single effects and two combined cases of two strong members — so the generator and
+//! the classification stay honest in CI.
 
+#[allow(dead_code)] // what the combined cases use
 mod blind;
 
 use blind::generator::{Case, Mech, Profile};
@@ -37,9 +42,7 @@ fn blind_harness() {
     }
     let n = env_num("BLIND_CASES", 200usize);
     let seed = env_num("BLIND_SEED", 1u64);
-    let out = std::env::var("BLIND_OUT")
-        .map(PathBuf::from)
-        .unwrap_or_else(|_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/blind"));
+    let out = out_dir();
     let t0 = std::time::Instant::now();
     let res = run_cases(n, seed, threads, true);
     let s = summarize(&res);
@@ -67,6 +70,12 @@ fn blind_harness() {
     }
 }
 
+fn out_dir() -> PathBuf {
+    std::env::var("BLIND_OUT")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/blind"))
+}
+
 #[test]
 fn blind_fixed_cases() {
     let mut cases = Vec::new();
@@ -90,6 +99,21 @@ fn blind_fixed_cases() {
         }
         cases.push(c);
     }
+    // Two combined cases of 15 σ members: a warm-up with a misalignment, and a nearly
+    // first-order lag with a scale-factor asymmetry.
+    for (seed, ids) in [(23u64, ["warmup", "cross_axis"]), (22, ["thermal_lag", "sf_asymmetry"])] {
+        let mut c = Case::draw_combined_with(seed, &ids);
+        c.size_sigma = 15.0;
+        c.extra[0].size_sigma = 15.0;
+        c.rw_ratio = 0.0;
+        c.rows = 3000;
+        c.dwell_s = c.dwell_s.min(3000.0 / c.rate_hz / 24.0);
+        if ids[0] == "thermal_lag" {
+            c.mech = Mech::ThermalLag { tau1_s: 150.0, tau2_s: 5.0 };
+            c.profile = Profile::RampsHolds { rates: 2 };
+        }
+        cases.push(c);
+    }
     let res = run_list(&cases, 2, false);
     for r in &res {
         println!("{}", blind::line(r));
@@ -97,5 +121,6 @@ fn blind_fixed_cases() {
     for r in &res {
         let ok = if r.case.mech.id() == "none" { r.outcome == Outcome::Clean } else { r.outcome.named() };
         assert!(ok, "{}", blind::line(r));
+        assert!(r.members.iter().all(|m| m.named) && r.false_ids.is_empty(), "{}", blind::line(r));
     }
 }

@@ -1,4 +1,5 @@
-//! Blind case generator: SIM/REAL recording pairs with at most one concealed mechanism,
+//! Blind case generator: SIM/REAL recording pairs with concealed mechanisms (none, one, or
+//! 2–3 at once in the combined mode),
 //! written from `physics.md` without any of the library's code (no `bins_cal::diagnose`, no
 //! `bins_cal::sim`, no core formulas): its own 12-constant unit, its own temperature model,
 //! its own forms of every mechanism, deliberately different in detail from the regressors the
@@ -6,8 +7,10 @@
 //! bias terms, quadratic cross-coupling tempcos, a rotation of the input, …).
 //!
 //! SIM is the ideal temperature model evaluated at the thermistor reading; REAL is the same unit
-//! at the true temperature, plus one mechanism (or none), plus white noise and optionally a
-//! random walk of the bias. Every draw comes from one ChaCha8 stream seeded by the case seed.
+//! at the true temperature, plus the concealed mechanisms' contributions (summed), plus white
+//! noise and optionally a random walk of the bias. Every draw comes from ChaCha8 streams seeded
+//! by the case seed (a single-mechanism case draws exactly what it drew before the combined mode
+//! existed: the combined mode and the extra members use streams of their own).
 
 use bins_cal::recording::{Row, VibKind};
 use rand::{Rng, SeedableRng};
@@ -269,6 +272,37 @@ pub struct Case {
     /// `bias_temp_order`) vanish [°C]: SIM's calibration temperature [`T_REF_C`] unless
     /// `BLIND_ANCHOR_C` says otherwise (20 °C = the library's own reference).
     pub anchor_c: f64,
+    /// Further concealed mechanisms acting at the same time (combined cases; empty in the
+    /// single-mechanism mode). `mech`, `size_sigma` and `axis_weight` are the first member.
+    pub extra: Vec<Member>,
+}
+
+/// One concealed mechanism of a case, with its size and where it acts.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Member {
+    /// The mechanism.
+    pub mech: Mech,
+    /// Effect size: RMS (about its mean) of its contribution on its strongest accelerometer,
+    /// in units of the white noise σ.
+    pub size_sigma: f64,
+    /// Relative size on each accelerometer (max 1; 0 = not applied).
+    pub axis_weight: [f64; 3],
+}
+
+/// How the sizes of a combined case are drawn.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SizeDraw {
+    /// Per-sample size log-uniform 0.5–20 σ, random walk on with probability 0.4 (the
+    /// scorecard).
+    PerSample,
+    /// Record-length-aware size `z = size_sigma·√rows` log-uniform in `lo`–`hi`, white noise
+    /// only (the detectability curves).
+    Snr {
+        /// Lowest z.
+        lo: f64,
+        /// Highest z.
+        hi: f64,
+    },
 }
 
 /// The anchor of the concealed tempco terms: `BLIND_ANCHOR_C` or [`T_REF_C`].
@@ -305,6 +339,49 @@ fn mech_of(id: &str, rng: &mut ChaCha8Rng) -> Mech {
 }
 
 impl Case {
+    /// Every concealed mechanism (none for a null).
+    pub fn members(&self) -> Vec<Member> {
+        let mut v = Vec::new();
+        if self.mech != Mech::None {
+            v.push(Member { mech: self.mech.clone(), size_sigma: self.size_sigma, axis_weight: self.axis_weight });
+        }
+        v.extend(self.extra.iter().cloned());
+        v
+    }
+
+    /// Record-length-aware size of a per-sample size: `size_sigma·√rows`, the signal-to-noise
+    /// ratio a fit of the contribution's known shape would reach in white noise.
+    pub fn snr(&self, size_sigma: f64) -> f64 {
+        size_sigma * (self.rows as f64).sqrt()
+    }
+
+    /// Draws a combined case from its seed (a stream of its own, unrelated to [`Case::draw`]'s):
+    /// 2 or 3 distinct mechanisms drawn uniformly among the 13, each with its own size and
+    /// accelerometers, a profile, positions and power-ons every member can be seen in.
+    pub fn draw_combined(seed: u64, sizes: SizeDraw) -> Case {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xC0B1_7ED5_B11D);
+        let k = rng.random_range(2..=3);
+        let mut ids: Vec<&str> = MECH_IDS.to_vec();
+        let mut mechs = Vec::new();
+        for _ in 0..k {
+            let id = ids.remove(rng.random_range(0..ids.len()));
+            mechs.push(mech_of(id, &mut rng));
+        }
+        let mut c = Self::draw_rest_of(seed, &mechs, &mut rng);
+        match sizes {
+            SizeDraw::PerSample => {}
+            SizeDraw::Snr { lo, hi } => {
+                c.rw_ratio = 0.0;
+                let root_n = (c.rows as f64).sqrt();
+                c.size_sigma = log_uniform(&mut rng, lo, hi) / root_n;
+                for m in &mut c.extra {
+                    m.size_sigma = log_uniform(&mut rng, lo, hi) / root_n;
+                }
+            }
+        }
+        c
+    }
+
     /// Draws a case from its seed: mechanism or none (27 %), size 0.5–20 σ (log-uniform), a
     /// thermal profile and positions the mechanism can be seen in, random walk on or off, σ
     /// 5–500 µg, 3 000–12 000 rows at 0.5–2 Hz.
@@ -316,19 +393,32 @@ impl Case {
             let id = MECH_IDS[rng.random_range(0..MECH_IDS.len())];
             mech_of(id, &mut rng)
         };
-        Self::draw_rest(seed, mech, &mut rng)
+        Self::draw_rest_of(seed, &[mech], &mut rng)
     }
 
     /// Draws a case with a given mechanism id (`none` for a null).
     pub fn draw_with(seed: u64, id: &str) -> Case {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5EED_B11D);
         let mech = mech_of(id, &mut rng);
-        Self::draw_rest(seed, mech, &mut rng)
+        Self::draw_rest_of(seed, &[mech], &mut rng)
     }
 
-    fn draw_rest(seed: u64, mech: Mech, rng: &mut ChaCha8Rng) -> Case {
+    /// Draws a combined case with the given mechanism ids (sizes 0.5–20 σ as drawn; the caller
+    /// may set them).
+    pub fn draw_combined_with(seed: u64, ids: &[&str]) -> Case {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xC0B1_7ED5_B11D);
+        let mechs: Vec<Mech> = ids.iter().map(|id| mech_of(id, &mut rng)).collect();
+        Self::draw_rest_of(seed, &mechs, &mut rng)
+    }
+
+    /// The rest of a case for the mechanisms `mechs` (the first is `mech`, the others `extra`):
+    /// for one mechanism this draws, in the same order, what the single-mechanism mode always
+    /// drew; the extra members' sizes and accelerometers are drawn last.
+    fn draw_rest_of(seed: u64, mechs: &[Mech], rng: &mut ChaCha8Rng) -> Case {
+        let mech = mechs[0].clone();
+        let any = |f: fn(&Mech) -> bool| mechs.iter().any(f);
         let size_sigma = log_uniform(rng, 0.5, 20.0);
-        let profile = if mech.needs_temperature_change() || rng.random_bool(0.8) {
+        let profile = if any(Mech::needs_temperature_change) || rng.random_bool(0.8) {
             match rng.random_range(0..3) {
                 0 => Profile::RampsHolds { rates: rng.random_range(1..=3) },
                 1 => Profile::Triangle,
@@ -338,8 +428,8 @@ impl Case {
             Profile::Constant
         };
         let positions = match mech {
-            Mech::K3 => Positions::Tilted,
-            ref m if m.needs_positions() => {
+            _ if any(|m| *m == Mech::K3) => Positions::Tilted,
+            _ if any(Mech::needs_positions) => {
                 if rng.random_bool(0.5) {
                     Positions::Six
                 } else {
@@ -358,7 +448,7 @@ impl Case {
         let dwell_s = rng.random_range(30.0..240.0_f64).min(dur / 24.0);
         // Power: turn-on mechanisms get 2–3 power-ons; otherwise half the cases carry a
         // `power_s` column (a third of those with power-ons inside the record).
-        let (power_column, power_on_s, power_offset_s) = if mech.needs_power_on() {
+        let (power_column, power_on_s, power_offset_s) = if any(Mech::needs_power_on) {
             let n = rng.random_range(2..=3);
             (true, power_ons(rng, dur, n), 0.0)
         } else if rng.random_bool(0.5) {
@@ -374,24 +464,15 @@ impl Case {
         };
         let rw_ratio = if rng.random_bool(0.4) { log_uniform(rng, 0.5, 3.0) } else { 0.0 };
         let sigma_ug = log_uniform(rng, 5.0, 500.0);
-        let mut axis_weight = [0.0; 3];
-        if mech.common() {
-            axis_weight = [1.0; 3];
-        } else if mech != Mech::None {
-            // One accelerometer at full size, each other one applied with probability 1/3 at
-            // 0.3–1 of it.
-            let main = rng.random_range(0..3);
-            for i in 0..3 {
-                axis_weight[i] = if i == main {
-                    1.0
-                } else if rng.random_bool(1.0 / 3.0) {
-                    rng.random_range(0.3..1.0)
-                } else {
-                    0.0
-                };
-            }
-        }
+        let axis_weight = draw_axis_weight(&mech, rng);
         let size_sigma = if mech == Mech::None { 0.0 } else { size_sigma };
+        let extra = mechs[1..]
+            .iter()
+            .map(|m| {
+                let size_sigma = log_uniform(rng, 0.5, 20.0);
+                Member { mech: m.clone(), size_sigma, axis_weight: draw_axis_weight(m, rng) }
+            })
+            .collect();
         Case {
             seed,
             mech,
@@ -408,8 +489,31 @@ impl Case {
             rate_hz,
             dwell_s,
             anchor_c: anchor_c(),
+            extra,
         }
     }
+}
+
+/// Where a mechanism acts: the thermal ones on the three accelerometers with one scale, the
+/// others on one accelerometer at full size and on each other one with probability 1/3 at
+/// 0.3–1 of it.
+fn draw_axis_weight(mech: &Mech, rng: &mut ChaCha8Rng) -> [f64; 3] {
+    let mut axis_weight = [0.0; 3];
+    if mech.common() {
+        axis_weight = [1.0; 3];
+    } else if *mech != Mech::None {
+        let main = rng.random_range(0..3);
+        for i in 0..3 {
+            axis_weight[i] = if i == main {
+                1.0
+            } else if rng.random_bool(1.0 / 3.0) {
+                rng.random_range(0.3..1.0)
+            } else {
+                0.0
+            };
+        }
+    }
+    axis_weight
 }
 
 fn power_ons(rng: &mut ChaCha8Rng, dur: f64, n: usize) -> Vec<f64> {
@@ -670,44 +774,35 @@ fn std_about_mean(v: &[f64]) -> f64 {
     (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / n).sqrt()
 }
 
-/// What the generator knows about a generated pair.
-#[derive(Clone, Debug)]
-pub struct Truth {
-    /// Achieved effect size per accelerometer (RMS about the mean / σ).
-    pub axis_size_sigma: [f64; 3],
+/// What the contributions are computed from.
+struct Ctx<'a> {
+    unit: &'a Unit,
+    t: &'a [f64],
+    temp: &'a [f64],
+    f: &'a [[f64; 3]],
+    power: &'a [f64],
+    /// Temperature minus the tempco anchor [°C].
+    d: &'a [f64],
+    /// `K_ii` \[V/g\].
+    kd: [f64; 3],
 }
 
-/// Generates the SIM and REAL rows of a case.
-pub fn generate(c: &Case) -> (Vec<Row>, Vec<Row>, Truth) {
-    let mut rng = ChaCha8Rng::seed_from_u64(c.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xB11D);
-    let unit = Unit::draw(&mut rng);
-    let n = c.rows;
-    let dt = 1.0 / c.rate_hz;
-    let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
-    let temp = temperature(c.profile, &t, &mut rng);
-    let read: Vec<f64> = temp.iter().map(|x| x + THERMISTOR_SIGMA_C * gauss(&mut rng)).collect();
-    let set = position_set(c.positions, &mut rng);
-    let dwell_rows = ((c.dwell_s * c.rate_hz).round() as usize).max(2);
-    let pos_of: Vec<usize> = (0..n).map(|k| (k / dwell_rows) % set.len()).collect();
-    let f: Vec<[f64; 3]> = pos_of.iter().map(|&p| set[p].1).collect();
-    let power: Vec<f64> = t
-        .iter()
-        .map(|&x| {
-            let on = c.power_on_s.iter().copied().filter(|&p| p <= x).fold(0.0, f64::max);
-            x - on + if on == 0.0 { c.power_offset_s } else { 0.0 }
-        })
-        .collect();
-
-    // The mechanism's contribution per accelerometer, in V, before scaling.
-    let kd = [unit.k[0][0], unit.k[1][1], unit.k[2][2]];
-    let mut contrib = vec![[0.0f64; 3]; n];
-    let d: Vec<f64> = temp.iter().map(|x| x - c.anchor_c).collect();
-    let mut per_axis = [[0.0f64; 3]; 3]; // per-axis random coefficient shapes
+/// Per-axis random coefficient shapes of a mechanism (signs and weights).
+fn draw_per_axis(rng: &mut ChaCha8Rng) -> [[f64; 3]; 3] {
+    let mut per_axis = [[0.0f64; 3]; 3];
     for row in per_axis.iter_mut() {
         for v in row.iter_mut() {
             *v = if rng.random_bool(0.5) { 1.0 } else { -1.0 } * rng.random_range(0.5..1.0);
         }
     }
+    per_axis
+}
+
+/// A mechanism's contribution per accelerometer, in V, before scaling.
+fn contribution(mech: &Mech, x: &Ctx<'_>, per_axis: &[[f64; 3]; 3]) -> Vec<[f64; 3]> {
+    let Ctx { unit, t, temp, f, power, d, kd } = *x;
+    let n = t.len();
+    let mut contrib = vec![[0.0f64; 3]; n];
     let through_temp = |te: &[f64], contrib: &mut [[f64; 3]]| {
         for k in 0..n {
             let a = unit.signals(te[k], &f[k]);
@@ -717,26 +812,26 @@ pub fn generate(c: &Case) -> (Vec<Row>, Vec<Row>, Truth) {
             }
         }
     };
-    match &c.mech {
+    match mech {
         Mech::None => {}
         Mech::ThermalLag { tau1_s, tau2_s } => {
-            let te = second_order_lag(&t, &temp, *tau1_s, *tau2_s);
+            let te = second_order_lag(t, temp, *tau1_s, *tau2_s);
             through_temp(&te, &mut contrib);
         }
         Mech::ThermalHysteresis { width_c } => {
-            let te = backlash(&temp, *width_c);
+            let te = backlash(temp, *width_c);
             through_temp(&te, &mut contrib);
         }
         Mech::SelfHeating { tau_s } => {
             let te: Vec<f64> = temp
                 .iter()
-                .zip(&power)
+                .zip(power)
                 .map(|(x, p)| x + 1.0 - 0.8 * (-p / tau_s).exp() - 0.2 * (-4.0 * p / tau_s).exp())
                 .collect();
             through_temp(&te, &mut contrib);
         }
         Mech::BiasHysteresis { width_c } => {
-            let pl = backlash(&temp, *width_c);
+            let pl = backlash(temp, *width_c);
             for k in 0..n {
                 let h = (pl[k] - temp[k]) / (0.5 * width_c);
                 for i in 0..3 {
@@ -826,31 +921,99 @@ pub fn generate(c: &Case) -> (Vec<Row>, Vec<Row>, Truth) {
             }
         }
     }
+    contrib
+}
 
-    // Scale: RMS about the mean of the contribution in g on each applied accelerometer.
-    let sigma_g = c.sigma_ug * 1e-6;
+/// Gains that scale a contribution to its drawn size (RMS about the mean in g on each applied
+/// accelerometer; one scale for the common thermal ones), and the achieved size per
+/// accelerometer [σ].
+fn scale_to_size(
+    mech: &Mech,
+    size_sigma: f64,
+    axis_weight: &[f64; 3],
+    contrib: &[[f64; 3]],
+    per_axis: &[[f64; 3]; 3],
+    kd: [f64; 3],
+    sigma_g: f64,
+) -> ([f64; 3], [f64; 3]) {
     let mut raw = [0.0; 3];
     for i in 0..3 {
         let v: Vec<f64> = contrib.iter().map(|r| r[i] / kd[i]).collect();
         raw[i] = std_about_mean(&v);
     }
     let mut gain = [0.0; 3];
-    if c.mech.common() {
+    if mech.common() {
         let m = raw.iter().copied().fold(0.0, f64::max);
         if m > 0.0 {
-            gain = [c.size_sigma * sigma_g / m; 3];
+            gain = [size_sigma * sigma_g / m; 3];
         }
     } else {
         for i in 0..3 {
-            if c.axis_weight[i] > 0.0 && raw[i] > 1e-15 {
+            if axis_weight[i] > 0.0 && raw[i] > 1e-15 {
                 let sign = if per_axis[i][0] > 0.0 { 1.0 } else { -1.0 };
-                gain[i] = sign * c.axis_weight[i] * c.size_sigma * sigma_g / raw[i];
+                gain[i] = sign * axis_weight[i] * size_sigma * sigma_g / raw[i];
             }
         }
     }
-    let mut truth = Truth { axis_size_sigma: [0.0; 3] };
+    let mut size = [0.0; 3];
     for i in 0..3 {
-        truth.axis_size_sigma[i] = gain[i].abs() * raw[i] / sigma_g;
+        size[i] = gain[i].abs() * raw[i] / sigma_g;
+    }
+    (gain, size)
+}
+
+/// What the generator knows about a generated pair.
+#[derive(Clone, Debug)]
+pub struct Truth {
+    /// Achieved effect size per accelerometer (RMS about the mean / σ).
+    pub axis_size_sigma: [f64; 3],
+    /// Achieved size per accelerometer of every member, in the order of [`Case::members`].
+    pub members: Vec<[f64; 3]>,
+}
+
+/// Generates the SIM and REAL rows of a case.
+pub fn generate(c: &Case) -> (Vec<Row>, Vec<Row>, Truth) {
+    let mut rng = ChaCha8Rng::seed_from_u64(c.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xB11D);
+    let unit = Unit::draw(&mut rng);
+    let n = c.rows;
+    let dt = 1.0 / c.rate_hz;
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+    let temp = temperature(c.profile, &t, &mut rng);
+    let read: Vec<f64> = temp.iter().map(|x| x + THERMISTOR_SIGMA_C * gauss(&mut rng)).collect();
+    let set = position_set(c.positions, &mut rng);
+    let dwell_rows = ((c.dwell_s * c.rate_hz).round() as usize).max(2);
+    let pos_of: Vec<usize> = (0..n).map(|k| (k / dwell_rows) % set.len()).collect();
+    let f: Vec<[f64; 3]> = pos_of.iter().map(|&p| set[p].1).collect();
+    let power: Vec<f64> = t
+        .iter()
+        .map(|&x| {
+            let on = c.power_on_s.iter().copied().filter(|&p| p <= x).fold(0.0, f64::max);
+            x - on + if on == 0.0 { c.power_offset_s } else { 0.0 }
+        })
+        .collect();
+
+    // Each mechanism's contribution per accelerometer, scaled to its drawn size. The first
+    // member's coefficient shapes come from the case's stream (as they always did), the extra
+    // members' from streams of their own.
+    let kd = [unit.k[0][0], unit.k[1][1], unit.k[2][2]];
+    let d: Vec<f64> = temp.iter().map(|x| x - c.anchor_c).collect();
+    let ctx = Ctx { unit: &unit, t: &t, temp: &temp, f: &f, power: &power, d: &d, kd };
+    let sigma_g = c.sigma_ug * 1e-6;
+    let per_axis = draw_per_axis(&mut rng);
+    let contrib = contribution(&c.mech, &ctx, &per_axis);
+    let (gain, axis_size) = scale_to_size(&c.mech, c.size_sigma, &c.axis_weight, &contrib, &per_axis, kd, sigma_g);
+    let mut truth = Truth { axis_size_sigma: axis_size, members: Vec::new() };
+    if c.mech != Mech::None {
+        truth.members.push(axis_size);
+    }
+    let mut extra = Vec::new();
+    for (m, member) in c.extra.iter().enumerate() {
+        let mut r = ChaCha8Rng::seed_from_u64(c.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (0xE0_B11D + m as u64));
+        let pa = draw_per_axis(&mut r);
+        let con = contribution(&member.mech, &ctx, &pa);
+        let (g, size) = scale_to_size(&member.mech, member.size_sigma, &member.axis_weight, &con, &pa, kd, sigma_g);
+        truth.members.push(size);
+        extra.push((g, con));
     }
 
     // Noise: white σ, and a random walk reaching `rw_ratio·σ` (1 standard deviation) at the end.
@@ -879,7 +1042,11 @@ pub fn generate(c: &Case) -> (Vec<Row>, Vec<Row>, Truth) {
                 rw[i] += q * dt.sqrt() * gauss(&mut rng);
             }
             let noise_g: f64 = sigma_g * gauss(&mut rng) + rw[i];
-            r.u_v[i] = base[i] + gain[i] * contrib[k][i] + kd[i] * noise_g;
+            let mut v = base[i] + gain[i] * contrib[k][i];
+            for (g, con) in &extra {
+                v += g[i] * con[k][i];
+            }
+            r.u_v[i] = v + kd[i] * noise_g;
         }
         sim.push(row);
         real.push(r);
