@@ -415,7 +415,9 @@ fn identify_dynamics(
         method: static_params.method,
     };
     println!("\nthermal dynamics (every dwell, ramps included, in blocks of ≤ {} s):", args.dynamics_block_s);
+    let started = std::time::Instant::now();
     let id = dynamics::identify(&series, &req, &mut |l| println!("  {l}")).map_err(|e| anyhow!("{files}: {e}"))?;
+    let took_s = started.elapsed().as_secs_f64();
     println!("  {:<11} {:>10} {:>10}     {:>22}  status", "component", "value", "std_error", "held-out gain [µg²]");
     for c in &id.components {
         let unit = if c.name == "lag" { "s" } else { "°C" };
@@ -449,7 +451,7 @@ fn identify_dynamics(
     println!("  bias play amplitude x/y/z: {:+.4} / {:+.4} / {:+.4} mg", b[0] * 1e3, b[1] * 1e3, b[2] * 1e3);
     let (r0, r1) = (id.static_fit.rms_g(), id.fit.rms_g());
     println!(
-        "  block residual RMS x/y/z: static poly:{order} {:.4} / {:.4} / {:.4} mg → with the dynamics {:.4} / {:.4} / {:.4} mg ({} blocks, {} evaluations)",
+        "  block residual RMS x/y/z: static poly:{order} {:.4} / {:.4} / {:.4} mg → with the dynamics {:.4} / {:.4} / {:.4} mg ({} blocks, {} evaluations, {took_s:.2} s)",
         r0[0] * 1e3,
         r0[1] * 1e3,
         r0[2] * 1e3,
