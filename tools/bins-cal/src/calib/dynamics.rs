@@ -14,11 +14,16 @@
 //! with `K(T)`, `U0(T)` the polynomial T(3) of the requested order about T0 (exactly the form
 //! the core evaluates, `CalibrationParams::constants_at`). For fixed (τ, h, h_b) the model is
 //! linear in the constants, their temperature coefficients and the amplitudes `b_i`: they are
-//! fitted by least squares. The three nonlinear parameters are searched as the diagnosis
-//! searches its θ: a log-spaced grid over (τ, h), then h_b, then Nelder–Mead on the logarithms
-//! of the non-zero ones together, within the grids' ranges. A component is kept only when dropping it (and re-fitting the rest) raises the
-//! residual beyond what the noise allows (`Component::on`); a lag below the resolution of the
-//! recording (three sample periods, at least 1 s) is reported as off.
+//! fitted by least squares (profiled out). The three nonlinear parameters are searched jointly:
+//! one log-spaced grid over (τ, h, h_b) with 0 in each, so that every combination of
+//! components (lag, play, bias play, on or off) is searched; per combination the best grid
+//! points are refined by Nelder–Mead on the logarithms of the non-zero ones ([`Candidate`]).
+//! The combination is chosen on held-out prediction: the blocks are grouped into chunks of time
+//! held out in turn, and a component is kept only when the prediction of the held-out blocks
+//! without it is worse by more than [`MIN_HELDOUT_Z`] standard errors (the scatter of the
+//! per-chunk gains, drift included) and by more than [`MIN_HELDOUT_REL`] of the residual. The
+//! kept parameters get standard errors from the residual's curvature. Without a dwell during a
+//! ramp nothing is searched ([`Identification::not_searched`]).
 //!
 //! Dwells are found as for the static calibration ([`segments`] finds them), but dwells
 //! during temperature ramps are used too (they are what tells the dynamics); each dwell is cut
