@@ -224,11 +224,10 @@ fn plot(r: &[Outcome], path: &Path) {
             .unwrap();
         ch.configure_mesh().x_desc(xl).y_desc(yl).draw().unwrap();
         ch.draw_series(LineSeries::new([(range.0, range.0), (range.1, range.1)], BLACK.stroke_width(1))).unwrap();
-        for f in [factor, 1.0 / factor] {
-            if f != 1.0 {
-                ch.draw_series(LineSeries::new([(range.0, range.0 * f), (range.1, range.1 * f)], BLACK.mix(0.3)))
-                    .unwrap();
-            }
+        // ±factor for a tolerance (factor > 1), one line for a bound (factor < 1).
+        let lines = if factor > 1.0 { vec![factor, 1.0 / factor] } else { vec![factor] };
+        for f in lines {
+            ch.draw_series(LineSeries::new([(range.0, range.0 * f), (range.1, range.1 * f)], BLACK.mix(0.3))).unwrap();
         }
         ch.draw_series(pts.into_iter().map(|(x, y, ok)| {
             Circle::new((x, y.clamp(range.0, range.1)), 4, if ok { BLUE.filled() } else { RED.filled() })

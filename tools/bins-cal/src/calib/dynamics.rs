@@ -955,6 +955,11 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
             refined.push((th, c.min(start.1)));
         }
         refined.sort_by(|a, b| a.1.total_cmp(&b.1));
+        // Two starts that refined to the same point (within 1 %) are one candidate.
+        let same = |a: &Theta, b: &Theta| (0..3).all(|k| (get(a, k) - get(b, k)).abs() <= 0.01 * get(a, k).abs());
+        if refined.len() == 2 && same(&refined[0].0, &refined[1].0) {
+            refined.truncate(1);
+        }
         for (th, sse) in refined.into_iter().take(if on.len() > 1 { 2 } else { 1 }) {
             let heldout_g2 = blocks.heldout(&th).iter().sum();
             candidates.push(Candidate { mask, theta: th, sse_g2: sse, heldout_g2 });
