@@ -14,11 +14,16 @@
 //! with `K(T)`, `U0(T)` the polynomial T(3) of the requested order about T0 (exactly the form
 //! the core evaluates, `CalibrationParams::constants_at`). For fixed (τ, h, h_b) the model is
 //! linear in the constants, their temperature coefficients and the amplitudes `b_i`: they are
-//! fitted by least squares. The three nonlinear parameters are searched as the diagnosis
-//! searches its θ: a log-spaced grid over (τ, h), then h_b, then Nelder–Mead on the logarithms
-//! of the non-zero ones together, within the grids' ranges. A component is kept only when dropping it (and re-fitting the rest) raises the
-//! residual beyond what the noise allows (`Component::on`); a lag below the resolution of the
-//! recording (three sample periods, at least 1 s) is reported as off.
+//! fitted by least squares (profiled out). The three nonlinear parameters are searched jointly:
+//! one log-spaced grid over (τ, h, h_b) with 0 in each, so that every combination of
+//! components (lag, play, bias play, on or off) is searched; per combination the best grid
+//! points are refined by Nelder–Mead on the logarithms of the non-zero ones ([`Candidate`]).
+//! The combination is chosen on held-out prediction: the blocks are grouped into chunks of time
+//! held out in turn, and a component is kept only when the prediction of the held-out blocks
+//! without it is worse by more than [`MIN_HELDOUT_Z`] standard errors (the scatter of the
+//! per-chunk gains, drift included) and by more than [`MIN_HELDOUT_REL`] of the residual. The
+//! kept parameters get standard errors from the residual's curvature. Without a dwell during a
+//! ramp nothing is searched ([`Identification::not_searched`]).
 //!
 //! Dwells are found as for the static calibration ([`segments`] finds them), but dwells
 //! during temperature ramps are used too (they are what tells the dynamics); each dwell is cut
@@ -53,6 +58,8 @@ pub struct Series {
     pub u_v: Vec<[f64; 3]>,
     /// The dwells' blocks: row range `[from, to)` and the reference specific force \[g\].
     pub blocks: Vec<(usize, usize, [f64; 3])>,
+    /// A block whose temperature moves faster than this [°C/min] is in a ramp.
+    pub max_rate_c_per_min: f64,
 }
 
 impl Series {
@@ -136,6 +143,7 @@ impl Series {
             temp_c: rows.iter().map(|r| r.temp_c).collect(),
             u_v: rows.iter().map(|r| r.u_v).collect(),
             blocks,
+            max_rate_c_per_min: opt.max_rate_c_per_min,
         })
     }
 
@@ -151,6 +159,22 @@ impl Series {
         let mut s = self.clone();
         s.blocks.retain(|b| keep(self.t_s[b.0], self.t_s[b.1 - 1]));
         s
+    }
+
+    /// The blocks (of at least 3 rows) whose temperature's least-squares rate exceeds
+    /// `max_rate_c_per_min`: dwells during a ramp, which alone tell a lag or a play.
+    pub fn ramp_blocks(&self) -> usize {
+        self.blocks
+            .iter()
+            .filter(|&&(a, b, _)| {
+                if b - a < 3 {
+                    return false;
+                }
+                let rows: Vec<segments::RunRow> = (a..b).map(|k| (self.t_s[k], [0.0; 3], self.temp_c[k])).collect();
+                let mean = self.temp_c[a..b].iter().sum::<f64>() / (b - a) as f64;
+                segments::temp_rate_c_per_min(&rows, mean).abs() > self.max_rate_c_per_min
+            })
+            .count()
     }
 
     /// Duration \[s\].
@@ -361,20 +385,56 @@ pub fn fit_at(series: &[Series], th: &Theta, req: &Request, scale_v_per_g: [f64;
     Ok(JointFit { theta: *th, params, bias_play_g, sse_g2, n_blocks, n_params })
 }
 
-/// One identified component of the dynamics.
+/// One component of the dynamics as the selection judged it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Component {
     /// `lag`, `hysteresis` or `bias_play`.
     pub name: &'static str,
-    /// Its best value (τ \[s\] or width [°C]).
+    /// Its value in the best candidate that has it (τ \[s\] or width [°C]); in the kept model
+    /// when it is kept.
     pub value: f64,
-    /// Residual with it dropped and the rest re-fitted, relative to the full model's: `SSE₀/SSE − 1`.
-    pub gain: f64,
+    /// Its standard error when kept (from the curvature of the residual, with the held-out
+    /// residual variance), else 0.
+    pub std_error: f64,
+    /// Held-out residual \[g²\] of the chosen model without the component (when kept) or with
+    /// it (when off) less the chosen model's: what it gains on blocks it was not fitted to.
+    pub heldout_gain_g2: f64,
+    /// Standard error of that gain \[g²\] (the scatter of its per-chunk parts).
+    pub heldout_se_g2: f64,
     /// Whether it is kept.
     pub on: bool,
     /// Why it is off, when it is.
     pub why_off: Option<String>,
 }
+
+/// One refined candidate of the search: a combination of components and its best θ.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Candidate {
+    /// Which components are on: bit 0 lag, bit 1 hysteresis, bit 2 bias play.
+    pub mask: u8,
+    /// The refined parameters.
+    pub theta: Theta,
+    /// The fit's residual over every block \[g²\].
+    pub sse_g2: f64,
+    /// The held-out residual: each block predicted by the fit without its fold \[g²\].
+    pub heldout_g2: f64,
+}
+
+impl Candidate {
+    /// `lag + hysteresis + bias_play`, or `static`.
+    pub fn label(&self) -> String {
+        mask_label(self.mask)
+    }
+}
+
+/// The names of the components of `mask`, joined by `+` (`static` for none).
+pub fn mask_label(mask: u8) -> String {
+    let v: Vec<&str> = COMPONENTS.iter().enumerate().filter(|(k, _)| mask & (1 << k) != 0).map(|(_, n)| *n).collect();
+    if v.is_empty() { "static".to_string() } else { v.join(" + ") }
+}
+
+/// The three components, in the order of θ's parameters.
+pub const COMPONENTS: [&str; 3] = ["lag", "hysteresis", "bias_play"];
 
 /// The result of [`identify`].
 #[derive(Clone, Debug)]
@@ -383,35 +443,52 @@ pub struct Identification {
     pub fit: JointFit,
     /// The joint fit of the same order without dynamics (same blocks).
     pub static_fit: JointFit,
-    /// Lag, hysteresis, bias play: their best values and whether kept.
+    /// Lag, hysteresis, bias play: their values and whether kept.
     pub components: Vec<Component>,
-    /// The lag resolution of the recordings \[s\] (a τ below it is off).
+    /// The refined candidates, one or two per combination of components.
+    pub candidates: Vec<Candidate>,
+    /// The lag resolution of the recordings \[s\] (the search's smallest τ).
     pub lag_resolution_s: f64,
     /// Objective evaluations of the search.
     pub evaluations: usize,
+    /// Why nothing was searched, when nothing was (e.g. no dwell during a ramp).
+    pub not_searched: Option<String>,
 }
 
 impl Identification {
+    /// True when at least one component is kept.
+    pub fn any_kept(&self) -> bool {
+        self.components.iter().any(|c| c.on)
+    }
+
     /// The identified dynamics as the core's parameters (self-heating 0: a tilter recording has
-    /// no power-on to identify it from; the bias play only with its play).
+    /// no power-on to identify it from; the bias play only with its play). No `-0.0`.
     pub fn dynamics(&self) -> ThermalDynamics<f64> {
         let th = self.fit.theta;
         ThermalDynamics {
-            lag_tau_s: th.lag_tau_s,
-            hysteresis_width_c: th.hysteresis_width_c,
+            lag_tau_s: th.lag_tau_s + 0.0,
+            hysteresis_width_c: th.hysteresis_width_c + 0.0,
             self_heating_c: 0.0,
             self_heating_tau_s: 0.0,
-            bias_play_width_c: th.bias_play_width_c,
-            bias_play_g: if th.bias_play_width_c > 0.0 { self.fit.bias_play_g } else { [0.0; 3] },
+            bias_play_width_c: th.bias_play_width_c + 0.0,
+            bias_play_g: if th.bias_play_width_c > 0.0 { self.fit.bias_play_g.map(|b| b + 0.0) } else { [0.0; 3] },
         }
     }
 }
 
-/// A component is kept when dropping it raises the residual by more than this fraction …
-pub const MIN_GAIN: f64 = 0.05;
-/// … and by more than this many times the residual variance per block (the block means are
-/// correlated in time by drift, so the bar is far above a white-noise F test's).
-pub const MIN_DELTA_PER_SIGMA2: f64 = 30.0;
+/// A component is kept only when the held-out residual without it exceeds the one with it by
+/// more than this many standard errors of that difference …
+pub const MIN_HELDOUT_Z: f64 = 2.0;
+/// … and by more than this fraction of the held-out residual with it (a gain of a few per cent
+/// is drift the component happens to follow, not a dynamic worth flying).
+pub const MIN_HELDOUT_REL: f64 = 0.1;
+
+/// Held-out chunks: whole spans of time of at least this \[s\] …
+pub const CHUNK_MIN_S: f64 = 120.0;
+/// … and about this many per recording (longer chunks on long recordings).
+pub const CHUNKS_PER_RECORDING: f64 = 48.0;
+/// Chunk `c` is held out in fold `c mod FOLDS`.
+pub const FOLDS: usize = 4;
 
 fn log_grid(lo: f64, hi: f64, per_decade: f64) -> Vec<f64> {
     if !(hi > lo && lo > 0.0) {
@@ -438,9 +515,21 @@ fn set(th: &mut Theta, k: usize, v: f64) {
     }
 }
 
+fn mask_of(th: &Theta) -> u8 {
+    (0..3).filter(|&k| get(th, k) > 0.0).fold(0, |m, k| m | (1 << k))
+}
+
 /// Nelder–Mead minimum of `f` from `x0` with initial steps `step`, at most `max_evals`
-/// evaluations, stopping when the simplex's values agree within `ftol` (relative).
-fn nelder_mead(x0: &[f64], step: f64, max_evals: usize, ftol: f64, f: &dyn Fn(&[f64]) -> f64) -> (Vec<f64>, f64) {
+/// evaluations, stopping when the simplex's values agree within `ftol` (absolute) or its
+/// points within `xtol`.
+fn nelder_mead(
+    x0: &[f64],
+    step: f64,
+    max_evals: usize,
+    ftol: f64,
+    xtol: f64,
+    f: &mut dyn FnMut(&[f64]) -> f64,
+) -> (Vec<f64>, f64) {
     let n = x0.len();
     let mut pts: Vec<(Vec<f64>, f64)> = Vec::with_capacity(n + 1);
     pts.push((x0.to_vec(), f(x0)));
@@ -454,23 +543,27 @@ fn nelder_mead(x0: &[f64], step: f64, max_evals: usize, ftol: f64, f: &dyn Fn(&[
     while evals < max_evals {
         pts.sort_by(|a, b| a.1.total_cmp(&b.1));
         let (lo, hi) = (pts[0].1, pts[n].1);
-        if (hi - lo).abs() <= ftol * lo.abs().max(1e-300) {
+        let size =
+            pts[1..].iter().flat_map(|p| p.0.iter().zip(&pts[0].0).map(|(a, b)| (a - b).abs())).fold(0.0, f64::max);
+        if (hi - lo).abs() <= ftol || size <= xtol {
             break;
         }
         let centroid: Vec<f64> = (0..n).map(|k| pts[..n].iter().map(|p| p.0[k]).sum::<f64>() / n as f64).collect();
-        let along = |t: f64| -> Vec<f64> { (0..n).map(|k| centroid[k] + t * (pts[n].0[k] - centroid[k])).collect() };
-        let xr = along(-1.0);
+        let along = |t: f64, worst: &[f64]| -> Vec<f64> {
+            (0..n).map(|k| centroid[k] + t * (worst[k] - centroid[k])).collect()
+        };
+        let xr = along(-1.0, &pts[n].0);
         let fr = f(&xr);
         evals += 1;
         if fr < pts[0].1 {
-            let xe = along(-2.0);
+            let xe = along(-2.0, &pts[n].0);
             let fe = f(&xe);
             evals += 1;
             pts[n] = if fe < fr { (xe, fe) } else { (xr, fr) };
         } else if fr < pts[n - 1].1 {
             pts[n] = (xr, fr);
         } else {
-            let xc = if fr < pts[n].1 { along(-0.5) } else { along(0.5) };
+            let xc = if fr < pts[n].1 { along(-0.5, &pts[n].0) } else { along(0.5, &pts[n].0) };
             let fc = f(&xc);
             evals += 1;
             if fc < pts[n].1.min(fr) {
@@ -490,8 +583,240 @@ fn nelder_mead(x0: &[f64], step: f64, max_evals: usize, ftol: f64, f: &dyn Fn(&[
     pts.swap_remove(0)
 }
 
+/// An orthonormal basis of the columns (modified Gram–Schmidt, twice), with `R`, for least
+/// squares by projection; a column (numerically) in the span of those before it is dropped.
+struct Basis {
+    q: Vec<Vec<f64>>,
+    /// Per kept column: its index among the inputs and its row of `R` (coefficients on the
+    /// kept columns' `q`, upper triangular).
+    kept: Vec<usize>,
+    r: Vec<Vec<f64>>,
+    n_cols: usize,
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+impl Basis {
+    fn new(cols: &[&[f64]]) -> Basis {
+        let mut q: Vec<Vec<f64>> = Vec::with_capacity(cols.len());
+        let mut kept = Vec::new();
+        // r[k][j]: coefficient of q_k in column kept[j].
+        let mut rcols: Vec<Vec<f64>> = Vec::new();
+        for (c, col) in cols.iter().enumerate() {
+            let norm0 = dot(col, col).sqrt();
+            if !(norm0 > 0.0) {
+                continue;
+            }
+            let mut v = col.to_vec();
+            let mut coef = vec![0.0; q.len()];
+            for _ in 0..2 {
+                for (k, qk) in q.iter().enumerate() {
+                    let a = dot(qk, &v);
+                    coef[k] += a;
+                    for (x, y) in v.iter_mut().zip(qk) {
+                        *x -= a * y;
+                    }
+                }
+            }
+            let norm = dot(&v, &v).sqrt();
+            if !(norm > 1e-9 * norm0) {
+                continue;
+            }
+            v.iter_mut().for_each(|x| *x /= norm);
+            coef.push(norm);
+            q.push(v);
+            kept.push(c);
+            rcols.push(coef);
+        }
+        // R row-major: r[k][j] for j ≥ k.
+        let m = q.len();
+        let r = (0..m).map(|k| (0..m).map(|j| if j >= k { rcols[j][k] } else { 0.0 }).collect()).collect();
+        Basis { q, kept, r, n_cols: cols.len() }
+    }
+
+    /// `v` less its projection on the columns.
+    fn residual(&self, v: &[f64]) -> Vec<f64> {
+        let mut r = v.to_vec();
+        for _ in 0..2 {
+            for qk in &self.q {
+                let a = dot(qk, &r);
+                for (x, y) in r.iter_mut().zip(qk) {
+                    *x -= a * y;
+                }
+            }
+        }
+        r
+    }
+
+    /// The least-squares coefficients of `v` on the input columns (0 for dropped ones).
+    fn coef(&self, v: &[f64]) -> Vec<f64> {
+        let m = self.q.len();
+        let qtv: Vec<f64> = self.q.iter().map(|qk| dot(qk, v)).collect();
+        let mut b = vec![0.0; m];
+        for k in (0..m).rev() {
+            let s = qtv[k] - ((k + 1)..m).map(|j| self.r[k][j] * b[j]).sum::<f64>();
+            b[k] = s / self.r[k][k];
+        }
+        let mut out = vec![0.0; self.n_cols];
+        for (k, &c) in self.kept.iter().enumerate() {
+            out[c] = b[k];
+        }
+        out
+    }
+}
+
+/// The blocks of every series, prepared once for the search: the known specific forces, the
+/// signals' block means less the part of the fixed K columns, and each block's held-out chunk.
+struct Blocks<'a> {
+    series: &'a [Series],
+    req: &'a Request,
+    var: [bool; 3],
+    f: Vec<[f64; 3]>,
+    y: [Vec<f64>; 3],
+    /// 1/K_ii²: the residuals in g².
+    w: [f64; 3],
+    chunk: Vec<usize>,
+    n_chunks: usize,
+}
+
+impl<'a> Blocks<'a> {
+    fn new(series: &'a [Series], req: &'a Request, scale_v_per_g: [f64; 3]) -> Blocks<'a> {
+        let var = varying(series);
+        let (mut f, mut y, mut chunk) = (Vec::new(), [Vec::new(), Vec::new(), Vec::new()], Vec::new());
+        let mut n_chunks = 0;
+        for s in series {
+            let t_first = s.t_s.first().copied().unwrap_or(0.0);
+            let len = (s.duration_s() / CHUNKS_PER_RECORDING).max(CHUNK_MIN_S);
+            let mut last = 0;
+            for &(a, b, fb) in &s.blocks {
+                let n = (b - a) as f64;
+                for i in 0..3 {
+                    let u = (a..b).map(|k| s.u_v[k][i]).sum::<f64>() / n;
+                    y[i].push(u - (0..3).filter(|&j| !var[j]).map(|j| req.k_prior[i][j] * fb[j]).sum::<f64>());
+                }
+                f.push(fb);
+                let c = ((s.t_s[a] - t_first) / len).floor() as usize;
+                chunk.push(n_chunks + c);
+                last = last.max(c);
+            }
+            n_chunks += last + 1;
+        }
+        Blocks { series, req, var, f, y, w: scale_v_per_g.map(|s| 1.0 / (s * s)), chunk, n_chunks }
+    }
+
+    /// The lagged temperature (τ) through the play (h) of every row of every series.
+    fn temp_eff(&self, tau: f64, h: f64) -> Vec<Vec<f64>> {
+        self.series
+            .iter()
+            .map(|s| {
+                let lag = if tau > 0.0 { lagged(&s.t_s, &s.temp_c, tau) } else { s.temp_c.clone() };
+                if h > 0.0 { play(&lag, h) } else { lag }
+            })
+            .collect()
+    }
+
+    /// The columns of the constants and their temperature model: block means of ΔT^p, then
+    /// ΔT^p·f_j for each varying f_j.
+    fn base(&self, te: &[Vec<f64>]) -> Vec<Vec<f64>> {
+        let order = self.req.order;
+        let mut pw: Vec<Vec<f64>> = vec![Vec::with_capacity(self.f.len()); order + 1];
+        for (s, te) in self.series.iter().zip(te) {
+            for &(a, b, _) in &s.blocks {
+                let n = (b - a) as f64;
+                let mut m = [0.0; MAX_POLY_ORDER + 1];
+                for &t in &te[a..b] {
+                    let x = (t - self.req.t0_c) / DT_SCALE;
+                    let mut xp = 1.0;
+                    for mp in m.iter_mut().take(order + 1) {
+                        *mp += xp;
+                        xp *= x;
+                    }
+                }
+                for (p, col) in pw.iter_mut().enumerate() {
+                    col.push(m[p] / n);
+                }
+            }
+        }
+        let mut cols = pw.clone();
+        for j in (0..3).filter(|&j| self.var[j]) {
+            for p in &pw {
+                cols.push(p.iter().zip(&self.f).map(|(x, f)| x * f[j]).collect());
+            }
+        }
+        cols
+    }
+
+    /// The block means of the bias play's output `d` (width `hb`) on `te`.
+    fn dcol(&self, te: &[Vec<f64>], hb: f64) -> Vec<f64> {
+        let mut out = Vec::with_capacity(self.f.len());
+        for (s, te) in self.series.iter().zip(te) {
+            let p = play(te, hb);
+            for &(a, b, _) in &s.blocks {
+                let n = (b - a) as f64;
+                out.push((a..b).map(|k| (p[k] - te[k]) / (0.5 * hb)).sum::<f64>() / n);
+            }
+        }
+        out
+    }
+
+    /// The columns of the model at θ.
+    fn columns(&self, th: &Theta) -> Vec<Vec<f64>> {
+        let te = self.temp_eff(th.lag_tau_s, th.hysteresis_width_c);
+        let mut cols = self.base(&te);
+        if th.bias_play_width_c > 0.0 {
+            cols.push(self.dcol(&te, th.bias_play_width_c));
+        }
+        cols
+    }
+
+    /// The residual of the fit at θ over every block \[g²\].
+    fn sse(&self, th: &Theta) -> f64 {
+        let cols = self.columns(th);
+        let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
+        let b = Basis::new(&refs);
+        (0..3).map(|i| self.w[i] * b.residual(&self.y[i]).iter().map(|x| x * x).sum::<f64>()).sum()
+    }
+
+    /// The held-out residual of each chunk at θ \[g²\]: every block predicted by the fit on the
+    /// folds other than its own.
+    fn heldout(&self, th: &Theta) -> Vec<f64> {
+        let cols = self.columns(th);
+        let mut out = vec![0.0; self.n_chunks];
+        for fold in 0..FOLDS {
+            let train: Vec<usize> = (0..self.f.len()).filter(|&k| self.chunk[k] % FOLDS != fold).collect();
+            let test: Vec<usize> = (0..self.f.len()).filter(|&k| self.chunk[k] % FOLDS == fold).collect();
+            if test.is_empty() || train.len() <= cols.len() {
+                continue;
+            }
+            let sub: Vec<Vec<f64>> = cols.iter().map(|c| train.iter().map(|&k| c[k]).collect()).collect();
+            let refs: Vec<&[f64]> = sub.iter().map(Vec::as_slice).collect();
+            let basis = Basis::new(&refs);
+            for i in 0..3 {
+                let yt: Vec<f64> = train.iter().map(|&k| self.y[i][k]).collect();
+                let beta = basis.coef(&yt);
+                for &k in &test {
+                    let pred: f64 = cols.iter().zip(&beta).map(|(c, b)| c[k] * b).sum();
+                    out[self.chunk[k]] += self.w[i] * (self.y[i][k] - pred).powi(2);
+                }
+            }
+        }
+        out
+    }
+}
+
+/// `a − b` summed, and its standard error from the scatter of the per-chunk differences.
+fn gain_and_se(a: &[f64], b: &[f64]) -> (f64, f64) {
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    let n = d.len() as f64;
+    let mean = d.iter().sum::<f64>() / n;
+    let var = d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    (mean * n, (var * n).sqrt())
+}
+
 /// Identifies the dynamics and the static model jointly (see the module's text). `progress`
-/// receives one line per stage of the search.
+/// receives the stages of the search, the candidates and the selection.
 pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)) -> anyhow::Result<Identification> {
     if series.is_empty() {
         bail!("no recording");
@@ -509,124 +834,339 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
         bail!("{names}: a scale factor K_ii is zero: the dwells do not determine the constants");
     }
     let static_fit = fit_at(series, &Theta::default(), req, scale)?;
-    let evals = std::cell::Cell::new(1usize);
-    let cost = |th: &Theta| -> f64 {
-        evals.set(evals.get() + 1);
-        fit_at(series, th, req, scale).map_or(f64::INFINITY, |f| f.sse())
-    };
-    let dur = series.iter().map(Series::duration_s).fold(0.0, f64::max);
     let dt = series.iter().map(Series::dt_s).fold(0.0, f64::max);
     let lag_res = (3.0 * dt).max(1.0);
+    let off = |why: &str| -> Vec<Component> {
+        COMPONENTS
+            .iter()
+            .map(|&name| Component {
+                name,
+                value: 0.0,
+                std_error: 0.0,
+                heldout_gain_g2: 0.0,
+                heldout_se_g2: 0.0,
+                on: false,
+                why_off: Some(why.to_string()),
+            })
+            .collect()
+    };
+    // Without a dwell while the temperature moves, a lag or a play changes nothing observable.
+    let ramp_blocks: usize = series.iter().map(Series::ramp_blocks).sum();
+    if ramp_blocks == 0 {
+        let why = "no dwell during a ramp: the dynamics cannot be identified from this recording".to_string();
+        progress(&format!("dynamics: {why} (every dwell is in a soak; nothing searched)"));
+        return Ok(Identification {
+            fit: static_fit.clone(),
+            static_fit,
+            components: off("no dwell during a ramp"),
+            candidates: Vec::new(),
+            lag_resolution_s: lag_res,
+            evaluations: 2,
+            not_searched: Some(why),
+        });
+    }
+    let blocks = Blocks::new(series, req, scale);
+    let dur = series.iter().map(Series::duration_s).fold(0.0, f64::max);
     let trange = series
         .iter()
         .flat_map(|s| s.temp_c.iter())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &t| (a.min(t), b.max(t)));
     let trange = trange.1 - trange.0;
-    let taus: Vec<f64> = std::iter::once(0.0).chain(log_grid(lag_res, (0.25 * dur).max(2.0 * lag_res), 4.0)).collect();
-    let widths: Vec<f64> = std::iter::once(0.0).chain(log_grid(0.02, (0.25 * trange).max(0.04), 4.0)).collect();
-    // Stage 1: (τ, h) grid.
-    let mut best = (Theta::default(), static_fit.sse());
-    for &tau in &taus {
-        for &h in &widths {
-            let th = Theta { lag_tau_s: tau, hysteresis_width_c: h, bias_play_width_c: 0.0 };
-            let c = cost(&th);
-            if c < best.1 {
-                best = (th, c);
+    let taus: Vec<f64> = std::iter::once(0.0).chain(log_grid(lag_res, (0.25 * dur).max(2.0 * lag_res), 3.0)).collect();
+    let widths: Vec<f64> = std::iter::once(0.0).chain(log_grid(0.02, (0.25 * trange).max(0.04), 3.0)).collect();
+    let bound = |k: usize| if k == 0 { (taus[1], taus[taus.len() - 1]) } else { (widths[1], widths[widths.len() - 1]) };
+    // Stage 1: the whole (τ, h, h_b) grid, zero included in each, so every combination of
+    // components is searched jointly. Per (τ, h) one basis of the constants' columns; each h_b
+    // adds one column, whose effect on the residual is a projection.
+    let mut grid: Vec<(Theta, f64, [usize; 3])> = Vec::with_capacity(taus.len() * widths.len() * widths.len());
+    let mut evaluations = 2;
+    for (it, &tau) in taus.iter().enumerate() {
+        for (ih, &h) in widths.iter().enumerate() {
+            let te = blocks.temp_eff(tau, h);
+            let cols = blocks.base(&te);
+            let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
+            let basis = Basis::new(&refs);
+            let ry: Vec<Vec<f64>> = (0..3).map(|i| basis.residual(&blocks.y[i])).collect();
+            let sse0: Vec<f64> = ry.iter().map(|r| dot(r, r)).collect();
+            let total0: f64 = (0..3).map(|i| blocks.w[i] * sse0[i]).sum();
+            grid.push((Theta { lag_tau_s: tau, hysteresis_width_c: h, bias_play_width_c: 0.0 }, total0, [it, ih, 0]));
+            evaluations += 1;
+            for (ib, &hb) in widths.iter().enumerate().skip(1) {
+                let rd = basis.residual(&blocks.dcol(&te, hb));
+                let dd = dot(&rd, &rd);
+                let total: f64 = (0..3)
+                    .map(|i| {
+                        let g = if dd > 0.0 { dot(&rd, &ry[i]).powi(2) / dd } else { 0.0 };
+                        blocks.w[i] * (sse0[i] - g).max(0.0)
+                    })
+                    .sum();
+                grid.push((
+                    Theta { lag_tau_s: tau, hysteresis_width_c: h, bias_play_width_c: hb },
+                    total,
+                    [it, ih, ib],
+                ));
+                evaluations += 1;
             }
         }
     }
     progress(&format!(
-        "dynamics: grid over τ ({} values) × h ({} values): τ = {:.1} s, h = {:.3} °C",
+        "dynamics: grid over τ ({} values) × h ({} values) × h_b ({} values), each with zero: {} fits",
         taus.len(),
         widths.len(),
-        best.0.lag_tau_s,
-        best.0.hysteresis_width_c
+        widths.len(),
+        grid.len()
     ));
-    // Stage 2: h_b grid.
-    for &hb in &widths[1..] {
-        let th = Theta { bias_play_width_c: hb, ..best.0 };
-        let c = cost(&th);
-        if c < best.1 {
-            best = (th, c);
-        }
-    }
-    progress(&format!(
-        "dynamics: grid over h_b ({} values): h_b = {:.3} °C",
-        widths.len() - 1,
-        best.0.bias_play_width_c
-    ));
-    // Stage 3: refine the nonzero parameters together (Nelder–Mead on their logarithms): lag
-    // and play trade against each other along a valley, which one at a time would not follow.
-    let on: Vec<usize> = (0..3).filter(|&k| get(&best.0, k) > 0.0).collect();
-    if !on.is_empty() {
-        // Within the grids' ranges.
-        let bound =
-            |k: usize| if k == 0 { (taus[1], taus[taus.len() - 1]) } else { (widths[1], widths[widths.len() - 1]) };
-        let f = |x: &[f64]| {
-            let mut th = best.0;
-            for (v, &k) in x.iter().zip(&on) {
-                let (lo, hi) = bound(k);
-                if !(v.exp() >= lo && v.exp() <= hi) {
-                    return f64::INFINITY;
+    // Stage 2: per combination of components, the best grid point and the best one not next to
+    // it, refined (Nelder–Mead on the logarithms of the non-zero parameters, within the grid).
+    let sigma2 = static_fit.sse() / (3 * n_blocks) as f64;
+    let mut candidates: Vec<Candidate> = Vec::new();
+    for mask in 0u8..8 {
+        let mut pts: Vec<&(Theta, f64, [usize; 3])> = grid.iter().filter(|g| mask_of(&g.0) == mask).collect();
+        pts.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let Some(best) = pts.first().copied() else { continue };
+        let second = pts.iter().copied().find(|p| (0..3).any(|k| p.2[k].abs_diff(best.2[k]) > 1));
+        let on: Vec<usize> = (0..3).filter(|&k| mask & (1 << k) != 0).collect();
+        let mut refined: Vec<(Theta, f64)> = Vec::new();
+        for start in std::iter::once(best).chain(second.filter(|_| on.len() > 1)) {
+            if on.is_empty() {
+                refined.push((start.0, start.1));
+                continue;
+            }
+            let mut f = |x: &[f64]| {
+                let mut th = start.0;
+                for (v, &k) in x.iter().zip(&on) {
+                    let (lo, hi) = bound(k);
+                    if !(v.exp() >= lo * 0.999 && v.exp() <= hi * 1.001) {
+                        return f64::INFINITY;
+                    }
+                    set(&mut th, k, v.exp());
                 }
-                set(&mut th, k, v.exp());
+                evaluations += 1;
+                blocks.sse(&th)
+            };
+            let x0: Vec<f64> = on.iter().map(|&k| get(&start.0, k).ln()).collect();
+            let (x, c) = nelder_mead(&x0, 0.25, 40 * on.len() + 40, 1e-3 * sigma2, 2e-3, &mut f);
+            let mut th = start.0;
+            if c <= start.1 {
+                for (v, &k) in x.iter().zip(&on) {
+                    set(&mut th, k, v.exp());
+                }
             }
-            cost(&th)
-        };
-        let x0: Vec<f64> = on.iter().map(|&k| get(&best.0, k).ln()).collect();
-        let (x, c) = nelder_mead(&x0, 0.3, 300, 1e-4, &f);
-        if c < best.1 {
-            for (v, &k) in x.iter().zip(&on) {
-                set(&mut best.0, k, v.exp());
-            }
-            best.1 = c;
+            refined.push((th, c.min(start.1)));
+        }
+        refined.sort_by(|a, b| a.1.total_cmp(&b.1));
+        // Two starts that refined to the same point (within 1 %) are one candidate.
+        let same = |a: &Theta, b: &Theta| (0..3).all(|k| (get(a, k) - get(b, k)).abs() <= 0.01 * get(a, k).abs());
+        if refined.len() == 2 && same(&refined[0].0, &refined[1].0) {
+            refined.truncate(1);
+        }
+        for (th, sse) in refined.into_iter().take(if on.len() > 1 { 2 } else { 1 }) {
+            let heldout_g2 = blocks.heldout(&th).iter().sum();
+            candidates.push(Candidate { mask, theta: th, sse_g2: sse, heldout_g2 });
         }
     }
+    // The best candidate of each combination (by its held-out residual).
+    let mut by_mask: Vec<Option<(Candidate, Vec<f64>)>> = vec![None; 8];
+    for c in &candidates {
+        let better = by_mask[c.mask as usize].as_ref().is_none_or(|(b, _)| c.heldout_g2 < b.heldout_g2);
+        if better {
+            by_mask[c.mask as usize] = Some((c.clone(), blocks.heldout(&c.theta)));
+        }
+    }
+    let nb = n_blocks as f64;
+    progress("dynamics: candidates (block RMS of the fit, and of each block predicted without its fold) [µg]:");
+    for c in &candidates {
+        progress(&format!(
+            "  {:<32} τ = {:>7.1} s, h = {:>6.3} °C, h_b = {:>6.3} °C: fit {:>8.2}, held out {:>8.2}",
+            c.label(),
+            c.theta.lag_tau_s,
+            c.theta.hysteresis_width_c,
+            c.theta.bias_play_width_c,
+            (c.sse_g2 / (3.0 * nb)).sqrt() * 1e6,
+            (c.heldout_g2 / (3.0 * nb)).sqrt() * 1e6
+        ));
+    }
+    // Selection: from the combination that predicts the held-out blocks best, drop the
+    // component whose held-out gain passes the bar (MIN_HELDOUT_Z standard errors and
+    // MIN_HELDOUT_REL of the residual) by the least while it fails it.
+    let mut chosen = (0..8).filter(|&m| by_mask[m].is_some()).min_by(|&a, &b| {
+        let (x, y) = (&by_mask[a].as_ref().unwrap().0, &by_mask[b].as_ref().unwrap().0);
+        x.heldout_g2.total_cmp(&y.heldout_g2)
+    });
+    let Some(mut m) = chosen.take() else { bail!("{names}: no candidate could be fitted") };
+    progress(&format!("dynamics: best held-out prediction: {}", mask_label(m as u8)));
+    let z_of = |with: usize, without: usize| -> Option<(f64, f64)> {
+        let (a, b) = (by_mask[without].as_ref()?, by_mask[with].as_ref()?);
+        Some(gain_and_se(&a.1, &b.1))
+    };
+    // How far a component passes the bar (≤ 1: it fails): the smaller of its gain in standard
+    // errors over MIN_HELDOUT_Z and its relative gain over MIN_HELDOUT_REL.
+    let margin = |with: usize, g: f64, se: f64| -> f64 {
+        let rel = g / by_mask[with].as_ref().map_or(f64::INFINITY, |c| c.0.heldout_g2).max(1e-300);
+        (g / se.max(1e-300) / MIN_HELDOUT_Z).min(rel / MIN_HELDOUT_REL)
+    };
+    loop {
+        let mut weakest: Option<(usize, f64, f64, f64)> = None;
+        for k in (0..3).filter(|&k| m & (1 << k) != 0) {
+            let Some((g, se)) = z_of(m, m & !(1 << k)) else { continue };
+            let q = margin(m, g, se);
+            if weakest.is_none_or(|w| q < w.1) {
+                weakest = Some((k, q, g, se));
+            }
+        }
+        match weakest {
+            Some((k, q, g, se)) if q <= 1.0 => {
+                progress(&format!(
+                    "dynamics: {} dropped: held-out gain {:.1} ± {:.1} µg² ({:.1} standard errors, {:.1} % of the held-out residual; {MIN_HELDOUT_Z} and {} % needed)",
+                    COMPONENTS[k],
+                    g * 1e12,
+                    se * 1e12,
+                    g / se.max(1e-300),
+                    100.0 * g / by_mask[m].as_ref().map_or(f64::INFINITY, |c| c.0.heldout_g2),
+                    100.0 * MIN_HELDOUT_REL
+                ));
+                m &= !(1 << k);
+            }
+            _ => break,
+        }
+    }
+    let theta = by_mask[m].as_ref().map_or(Theta::default(), |c| c.0.theta);
     progress(&format!(
-        "dynamics: refined: τ = {:.1} s, h = {:.3} °C, h_b = {:.3} °C",
-        best.0.lag_tau_s, best.0.hysteresis_width_c, best.0.bias_play_width_c
+        "dynamics: chosen {}: τ = {:.1} s, h = {:.3} °C, h_b = {:.3} °C",
+        mask_label(m as u8),
+        theta.lag_tau_s,
+        theta.hysteresis_width_c,
+        theta.bias_play_width_c
     ));
-    // Keep or drop each component: drop it, re-fit the rest, compare.
-    let full = fit_at(series, &best.0, req, scale)?;
-    let sigma2 = full.sse() / ((3 * full.n_blocks).saturating_sub(3 * full.n_params).max(1)) as f64;
+    // Standard errors of the kept parameters: the curvature of the residual in their
+    // logarithms, with the held-out residual variance (drift included).
+    let on: Vec<usize> = (0..3).filter(|&k| m & (1 << k) != 0).collect();
+    let heldout_sigma2 = by_mask[m].as_ref().map_or(sigma2, |c| c.0.heldout_g2 / (3.0 * nb));
+    let se = std_errors(&blocks, &theta, &on, heldout_sigma2);
+    evaluations += 1 + 2 * on.len() + 4 * on.len() * on.len().saturating_sub(1) / 2;
+    // What each component gains on held-out blocks against the chosen model.
     let mut components = Vec::new();
-    let mut kept = best.0;
-    for (name, value) in
-        [("lag", best.0.lag_tau_s), ("hysteresis", best.0.hysteresis_width_c), ("bias_play", best.0.bias_play_width_c)]
-    {
-        let mut th = best.0;
-        match name {
-            "lag" => th.lag_tau_s = 0.0,
-            "hysteresis" => th.hysteresis_width_c = 0.0,
-            _ => th.bias_play_width_c = 0.0,
+    for k in 0..3 {
+        let bit = 1usize << k;
+        let (with, without) = if m & bit != 0 { (m, m & !bit) } else { (m | bit, m) };
+        let (g, s) = z_of(with, without).unwrap_or((0.0, 0.0));
+        let value = by_mask[with].as_ref().map_or(0.0, |c| get(&c.0.theta, k));
+        let on_k = m & bit != 0;
+        let why_off = (!on_k).then(|| {
+            let rel = g / by_mask[with].as_ref().map_or(f64::INFINITY, |c| c.0.heldout_g2).max(1e-300);
+            format!(
+                "best at {} {}, held-out gain {:+.0} ± {:.0} µg² ({:.1} standard errors, {:+.1} %; {MIN_HELDOUT_Z} and {} % needed)",
+                fmt_value(k, value),
+                if k == 0 { "s" } else { "°C" },
+                g * 1e12,
+                s * 1e12,
+                g / s.max(1e-300),
+                100.0 * rel,
+                100.0 * MIN_HELDOUT_REL
+            )
+        });
+        let std_error = on.iter().position(|&j| j == k).map_or(0.0, |p| se[p]);
+        components.push(Component {
+            name: COMPONENTS[k],
+            value,
+            std_error,
+            heldout_gain_g2: g,
+            heldout_se_g2: s,
+            on: on_k,
+            why_off,
+        });
+    }
+    let fit = fit_at(series, &theta, req, scale)?;
+    Ok(Identification {
+        fit,
+        static_fit,
+        components,
+        candidates,
+        lag_resolution_s: lag_res,
+        evaluations,
+        not_searched: None,
+    })
+}
+
+fn fmt_value(k: usize, v: f64) -> String {
+    if k == 0 { format!("{v:.1}") } else { format!("{v:.3}") }
+}
+
+/// Standard errors of the parameters `on` of θ: `θ_k·√(2σ²·(H⁻¹)_kk)` with `H` the Hessian of
+/// the residual in their logarithms (central differences, step 0.05).
+fn std_errors(blocks: &Blocks<'_>, th: &Theta, on: &[usize], sigma2: f64) -> Vec<f64> {
+    let n = on.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    let hstep = 0.05;
+    let at = |dx: &[f64]| {
+        let mut t = *th;
+        for (d, &k) in dx.iter().zip(on) {
+            set(&mut t, k, get(th, k) * d.exp());
         }
-        let dropped = fit_at(series, &th, req, scale)?.sse();
-        let gain = dropped / full.sse().max(1e-300) - 1.0;
-        let delta = dropped - full.sse();
-        let why_off = if value == 0.0 {
-            Some("not found (best at zero)".to_string())
-        } else if name == "lag" && value < lag_res {
-            Some(format!("τ = {value:.2} s below the resolution {lag_res:.1} s"))
-        } else if !(gain > MIN_GAIN && delta > MIN_DELTA_PER_SIGMA2 * sigma2) {
-            Some(format!(
-                "not significant (residual {:+.1} % without it; {:.1} residual variances)",
-                100.0 * gain,
-                delta / sigma2
-            ))
-        } else {
-            None
-        };
-        if why_off.is_some() {
-            match name {
-                "lag" => kept.lag_tau_s = 0.0,
-                "hysteresis" => kept.hysteresis_width_c = 0.0,
-                _ => kept.bias_play_width_c = 0.0,
+        blocks.sse(&t)
+    };
+    let f0 = at(&vec![0.0; n]);
+    let mut hm = vec![vec![0.0; n]; n];
+    for a in 0..n {
+        let mut e = vec![0.0; n];
+        e[a] = hstep;
+        let fp = at(&e);
+        e[a] = -hstep;
+        let fm = at(&e);
+        hm[a][a] = (fp - 2.0 * f0 + fm) / (hstep * hstep);
+        for b in 0..a {
+            let v = |sa: f64, sb: f64| {
+                let mut e = vec![0.0; n];
+                e[a] = sa * hstep;
+                e[b] = sb * hstep;
+                at(&e)
+            };
+            let h = (v(1.0, 1.0) - v(1.0, -1.0) - v(-1.0, 1.0) + v(-1.0, -1.0)) / (4.0 * hstep * hstep);
+            hm[a][b] = h;
+            hm[b][a] = h;
+        }
+    }
+    let inv = invert(&hm);
+    on.iter()
+        .enumerate()
+        .map(|(p, &k)| match &inv {
+            Some(i) if i[p][p] > 0.0 => get(th, k) * (2.0 * sigma2 * i[p][p]).sqrt(),
+            _ => f64::INFINITY,
+        })
+        .collect()
+}
+
+/// The inverse of a small matrix (Gauss–Jordan with partial pivoting); `None` when singular.
+fn invert(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
+    let n = a.len();
+    let mut m: Vec<Vec<f64>> = a
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let mut row = r.clone();
+            row.extend((0..n).map(|j| if i == j { 1.0 } else { 0.0 }));
+            row
+        })
+        .collect();
+    for c in 0..n {
+        let p = (c..n).max_by(|&x, &y| m[x][c].abs().total_cmp(&m[y][c].abs()))?;
+        if !(m[p][c].abs() > 0.0) {
+            return None;
+        }
+        m.swap(c, p);
+        let d = m[c][c];
+        m[c].iter_mut().for_each(|x| *x /= d);
+        for r in 0..n {
+            if r != c {
+                let f = m[r][c];
+                let row_c = m[c].clone();
+                m[r].iter_mut().zip(&row_c).for_each(|(x, y)| *x -= f * y);
             }
         }
-        components.push(Component { name, value, gain, on: why_off.is_none(), why_off });
     }
-    let fit = fit_at(series, &kept, req, scale)?;
-    Ok(Identification { fit, static_fit, components, lag_resolution_s: lag_res, evaluations: evals.get() })
+    Some(m.into_iter().map(|r| r[n..].to_vec()).collect())
 }
 
 /// The core's thermal dynamics run over a recording's rows (`t_s`, `temp_C`; the time since

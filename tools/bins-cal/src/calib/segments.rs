@@ -9,7 +9,7 @@
 //! seconds at the logger's rate is enough. Kept segments are grouped by temperature: sorted
 //! by mean temperature and split where two neighbours differ by more than `temp_tol_c`.
 
-use crate::recording::{Reader, Row};
+use crate::recording::{REFERENCE, Reader, Row, col};
 use anyhow::{anyhow, bail};
 use std::path::{Path, PathBuf};
 
@@ -95,10 +95,22 @@ pub enum Reference {
     Rows(usize),
 }
 
-/// The [`Reference`] of a recording (reads it through). Errors name the file.
+/// The columns of the specific force the dwells are labelled with.
+pub const FORCE: [&str; 3] = [col::FX_G, col::FY_G, col::FZ_G];
+
+/// The reference columns of the format a recording's header lacks (the vibration's, say: a
+/// tilter's dwells need only [`FORCE`]). Errors name the file.
+pub fn missing_reference_columns(path: &Path) -> anyhow::Result<Vec<&'static str>> {
+    let reader = Reader::open(path).map_err(|e| anyhow!("{e}"))?;
+    Ok(REFERENCE.iter().copied().filter(|c| !reader.has_column(c)).collect())
+}
+
+/// The [`Reference`] of a recording: its specific force `fx_g`, `fy_g`, `fz_g` (the
+/// vibration columns are not needed for a dwell's reference). Reads it through; errors name
+/// the file.
 pub fn reference(path: &Path) -> anyhow::Result<Reference> {
     let mut reader = Reader::open(path).map_err(|e| anyhow!("{e}"))?;
-    if !reader.has_reference() {
+    if !FORCE.iter().all(|c| reader.has_column(c)) {
         return Ok(Reference::Absent);
     }
     let mut row = Row::default();
@@ -110,16 +122,19 @@ pub fn reference(path: &Path) -> anyhow::Result<Reference> {
 }
 
 /// All dwells of a recording (kept and rejected). Errors name the file: unreadable, no `pos`
-/// column, no reference columns, no row with a known reference and a position label.
+/// column, no specific-force columns (named), no row with a known reference and a position
+/// label. The vibration columns are not needed.
 pub fn find(path: &Path, opt: &Options) -> anyhow::Result<Vec<Segment>> {
     let mut reader = Reader::open(path).map_err(|e| anyhow!("{e}"))?;
     if !reader.has_column("pos") {
         bail!("{}: missing column `pos` (the rig position label): cannot find the dwells", path.display());
     }
-    if !reader.has_reference() {
+    let missing: Vec<&str> = FORCE.iter().copied().filter(|c| !reader.has_column(c)).collect();
+    if !missing.is_empty() {
         bail!(
-            "{}: no reference columns `fx_g`, `fy_g`, `fz_g` in the header: the dwells' specific force is not known (calibrate --free finds static intervals without it)",
-            path.display()
+            "{}: missing reference column(s) `{}` in the header: the dwells' specific force is not known (calibrate --free finds static intervals without it)",
+            path.display(),
+            missing.join("`, `")
         );
     }
     let mut runs: Vec<Run> = Vec::new();

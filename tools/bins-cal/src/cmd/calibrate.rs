@@ -204,6 +204,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (all, files) = if free {
         free_intervals(&args.tilter, &args.stat, &args.seg)?
     } else {
+        for p in &args.tilter {
+            let missing = segments::missing_reference_columns(p)?;
+            if !missing.is_empty() {
+                notes.push(format!(
+                    "{}: no column(s) {}: the dwells are taken as free of vibration (their reference is fx_g, fy_g, fz_g)",
+                    p.display(),
+                    missing.join(", ")
+                ));
+            }
+        }
         let (all, files) = segments::find_all(&args.tilter, &args.seg)?;
         (all.into_iter().filter(|s| s.pos.starts_with(&args.pos_prefix)).collect(), files)
     };
@@ -221,12 +231,41 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return run_free(&args, groups, &all, &files, notes, (model_arg, method, ve_variant));
     }
     let mut fits = Vec::new();
+    let n_groups = groups.len();
+    let mut first_skipped: Option<anyhow::Error> = None;
     for (t, segs) in groups {
+        // A temperature with fewer than 4 positions (dwells that happened to be settled during
+        // a ramp's reversal, say) cannot give the 12 constants: skipped with a note while
+        // other temperatures can.
+        let positions = segs.iter().fold(Vec::<[f64; 3]>::new(), |mut v, s| {
+            if !v.contains(&s.f_g) {
+                v.push(s.f_g);
+            }
+            v
+        });
+        if positions.len() < 4 && n_groups > 1 {
+            let labels: Vec<&str> = segs.iter().map(|s| s.pos.as_str()).collect();
+            notes.push(format!(
+                "{files}: at {t:.2} °C only {} settled dwell(s) ({}) at {} position(s): skipped (the 12 constants need at least 4 positions)",
+                segs.len(),
+                labels.join(", "),
+                positions.len()
+            ));
+            first_skipped.get_or_insert(
+                fit_temperature(t, segs, &files)
+                    .err()
+                    .unwrap_or_else(|| anyhow!("{files}: at {t:.2} °C too few positions")),
+            );
+            continue;
+        }
         let mut fit = fit_temperature(t, segs, &files)?;
         if args.tilt {
             notes.push(refine_tilt(&mut fit, args.tilt_tol_mrad, &files)?);
         }
         fits.push(fit);
+    }
+    if fits.is_empty() {
+        return Err(first_skipped.unwrap_or_else(|| anyhow!("{files}: no temperature with enough dwells")));
     }
     println!("\nconstants per temperature (residual = U − (K·f + U0), in mg of the axis):");
     println!("  {:>9} {:>4} {:<6} {:>10} {:>10}  dwells", "temp_C", "n", "fit", "rms_mg", "max_mg");
@@ -275,10 +314,12 @@ fn finish(
             Some(spec)
         }
         Some(DynamicsArg::Identify) => {
-            let (p, d, n) = identify_dynamics(args, &params, files)?;
-            params = p;
+            let (found, n) = identify_dynamics(args, &params, files)?;
             notes.extend(n);
-            Some(d)
+            found.map(|(p, d)| {
+                params = p;
+                d
+            })
         }
     };
     let method = params.method;
@@ -353,12 +394,14 @@ fn finish(
 /// `--dynamics identify`: the dynamics and the polynomial model fitted jointly on every dwell
 /// of the tilter recordings (`static_params`: the model from the settled dwells, whose order,
 /// T0, K (for what the dwells cannot determine) and method it keeps). Prints the search, the
-/// components and the residuals; returns the joint parameters, the table and the notes.
+/// components and the residuals; returns the joint parameters and the table (`None` when no
+/// component is kept: nothing of the dynamics is then written) and the notes.
+#[allow(clippy::type_complexity)]
 fn identify_dynamics(
     args: &Args,
     static_params: &CalibrationParams,
     files: &str,
-) -> anyhow::Result<(CalibrationParams, DynamicsSpec, Vec<String>)> {
+) -> anyhow::Result<(Option<(CalibrationParams, DynamicsSpec)>, Vec<String>)> {
     let ModelArg::Poly(order) = parse_model(&args.model)? else { bail!("--dynamics identify: needs --model poly:N") };
     let series: Vec<Series> = args
         .tilter
@@ -372,24 +415,43 @@ fn identify_dynamics(
         method: static_params.method,
     };
     println!("\nthermal dynamics (every dwell, ramps included, in blocks of ≤ {} s):", args.dynamics_block_s);
+    let started = std::time::Instant::now();
     let id = dynamics::identify(&series, &req, &mut |l| println!("  {l}")).map_err(|e| anyhow!("{files}: {e}"))?;
-    println!("  {:<11} {:>12} {:>14}  status", "component", "value", "dropped: SSE");
+    let took_s = started.elapsed().as_secs_f64();
+    println!("  {:<11} {:>10} {:>10}     {:>22}  status", "component", "value", "std_error", "held-out gain [µg²]");
     for c in &id.components {
         let unit = if c.name == "lag" { "s" } else { "°C" };
         println!(
-            "  {:<11} {:>9.3} {:<2} {:>+13.1}%  {}",
+            "  {:<11} {:>10.3} {:>10.3} {:<3} {:>+11.1} ± {:<8.1}  {}",
             c.name,
             c.value,
+            c.std_error,
             unit,
-            100.0 * c.gain,
+            c.heldout_gain_g2 * 1e12,
+            c.heldout_se_g2 * 1e12,
             c.why_off.as_deref().unwrap_or("kept")
         );
+    }
+    let off: Vec<String> =
+        id.components.iter().filter_map(|c| c.why_off.as_ref().map(|w| format!("{} off: {w}", c.name))).collect();
+    if !id.any_kept() {
+        // Nothing found, nothing written: the static calibration, no [thermal_dynamics].
+        let head = match &id.not_searched {
+            Some(why) => format!("thermal dynamics not identified: {why}"),
+            None => format!(
+                "thermal dynamics not identified: lag, hysteresis and bias play tried jointly with the poly:{order} model on {} blocks, none kept ({}); no [thermal_dynamics] written",
+                id.fit.n_blocks,
+                off.join("; ")
+            ),
+        };
+        println!("  {head}");
+        return Ok((None, vec![head]));
     }
     let b = id.fit.bias_play_g;
     println!("  bias play amplitude x/y/z: {:+.4} / {:+.4} / {:+.4} mg", b[0] * 1e3, b[1] * 1e3, b[2] * 1e3);
     let (r0, r1) = (id.static_fit.rms_g(), id.fit.rms_g());
     println!(
-        "  block residual RMS x/y/z: static poly:{order} {:.4} / {:.4} / {:.4} mg → with the dynamics {:.4} / {:.4} / {:.4} mg ({} blocks, {} evaluations)",
+        "  block residual RMS x/y/z: static poly:{order} {:.4} / {:.4} / {:.4} mg → with the dynamics {:.4} / {:.4} / {:.4} mg ({} blocks, {} evaluations, {took_s:.2} s)",
         r0[0] * 1e3,
         r0[1] * 1e3,
         r0[2] * 1e3,
@@ -399,16 +461,29 @@ fn identify_dynamics(
         id.fit.n_blocks,
         id.evaluations
     );
-    let th = id.fit.theta;
-    let spec = DynamicsSpec::from_dynamics(&id.dynamics());
-    let off: Vec<String> =
-        id.components.iter().filter_map(|c| c.why_off.as_ref().map(|w| format!("{} off: {w}", c.name))).collect();
+    let d = id.dynamics();
+    let spec = DynamicsSpec::from_dynamics(&d);
+    let kept: Vec<String> = id
+        .components
+        .iter()
+        .filter(|c| c.on)
+        .map(|c| match c.name {
+            "lag" => format!("τ = {:.1} ± {:.1} s", d.lag_tau_s, c.std_error),
+            "hysteresis" => format!("h = {:.3} ± {:.3} °C", d.hysteresis_width_c, c.std_error),
+            _ => format!(
+                "h_b = {:.3} ± {:.3} °C with {:+.4} / {:+.4} / {:+.4} mg",
+                d.bias_play_width_c,
+                c.std_error,
+                b[0] * 1e3,
+                b[1] * 1e3,
+                b[2] * 1e3
+            ),
+        })
+        .collect();
     let mut notes = vec![format!(
-        "thermal dynamics identified jointly with the poly:{order} model on {} blocks of every dwell (ramps included): τ = {:.1} s, h = {:.3} °C, h_b = {:.3} °C; block residual RMS {:.4} → {:.4} mg (worst axis)",
+        "thermal dynamics identified jointly with the poly:{order} model on {} blocks of every dwell (ramps included): {}; block residual RMS {:.4} → {:.4} mg (worst axis)",
         id.fit.n_blocks,
-        th.lag_tau_s,
-        th.hysteresis_width_c,
-        th.bias_play_width_c,
+        kept.join(", "),
         r0.iter().fold(0.0f64, |a, b| a.max(*b)) * 1e3,
         r1.iter().fold(0.0f64, |a, b| a.max(*b)) * 1e3
     )];
@@ -422,7 +497,7 @@ fn identify_dynamics(
         params.temp_range_c.0.min(static_params.temp_range_c.0),
         params.temp_range_c.1.max(static_params.temp_range_c.1),
     );
-    Ok((params, spec, notes))
+    Ok((Some((params, spec)), notes))
 }
 
 /// True when no recording has a reference (absent or empty columns): the free fit is then
@@ -432,7 +507,7 @@ fn no_reference(paths: &[PathBuf], notes: &mut Vec<String>) -> anyhow::Result<bo
     for p in paths {
         match segments::reference(p)? {
             Reference::Rows(_) => return Ok(false),
-            Reference::Absent => why.push(format!("{} has no reference columns", p.display())),
+            Reference::Absent => why.push(format!("{} has no reference columns fx_g, fy_g, fz_g", p.display())),
             Reference::Empty => why.push(format!("{}: the reference columns are empty in every row", p.display())),
         }
     }
