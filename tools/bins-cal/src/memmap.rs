@@ -12,7 +12,7 @@ pub const DEFAULT_CALIB_ORIGIN: u32 = 0x003F_F000;
 pub struct CalibRegion {
     /// `ORIGIN` (a multiple of [`ALIGN`]).
     pub origin: u32,
-    /// `LENGTH` [bytes].
+    /// `LENGTH` \[bytes\].
     pub length: u32,
 }
 

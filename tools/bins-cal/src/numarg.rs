@@ -36,7 +36,7 @@ pub fn positive(s: &str) -> Result<f64, String> {
     Ok(x)
 }
 
-/// A duration [s] from 0 to [`MAX_DURATION_S`].
+/// A duration \[s\] from 0 to [`MAX_DURATION_S`].
 pub fn duration_or_zero_s(s: &str) -> Result<f64, String> {
     let x = number(s)?;
     if !(0.0..=MAX_DURATION_S).contains(&x) {
@@ -45,7 +45,7 @@ pub fn duration_or_zero_s(s: &str) -> Result<f64, String> {
     Ok(x)
 }
 
-/// A duration [s] from [`MIN_DURATION_S`] to [`MAX_DURATION_S`].
+/// A duration \[s\] from [`MIN_DURATION_S`] to [`MAX_DURATION_S`].
 pub fn duration_s(s: &str) -> Result<f64, String> {
     let x = number(s)?;
     if !(MIN_DURATION_S..=MAX_DURATION_S).contains(&x) {
