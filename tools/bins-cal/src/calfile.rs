@@ -38,12 +38,15 @@ pub struct CalibrationFile {
     pub t0_c: f64,
     /// Calibrated temperature range [°C]: `[min, max]`.
     #[serde(rename = "temp_range_C")]
+    #[serde(deserialize_with = "crate::exact::array")]
     pub temp_range_c: [f64; 2],
     /// K at T0 [V/g], row-major.
     #[serde(rename = "k_V_per_g")]
+    #[serde(deserialize_with = "crate::exact::matrix")]
     pub k_v_per_g: [[f64; 3]; 3],
     /// U0 at T0 \[V\].
     #[serde(rename = "u0_V")]
+    #[serde(deserialize_with = "crate::exact::array")]
     pub u0_v: [f64; 3],
     /// Compensation method.
     pub method: MethodSpec,
@@ -79,6 +82,7 @@ pub struct DynamicsSpec {
     #[serde(rename = "bias_play_width_C")]
     pub bias_play_width_c: f64,
     /// Bias per unit of the play fraction, x, y, z \[mg\].
+    #[serde(deserialize_with = "crate::exact::array")]
     pub bias_play_mg: [f64; 3],
 }
 
@@ -114,7 +118,7 @@ impl DynamicsSpec {
     /// `bins-cal diagnose --model` writes; other tables are ignored) and checks it as the
     /// firmware would. Errors name the file and the key.
     pub fn read_table(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let text = crate::fsio::read_text(path)?;
         let value: toml::Table =
             toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), one_line(&e.to_string())))?;
         let table = value
@@ -253,6 +257,7 @@ pub enum ProfileSpec {
     /// `kind = "sine"`: harmonic, in phase on all axes.
     Sine {
         /// Peak amplitude per axis x, y, z \[g\], signed.
+        #[serde(deserialize_with = "keyed_amp_g")]
         amp_g: [f64; 3],
         /// Frequency \[Hz\].
         #[serde(rename = "freq_Hz")]
@@ -261,12 +266,18 @@ pub enum ProfileSpec {
     /// `kind = "random"`: flat band, fully correlated components.
     Random {
         /// σ per axis x, y, z \[g\].
+        #[serde(deserialize_with = "keyed_sigma_g")]
         sigma_g: [f64; 3],
         /// Band [low, high] \[Hz\].
         #[serde(rename = "band_Hz")]
+        #[serde(deserialize_with = "keyed_band_hz")]
         band_hz: [f64; 2],
     },
 }
+
+crate::keyed_array!(keyed_amp_g, "amp_g", 3);
+crate::keyed_array!(keyed_sigma_g, "sigma_g", 3);
+crate::keyed_array!(keyed_band_hz, "band_Hz", 2);
 
 impl ProfileSpec {
     /// The core's vibration.
@@ -397,8 +408,10 @@ pub struct KnotSpec {
     pub t_c: f64,
     /// ΔU0 at the knot \[V\].
     #[serde(rename = "du0_V")]
+    #[serde(deserialize_with = "crate::exact::array")]
     pub du0_v: [f64; 3],
     /// ΔK_ij/K_ij at the knot \[1\].
+    #[serde(deserialize_with = "crate::exact::matrix")]
     pub rel_k: [[f64; 3]; 3],
 }
 
@@ -410,9 +423,11 @@ pub struct TermSpec {
     pub power: u8,
     /// α_n [V/°Cⁿ].
     #[serde(rename = "alpha_V_per_Cn")]
+    #[serde(deserialize_with = "crate::exact::array")]
     pub alpha_v_per_cn: [f64; 3],
     /// β_n on the diagonal, γ_n off it [1/°Cⁿ].
     #[serde(rename = "rel_k_per_Cn")]
+    #[serde(deserialize_with = "crate::exact::matrix")]
     pub rel_k_per_cn: [[f64; 3]; 3],
 }
 
@@ -476,18 +491,33 @@ impl CalibrationFile {
         toml::from_str(text).map_err(|e| CalFileError::Syntax(one_line(&e.to_string())))
     }
 
-    /// Reads and parses a file; errors name the file.
+    /// Reads and parses a calibration file (TOML); errors name the file. A blob given
+    /// instead (decided by its content, the magic `BCAL`, not by the name) is said to be one.
     pub fn read(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        Self::from_toml(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+        let bytes = crate::fsio::read_capped(path, crate::fsio::MAX_TEXT_INPUT_BYTES)?;
+        if is_blob(&bytes) {
+            anyhow::bail!(
+                "{}: a calibration blob (it starts with the magic BCAL), not a calibration file (TOML); `bins-cal blob decode` turns it into one",
+                path.display()
+            );
+        }
+        Self::from_toml(&toml_text(path, &bytes)?).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
     }
 
-    /// Reads a file and checks it as the firmware would check it ([`check`](Self::check));
-    /// returns the file and its blob. Errors name the file and the key or blob field. Every
-    /// command that uses a calibration file goes through this, so a calibration is accepted
-    /// or refused the same way whatever its container.
+    /// Reads a calibration, a calibration file (TOML) or a blob, told apart by the content
+    /// (UTF-8 text not starting with the blob's magic `BCAL` is a calibration file, anything
+    /// else is read as a blob; the name does not matter), and checks it as the
+    /// firmware would check it ([`check`](Self::check)); returns the file and its blob. Errors
+    /// name the file and the key or blob field. Every command that uses a calibration goes
+    /// through this, so a calibration is accepted or refused the same way whatever its
+    /// container.
     pub fn read_checked(path: &Path) -> anyhow::Result<(Self, Vec<u8>)> {
-        let file = Self::read(path)?;
+        let bytes = crate::fsio::read_capped(path, crate::fsio::MAX_TEXT_INPUT_BYTES)?;
+        let file = if is_blob(&bytes) || std::str::from_utf8(&bytes).is_err() {
+            Self::from_blob(&bytes).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), describe(&e)))?
+        } else {
+            Self::from_toml(&toml_text(path, &bytes)?).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?
+        };
         let bytes = file.check().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
         Ok((file, bytes))
     }
@@ -699,6 +729,22 @@ impl CalibrationFile {
     }
 }
 
+/// True when `bytes` are a blob (they start with its magic), not TOML text.
+pub fn is_blob(bytes: &[u8]) -> bool {
+    bytes.starts_with(&blob::MAGIC)
+}
+
+/// `bytes` as the text of a TOML file; not UTF-8 is said so, with the byte offset.
+fn toml_text(path: &Path, bytes: &[u8]) -> anyhow::Result<String> {
+    String::from_utf8(bytes.to_vec()).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: not a calibration file (TOML text) nor a blob: byte {} is not UTF-8",
+            path.display(),
+            e.utf8_error().valid_up_to()
+        )
+    })
+}
+
 /// Puts each row of a 3×3 matrix value (`key = [[…], […], […]]`) on its own line.
 fn matrices_by_row(body: &str) -> String {
     let mut out = String::with_capacity(body.len() + 256);
@@ -727,7 +773,7 @@ fn matrices_by_row(body: &str) -> String {
 /// Joins the TOML parser's multi-line message (position, source excerpt, reason) into one
 /// line that keeps the offending source line, e.g.
 /// "TOML parse error at line 6, column 8: `t0_C = "x"`: invalid type: string "x", expected f64".
-fn one_line(s: &str) -> String {
+pub fn one_line(s: &str) -> String {
     let mut parts: Vec<String> = Vec::new();
     for line in s.lines().map(str::trim).filter(|l| !l.is_empty()) {
         if line.starts_with('|') {

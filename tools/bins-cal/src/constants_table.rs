@@ -2,7 +2,7 @@
 //! `data/paper-constants.csv`: `temp_C`, `Kxx` … `Kzz`, `U0x` … `U0z`, `#` comments), read
 //! with errors that name the file, line and column.
 
-use anyhow::{Context, anyhow, bail};
+use anyhow::{anyhow, bail};
 use bins_comp::Constants;
 use std::path::Path;
 
@@ -11,9 +11,19 @@ pub const K_NAMES: [[&str; 3]; 3] = [["Kxx", "Kxy", "Kxz"], ["Kyx", "Kyy", "Kyz"
 /// The zero-offset columns.
 pub const U0_NAMES: [&str; 3] = ["U0x", "U0y", "U0z"];
 
+/// The temperatures a table may hold [°C] (the simulator's range).
+pub const MIN_TEMP_C: f64 = -150.0;
+/// See [`MIN_TEMP_C`].
+pub const MAX_TEMP_C: f64 = 250.0;
+/// Smallest |K_ii| \[V/g\]: a row whose scale factor is below it (an all-zero row) has no
+/// accelerometer in it.
+pub const MIN_K_DIAG_V_PER_G: f64 = 1.0e-6;
+/// Largest |K_ij| \[V/g\] and |U0_i| \[V\].
+pub const MAX_ABS_V: f64 = 1.0e3;
+
 /// Reads a constants table: (temperature [°C], constants) per data row, in file order.
 pub fn read(path: &Path) -> anyhow::Result<Vec<(f64, Constants<f64>)>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    let text = crate::fsio::read_text(path)?;
     parse(&text).map_err(|e| anyhow!("{}: {e}", path.display()))
 }
 
@@ -56,6 +66,27 @@ pub fn parse(text: &str) -> anyhow::Result<Vec<(f64, Constants<f64>)>> {
             }
         }
         let t = num(t_col)?;
+        if !(MIN_TEMP_C..=MAX_TEMP_C).contains(&t) {
+            bail!("line {}, column `temp_C`: {t} °C is outside {MIN_TEMP_C} … {MAX_TEMP_C} °C", n + 1);
+        }
+        for i in 0..3 {
+            if !(c.k_v_per_g[i][i].abs() >= MIN_K_DIAG_V_PER_G) {
+                bail!(
+                    "line {}, column `{}`: {} V/g: the scale factor of an accelerometer must be at least {MIN_K_DIAG_V_PER_G} V/g in magnitude",
+                    n + 1,
+                    K_NAMES[i][i],
+                    c.k_v_per_g[i][i]
+                );
+            }
+            for (j, k) in c.k_v_per_g[i].iter().enumerate() {
+                if k.abs() > MAX_ABS_V {
+                    bail!("line {}, column `{}`: {k} V/g is beyond ±{MAX_ABS_V}", n + 1, K_NAMES[i][j]);
+                }
+            }
+            if c.u0_v[i].abs() > MAX_ABS_V {
+                bail!("line {}, column `{}`: {} V is beyond ±{MAX_ABS_V}", n + 1, U0_NAMES[i], c.u0_v[i]);
+            }
+        }
         if out.iter().any(|(u, _)| *u == t) {
             bail!("line {}: temperature {t} °C appears twice", n + 1);
         }

@@ -14,6 +14,7 @@
 //!   Unix filter, instead of a panic of `println!`.
 
 use anyhow::Context;
+use std::ffi::{OsStr, OsString};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard};
@@ -27,35 +28,56 @@ fn live() -> MutexGuard<'static, Vec<PathBuf>> {
 }
 
 /// The directory and file name of an output.
-fn split(path: &Path) -> anyhow::Result<(PathBuf, String)> {
+fn split(path: &Path) -> anyhow::Result<(PathBuf, OsString)> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
     let name = path.file_name().with_context(|| format!("{}: not a file name", path.display()))?;
-    Ok((dir, name.to_string_lossy().into_owned()))
+    Ok((dir, name.to_os_string()))
 }
 
-/// The temporary sibling of `path` for this process, after removing the temporary siblings
-/// of `path` left by processes that no longer exist.
-fn temp_path(path: &Path) -> anyhow::Result<PathBuf> {
-    let (dir, name) = split(path)?;
-    remove_stale(&dir, &name);
-    Ok(dir.join(format!(".{name}.tmp-{}", std::process::id())))
+/// The longest file name the temporary files are given (POSIX `NAME_MAX` of the usual file
+/// systems).
+const NAME_MAX: usize = 255;
+
+/// The common start `.NAME.tmp-` of the temporary siblings of an output named `name`. A name
+/// too long for the suffix is cut (at a character), so that `.NAME.tmp-PID-K` fits in
+/// [`NAME_MAX`] bytes.
+fn temp_prefix(name: &OsStr) -> OsString {
+    // ".", ".tmp-", a PID of up to 10 digits, "-" and a retry count of up to 3.
+    let room = NAME_MAX - 1 - 5 - 10 - 4;
+    let mut p = OsString::from(".");
+    if name.len() <= room {
+        p.push(name);
+    } else {
+        let lossy = name.to_string_lossy();
+        let mut end = room.min(lossy.len());
+        while !lossy.is_char_boundary(end) {
+            end -= 1;
+        }
+        p.push(&lossy[..end]);
+    }
+    p.push(".tmp-");
+    p
 }
 
-/// Removes `dir/.NAME.tmp-PID` for every PID (not this process's) that is not a running
-/// process. Errors are ignored: a file that cannot be listed or removed is left as it was.
-fn remove_stale(dir: &Path, name: &str) {
-    let prefix = format!(".{name}.tmp-");
+/// Removes `dir/.NAME.tmp-PID` and `dir/.NAME.tmp-PID-K` for every PID (not this process's)
+/// that is not a running process. Errors are ignored: a file that cannot be listed or removed
+/// is left as it was.
+fn remove_stale(dir: &Path, name: &OsStr) {
+    let prefix = temp_prefix(name);
     let Ok(entries) = std::fs::read_dir(dir) else { return };
     for entry in entries.flatten() {
         let file = entry.file_name();
-        let Some(pid) = file.to_str().and_then(|f| f.strip_prefix(&prefix)) else { continue };
-        if !pid.bytes().all(|b| b.is_ascii_digit()) {
+        let Some(rest) = file.as_encoded_bytes().strip_prefix(prefix.as_encoded_bytes()) else { continue };
+        let pid = rest.split(|b| *b == b'-').next().unwrap_or_default();
+        let retry = &rest[pid.len()..];
+        let digits = |b: &[u8]| !b.is_empty() && b.iter().all(u8::is_ascii_digit);
+        if !digits(pid) || !(retry.is_empty() || digits(&retry[1..])) {
             continue;
         }
-        let Ok(pid) = pid.parse::<u32>() else { continue };
+        let Some(pid) = std::str::from_utf8(pid).ok().and_then(|p| p.parse::<u32>().ok()) else { continue };
         if pid != std::process::id() && !process_exists(pid) {
             let _ = std::fs::remove_file(entry.path());
         }
@@ -80,13 +102,54 @@ fn process_exists(_pid: u32) -> bool {
     true
 }
 
-/// Creates the temporary file `tmp` and registers it, under the registry's lock (a signal
-/// handled meanwhile waits and then removes it).
-fn create_registered(tmp: &Path) -> std::io::Result<std::fs::File> {
-    let mut live = live();
-    let f = std::fs::File::create(tmp)?;
-    live.push(tmp.to_path_buf());
-    Ok(f)
+/// How many names a temporary file tries before giving up (each taken by another file).
+const TEMP_ATTEMPTS: u32 = 100;
+
+/// Creates a temporary sibling of `dest` exclusively (`O_CREAT|O_EXCL`, so never through a
+/// symbolic link or over another file planted at its name; the next name on a collision),
+/// with `mode` (the permissions of the file it will replace) when given, and registers it
+/// under the registry's lock (a signal handled meanwhile waits and then removes it).
+fn create_temp(dest: &Path, mode: Option<u32>) -> std::io::Result<(PathBuf, std::fs::File)> {
+    let (dir, name) = split(dest).map_err(std::io::Error::other)?;
+    remove_stale(&dir, &name);
+    let prefix = temp_prefix(&name);
+    let pid = std::process::id();
+    for k in 0..TEMP_ATTEMPTS {
+        let mut file = prefix.clone();
+        file.push(if k == 0 { pid.to_string() } else { format!("{pid}-{k}") });
+        let tmp = dir.join(file);
+        let mut live = live();
+        let mut opts = std::fs::OpenOptions::new();
+        opts.write(true).create_new(true);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::OpenOptionsExt;
+            opts.custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC).mode(0o666);
+        }
+        match opts.open(&tmp) {
+            Ok(f) => {
+                live.push(tmp.clone());
+                drop(live);
+                #[cfg(unix)]
+                if let Some(mode) = mode {
+                    use std::os::unix::fs::PermissionsExt;
+                    if let Err(e) = f.set_permissions(std::fs::Permissions::from_mode(mode)) {
+                        let _ = finish_registered(&tmp, None);
+                        return Err(e);
+                    }
+                }
+                #[cfg(not(unix))]
+                let _ = mode;
+                return Ok((tmp, f));
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e),
+        }
+    }
+    Err(std::io::Error::new(
+        std::io::ErrorKind::AlreadyExists,
+        format!("{TEMP_ATTEMPTS} temporary names beside it are all taken"),
+    ))
 }
 
 /// Renames (`Some(dest)`) or removes (`None`) the registered temporary file `tmp`, and
@@ -103,19 +166,128 @@ fn finish_registered(tmp: &Path, dest: Option<&Path>) -> std::io::Result<()> {
     r
 }
 
+/// Where the bytes of an output go.
+enum Dest {
+    /// A temporary file renamed over `target` on commit (`target`: the output, or the
+    /// regular file a symbolic link given as the output points to).
+    Replace { target: PathBuf, tmp: PathBuf },
+    /// A character device (`/dev/null`, a terminal) or a FIFO with a reader: written in place,
+    /// there is no file to replace.
+    InPlace,
+}
+
+/// What kind of file a non-regular, non-directory output is, for the error message.
+#[cfg(unix)]
+fn special_kind(m: &std::fs::Metadata) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    let t = m.file_type();
+    if t.is_block_device() {
+        "a block device"
+    } else if t.is_socket() {
+        "a socket"
+    } else if t.is_char_device() {
+        "a character device"
+    } else if t.is_fifo() {
+        "a FIFO"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// Opens the output `path`: a temporary sibling for a new or regular file (with the previous
+/// file's permissions), the device or FIFO itself in place; refuses `-`, a directory, a
+/// socket, a block device, a FIFO without a reader and a symbolic link to nothing. Errors
+/// name `path`.
+fn open_output(path: &Path) -> anyhow::Result<(Dest, std::fs::File)> {
+    let named = |e: &dyn std::fmt::Display| anyhow::anyhow!("{}: {e}", path.display());
+    if path.as_os_str() == "-" {
+        anyhow::bail!(
+            "-: `-` is not standard output here (the commands print their tables there); give a file name, or /dev/stdout"
+        );
+    }
+    let (target, mode) = match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => {
+            let is_link = std::fs::symlink_metadata(path).is_ok_and(|l| l.file_type().is_symlink());
+            let target = if is_link { std::fs::canonicalize(path).map_err(|e| named(&e))? } else { path.to_path_buf() };
+            #[cfg(unix)]
+            let mode = {
+                use std::os::unix::fs::PermissionsExt;
+                Some(m.permissions().mode() & 0o7777)
+            };
+            #[cfg(not(unix))]
+            let mode = None;
+            (target, mode)
+        }
+        Ok(m) if m.is_dir() => anyhow::bail!("{}: is a directory; give a file name", path.display()),
+        #[cfg(unix)]
+        Ok(m) => {
+            use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+            let t = m.file_type();
+            if t.is_char_device() {
+                let f = std::fs::OpenOptions::new().write(true).open(path).map_err(|e| named(&e))?;
+                return Ok((Dest::InPlace, f));
+            }
+            if t.is_fifo() {
+                // Non-blocking, so that a FIFO nobody reads is refused instead of a hang.
+                let f =
+                    std::fs::OpenOptions::new().write(true).custom_flags(libc::O_NONBLOCK).open(path).map_err(|e| {
+                        match e.raw_os_error() {
+                            Some(libc::ENXIO) => anyhow::anyhow!("{}: a FIFO that nobody reads", path.display()),
+                            _ => named(&e),
+                        }
+                    })?;
+                use std::os::fd::AsRawFd;
+                // SAFETY: F_GETFL/F_SETFL on a file descriptor this function owns.
+                unsafe {
+                    let fl = libc::fcntl(f.as_raw_fd(), libc::F_GETFL);
+                    libc::fcntl(f.as_raw_fd(), libc::F_SETFL, fl & !libc::O_NONBLOCK);
+                }
+                return Ok((Dest::InPlace, f));
+            }
+            anyhow::bail!("{}: {}, not a regular file; refusing to replace it", path.display(), special_kind(&m))
+        }
+        #[cfg(not(unix))]
+        Ok(_) => anyhow::bail!("{}: not a regular file; refusing to replace it", path.display()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            if std::fs::symlink_metadata(path).is_ok() {
+                anyhow::bail!("{}: a symbolic link to a file that does not exist", path.display());
+            }
+            (path.to_path_buf(), None)
+        }
+        Err(e) => return Err(named(&e)),
+    };
+    let (tmp, f) = create_temp(&target, mode).map_err(|e| named(&e))?;
+    Ok((Dest::Replace { target, tmp }, f))
+}
+
 /// Writes `data` to `path` atomically (temporary sibling file, fsync, rename). Errors name
 /// the file.
 pub fn write_atomic(path: &Path, data: &[u8]) -> anyhow::Result<()> {
-    let tmp = temp_path(path)?;
-    let result = (|| -> std::io::Result<()> {
-        let mut f = create_registered(&tmp)?;
-        f.write_all(data)?;
-        f.sync_all()?;
-        finish_registered(&tmp, Some(path))
-    })();
-    if let Err(e) = result {
-        let _ = finish_registered(&tmp, None);
-        return Err(anyhow::anyhow!("{}: {e}", path.display()));
+    write_all_or_nothing(&[(path, data)])
+}
+
+/// Writes several outputs all or nothing: each to its temporary file, synced, and only when
+/// every one is ready are they renamed into place. On an error every temporary file is
+/// removed and no output is written (in-place outputs, a device or a FIFO, excepted: those
+/// have nothing to roll back). Errors name the output.
+pub fn write_all_or_nothing(outputs: &[(&Path, &[u8])]) -> anyhow::Result<()> {
+    let mut files = Vec::with_capacity(outputs.len());
+    for (path, data) in outputs {
+        let mut f = AtomicFile::create(path)?;
+        f.writer().write_all(data).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        files.push(f);
+    }
+    commit_all(files)
+}
+
+/// Commits several [`AtomicFile`]s all or nothing: every one flushed and synced first (an
+/// error removes them all), then all renamed into place.
+pub fn commit_all(mut files: Vec<AtomicFile>) -> anyhow::Result<()> {
+    for f in &mut files {
+        f.prepare()?;
+    }
+    for f in files {
+        f.commit()?;
     }
     Ok(())
 }
@@ -123,19 +295,24 @@ pub fn write_atomic(path: &Path, data: &[u8]) -> anyhow::Result<()> {
 /// A file written in a stream and put in place only on success: the data goes to a temporary
 /// sibling file, [`commit`](AtomicFile::commit) flushes, fsyncs and renames it over the
 /// destination. Dropped without a commit (an error on the way), the temporary file is
-/// removed, so the destination is never half-written.
+/// removed, so the destination is never half-written. A character device or a FIFO given as
+/// the output is written in place.
 pub struct AtomicFile {
     path: PathBuf,
-    tmp: PathBuf,
+    dest: Dest,
     out: Option<std::io::BufWriter<std::fs::File>>,
 }
 
 impl AtomicFile {
     /// Creates the temporary file beside `path`. Errors name the file.
     pub fn create(path: &Path) -> anyhow::Result<Self> {
-        let tmp = temp_path(path)?;
-        let f = create_registered(&tmp).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        Ok(AtomicFile { path: path.to_path_buf(), tmp, out: Some(std::io::BufWriter::with_capacity(1 << 20, f)) })
+        let (dest, f) = open_output(path)?;
+        Ok(AtomicFile { path: path.to_path_buf(), dest, out: Some(std::io::BufWriter::with_capacity(1 << 20, f)) })
+    }
+
+    /// The output as given (for messages).
+    pub fn path(&self) -> &Path {
+        &self.path
     }
 
     /// The stream to write to.
@@ -143,18 +320,29 @@ impl AtomicFile {
         self.out.as_mut().unwrap_or_else(|| unreachable!("taken only by commit"))
     }
 
+    /// Flushes and syncs what was written (the rename is [`commit`](Self::commit)'s). Errors
+    /// name the output.
+    fn prepare(&mut self) -> anyhow::Result<()> {
+        let replace = matches!(self.dest, Dest::Replace { .. });
+        let out = self.writer();
+        let r = out.flush().and_then(|_| if replace { out.get_ref().sync_all() } else { Ok(()) });
+        r.map_err(|e| anyhow::anyhow!("{}: {e}", self.path.display()))
+    }
+
     /// Flushes, syncs and renames the temporary file over the destination.
     pub fn commit(mut self) -> anyhow::Result<()> {
-        let out = self.out.take().unwrap_or_else(|| unreachable!("taken only here"));
-        let result = (|| -> std::io::Result<()> {
-            let f = out.into_inner().map_err(|e| e.into_error())?;
-            f.sync_all()?;
-            finish_registered(&self.tmp, Some(&self.path))
-        })();
-        if result.is_err() {
-            let _ = finish_registered(&self.tmp, None);
+        self.prepare()?;
+        self.out = None;
+        match &self.dest {
+            Dest::Replace { target, tmp } => {
+                let r = finish_registered(tmp, Some(target));
+                if r.is_err() {
+                    let _ = finish_registered(tmp, None);
+                }
+                r.map_err(|e| anyhow::anyhow!("{}: {e}", self.path.display()))
+            }
+            Dest::InPlace => Ok(()),
         }
-        result.map_err(|e| anyhow::anyhow!("{}: {e}", self.path.display()))
     }
 }
 
@@ -162,8 +350,47 @@ impl Drop for AtomicFile {
     fn drop(&mut self) {
         if self.out.is_some() {
             self.out = None;
-            let _ = finish_registered(&self.tmp, None);
+            if let Dest::Replace { tmp, .. } = &self.dest {
+                let _ = finish_registered(tmp, None);
+            }
         }
+    }
+}
+
+/// A private scratch directory (created exclusively, mode 0700, under the system's temporary
+/// directory) for a library that writes only to a path (the PNG encoder); removed on drop.
+pub struct ScratchDir(PathBuf);
+
+impl ScratchDir {
+    /// Creates it; errors name the directory.
+    pub fn new(what: &str) -> anyhow::Result<Self> {
+        let base = std::env::temp_dir();
+        for k in 0..TEMP_ATTEMPTS {
+            let d = base.join(format!("bins-cal-{what}-{}-{k}", std::process::id()));
+            let mut b = std::fs::DirBuilder::new();
+            #[cfg(unix)]
+            {
+                use std::os::unix::fs::DirBuilderExt;
+                b.mode(0o700);
+            }
+            match b.create(&d) {
+                Ok(()) => return Ok(ScratchDir(d)),
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+                Err(e) => anyhow::bail!("{}: {e}", d.display()),
+            }
+        }
+        anyhow::bail!("{}: no free scratch directory name", base.display())
+    }
+
+    /// Its path.
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
     }
 }
 
@@ -315,4 +542,32 @@ where
         seen.push((o.to_path_buf(), id));
     }
     Ok(())
+}
+
+/// The largest text input a command reads whole (a calibration file, a scenario, a linker
+/// script, an environment or constants table) \[bytes\].
+pub const MAX_TEXT_INPUT_BYTES: u64 = 16 << 20;
+
+/// Reads a file whole, refusing one longer than `max_bytes` before it is read further (so
+/// `/dev/zero` or a huge file given by mistake is an error, not an exhausted memory). Errors
+/// name the file.
+pub fn read_capped(path: &Path, max_bytes: u64) -> anyhow::Result<Vec<u8>> {
+    use std::io::Read;
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(max_bytes + 1).read_to_end(&mut bytes))
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    if bytes.len() as u64 > max_bytes {
+        anyhow::bail!("{}: longer than {max_bytes} bytes; not an input of this kind", path.display());
+    }
+    Ok(bytes)
+}
+
+/// [`read_capped`] at [`MAX_TEXT_INPUT_BYTES`], as UTF-8 text (not UTF-8 is said so with the
+/// byte offset).
+pub fn read_text(path: &Path) -> anyhow::Result<String> {
+    let bytes = read_capped(path, MAX_TEXT_INPUT_BYTES)?;
+    String::from_utf8(bytes).map_err(|e| {
+        anyhow::anyhow!("{}: not UTF-8 text (byte {} is not UTF-8)", path.display(), e.utf8_error().valid_up_to())
+    })
 }

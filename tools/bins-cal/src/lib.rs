@@ -20,9 +20,11 @@ pub mod calfile;
 pub mod calib;
 pub mod constants_table;
 pub mod diagnose;
+pub mod exact;
 pub mod fsio;
 pub mod ihex;
 pub mod memmap;
+pub mod numarg;
 pub mod recording;
 pub mod sim;
 

@@ -489,3 +489,370 @@ fn sweep_of_hostile_inputs() {
     assert_eq!(temporaries(dir), Vec::<String>::new());
     eprintln!("sweep: {runs} runs, {refused} refused with a one-line error, 0 panics, 0 inputs changed");
 }
+
+// Round 2: what a second sweep of hostile inputs found.
+
+/// Runs `bins-cal args` in `dir`, killed after `secs` (a hang fails the test instead of
+/// holding the suite).
+fn run_bounded(dir: &Path, args: &[&str], secs: u64) -> Output {
+    let mut child = common::bin()
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("bins-cal runs");
+    let t0 = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t0.elapsed() > Duration::from_secs(secs) {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("{args:?} still running after {secs} s");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// The files in `dir` (names), sorted.
+fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> =
+        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    v.sort();
+    v
+}
+
+/// `text` with the array value of the first line starting `key = [` given one element more
+/// (`[[` rows: the first row one element more).
+fn one_more(text: &str, key: &str) -> String {
+    let start = format!("{key} = [");
+    let mut done = false;
+    text.lines()
+        .map(|l| {
+            if !done && l.starts_with(&start) {
+                done = true;
+                let rest = &l[start.len()..];
+                if rest.is_empty() {
+                    // A matrix by rows: the first row follows on the next line.
+                    return format!("{start}\n    [0.001, ");
+                }
+                if let Some(r) = rest.strip_prefix('[') {
+                    return format!("{start}[0.001, {r}");
+                }
+                return format!("{start}0.001, {rest}");
+            }
+            l.to_string()
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+        .replace("[0.001, \n    [", "[0.001, ")
+        + "\n"
+}
+
+/// Round 2, item 1: an array longer than its key's fixed length is refused, naming the key,
+/// by `blob check` and `blob encode` (and `encode` writes nothing); in a scenario by
+/// `simulate`; in `vibration --env`. Too few elements were refused already, too many were cut
+/// silently, the values shifting.
+#[test]
+fn an_over_long_array_is_refused_naming_the_key() {
+    let f = fixture();
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let cal = std::fs::read_to_string(&f.cal_toml).unwrap();
+    let with_dynamics = format!(
+        "{cal}\n[thermal_dynamics]\nlag_tau_s = 10.0\nbias_play_width_C = 1.0\nbias_play_mg = [0.1, 0.2, 0.3]\n"
+    );
+    let cases: Vec<(&str, String)> = vec![
+        ("u0_V", one_more(&cal, "u0_V")),
+        ("temp_range_C", one_more(&cal, "temp_range_C")),
+        ("k_V_per_g", one_more(&cal, "k_V_per_g")),
+        ("alpha_V_per_Cn", one_more(&cal, "alpha_V_per_Cn")),
+        ("rel_k_per_Cn", one_more(&cal, "rel_k_per_Cn")),
+        ("bias_play_mg", one_more(&with_dynamics, "bias_play_mg")),
+    ];
+    for (key, text) in &cases {
+        assert_ne!(text, &cal, "{key}: the edit applies");
+        let p = dir.join(format!("{key}.toml"));
+        std::fs::write(&p, text).unwrap();
+        for args in [vec!["blob", "check", s(&p)], vec!["blob", "encode", s(&p), "-o", "out.bin"]] {
+            let e = assert_refused(&run_in(dir, &args), &args, &[&format!("{key}.toml"), key]);
+            assert!(e.contains("exactly"), "{e}");
+        }
+        assert!(!dir.join("out.bin").exists(), "{key}: a blob was written");
+    }
+    // The same file with the right lengths passes (the edit, not the file, is refused).
+    std::fs::write(dir.join("good.toml"), &with_dynamics).unwrap();
+    assert!(run_in(dir, &["blob", "check", "good.toml"]).status.success());
+    // A scenario: the start force and a hold's force; the unit's U0.
+    let scen = [
+        ("start_f_g", TINY.replace("rate_Hz = 10.0\n", "rate_Hz = 10.0\nstart_f_g = [0.0, 0.0, 1.0, 0.0]\n")),
+        ("f_g", TINY.replace("position = \"TP3\"", "f_g = [0.0, 0.0, 1.0, 0.5]")),
+        (
+            "bias_play_mg",
+            TINY.replace("preset = \"paper\"\n", "preset = \"paper\"\nbias_play_mg = [0.0, 0.0, 0.0, 1.0]\n"),
+        ),
+    ];
+    for (key, text) in scen {
+        let p = dir.join("scen.toml");
+        std::fs::write(&p, text).unwrap();
+        let args = ["simulate", "scen.toml", "-o", "out.csv", "--quiet"];
+        let e = assert_refused(&run_in(dir, &args), &args, &["scen.toml", key]);
+        assert!(e.contains("exactly"), "{e}");
+        assert!(!dir.join("out.csv").exists());
+    }
+    // vibration --env.
+    let env = std::fs::read_to_string(common::repo("data/vibration-env-paper.toml")).unwrap();
+    std::fs::write(dir.join("env.toml"), env.replacen("ia_amp_g = [", "ia_amp_g = [0.1, ", 1)).unwrap();
+    let cf = common::repo("data/al15-coefficients.csv");
+    let args = ["vibration", "--cf", s(&cf), "--env", "env.toml"];
+    assert_refused(&run_in(dir, &args), &args, &["env.toml", "ia_amp_g", "exactly"]);
+}
+
+/// Round 2, item 2: `verify --replayed` with a non-finite or absurd acceleration is refused
+/// at the line (NaN was printed but skipped by the max, exit 0; `inf` or `1e300` made the
+/// plot's axis loop forever), within seconds, and writes nothing.
+#[test]
+fn verify_refuses_a_non_finite_or_absurd_replayed_value() {
+    let f = fixture();
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let rec = copy(&f.rec, dir, "t.csv");
+    copy(&f.cal_toml, dir, "cal.toml");
+    common::ok(&["replay", "--rec", s(&rec), "--calib", s(&dir.join("cal.toml")), "-o", s(&dir.join("rep.csv"))]);
+    let good = std::fs::read_to_string(dir.join("rep.csv")).unwrap();
+    let args = ["verify", "--check", "t.csv", "--calib", "cal.toml", "--pos-prefix", "TP", "-o", "v", "--replayed"];
+    let mut ok = args.to_vec();
+    ok.push("rep.csv");
+    assert!(run_bounded(dir, &ok, 120).status.success(), "the unedited replay verifies");
+    std::fs::remove_dir_all(dir.join("v")).unwrap();
+    for bad in ["NaN", "inf", "-inf", "1e300"] {
+        // Every row's ax_g: whatever the dwells, one of them holds it.
+        let text: String = good
+            .lines()
+            .enumerate()
+            .map(|(i, l)| {
+                if i == 0 {
+                    return l.to_string() + "\n";
+                }
+                let mut c: Vec<&str> = l.split(',').collect();
+                c[1] = bad;
+                c.join(",") + "\n"
+            })
+            .collect();
+        std::fs::write(dir.join("bad.csv"), text).unwrap();
+        let mut a = args.to_vec();
+        a.push("bad.csv");
+        let o = run_bounded(dir, &a, 60);
+        assert_refused(&o, &a, &["bad.csv", "line 2"]);
+        assert!(!dir.join("v").exists(), "{bad}: an output was written");
+    }
+}
+
+/// Round 2, item 6: sizes that would exhaust the memory are refused before anything is
+/// allocated: a hand step of a billion holds, a scenario or calibration that is `/dev/zero`.
+#[test]
+fn sizes_that_would_exhaust_the_memory_are_refused_first() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let hand = "[recording]\nrate_Hz = 10.0\n[unit]\npreset = \"paper\"\n[[step]]\nkind = \"hand\"\nholds = 1000000000\ninit_s = 1.0\ndwell_s = 1.0\n";
+    std::fs::write(dir.join("hand.toml"), hand).unwrap();
+    let args = ["simulate", "hand.toml", "-o", "out.csv", "--quiet"];
+    assert_refused(&run_bounded(dir, &args, 30), &args, &["hand.toml", "step[0].holds", "1000000000"]);
+    let cal = s(&fixture().cal_toml);
+    let rec = s(&fixture().rec);
+    for args in [
+        vec!["simulate", "/dev/zero", "-o", "out.csv", "--quiet"],
+        vec!["blob", "check", "/dev/zero"],
+        vec!["blob", "encode", "/dev/zero", "-o", "out.bin"],
+        vec!["replay", "--rec", rec, "--calib", "/dev/zero", "-o", "out.csv"],
+        vec!["verify", "--check", rec, "--calib", "/dev/zero", "-o", "v"],
+        vec!["calibrate", "--tilter", rec, "--dynamics", "/dev/zero", "-o", "c.toml"],
+    ] {
+        let o = run_bounded(dir, &args, 30);
+        assert_refused(&o, &args, &["/dev/zero"]);
+    }
+    let _ = cal;
+    assert_eq!(listing(dir), ["hand.toml"], "nothing written");
+}
+
+/// A usage error of clap: exit 2, the option and the reason named.
+fn assert_usage_error(o: &Output, args: &[&str], needles: &[&str]) {
+    assert_no_panic(o, args);
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{args:?} should be refused: {err}");
+    for n in needles {
+        assert!(err.contains(n), "{args:?}: {err:?} should contain {n:?}");
+    }
+}
+
+/// Round 2, item 8: a non-finite or absurd number given as an option is refused by name
+/// before anything runs (`--t0 nan` gave T0 = −40 °C, `--static-window-s 0` changed K, …);
+/// `replay --ve profile:N` beyond the calibration's profiles is refused (every sample was
+/// flagged).
+#[test]
+fn a_non_finite_or_absurd_option_is_refused() {
+    let f = fixture();
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    copy(&f.rec, dir, "t.csv");
+    copy(&f.cal_toml, dir, "cal.toml");
+    let cal = ["calibrate", "--tilter", "t.csv", "-o", "c.toml"];
+    let free = ["calibrate", "--tilter", "t.csv", "--free", "-o", "c.toml"];
+    let ver = ["verify", "--check", "t.csv", "--calib", "cal.toml", "--pos-prefix", "TP", "-o", "v"];
+    let consts = common::repo("data/paper-constants.csv");
+    let cases: Vec<(Vec<&str>, [&str; 2], &str)> = vec![
+        (cal.to_vec(), ["--t0", "nan"], "not a finite number"),
+        (cal.to_vec(), ["--t0", "inf"], "not a finite number"),
+        (cal.to_vec(), ["--settle-s", "-1"], "must be from 0"),
+        (cal.to_vec(), ["--settle-s", "nan"], "not a finite number"),
+        (cal.to_vec(), ["--temp-tol-c", "-5"], "greater than 0"),
+        (cal.to_vec(), ["--max-std-v", "nan"], "not a finite number"),
+        (cal.to_vec(), ["--tilt-tol-mrad", "0"], "greater than 0"),
+        (cal.to_vec(), ["--dynamics-block-s", "1e-300"], "must be from"),
+        (cal.to_vec(), ["--knots", "nan"], "not a finite number"),
+        (free.to_vec(), ["--static-window-s", "0"], "must be from"),
+        (free.to_vec(), ["--static-window-s", "-1"], "must be from"),
+        (free.to_vec(), ["--static-window-s", "nan"], "not a finite number"),
+        (free.to_vec(), ["--min-static-s", "nan"], "not a finite number"),
+        (free.to_vec(), ["--init-s", "inf"], "not a finite number"),
+        (free.to_vec(), ["--static-threshold", "-1"], "greater than 0"),
+        (ver.to_vec(), ["--settle-s", "nan"], "not a finite number"),
+        (ver.to_vec(), ["--temp-tol-c", "nan"], "not a finite number"),
+        (ver.to_vec(), ["--temp-tol-c", "-5"], "greater than 0"),
+        (vec!["tempco", "--constants", s(&consts)], ["--t0", "nan"], "not a finite"),
+    ];
+    for (base, [opt, val], why) in &cases {
+        let mut args = base.clone();
+        let given = format!("{opt}={val}");
+        args.push(&given);
+        assert_usage_error(&run_in(dir, &args), &args, &[opt, why]);
+    }
+    // The fixture's calibration has no vibration model: no profile to take.
+    let args = ["replay", "--rec", "t.csv", "--calib", "cal.toml", "--ve", "profile:0", "-o", "r.csv"];
+    assert_refused(&run_in(dir, &args), &args, &["--ve profile:0", "cal.toml", "0 flight-phase profile"]);
+    assert_eq!(listing(dir), ["cal.toml", "t.csv"], "nothing written");
+}
+
+/// Round 2, item 10: scenario values the simulator cannot stand for are refused naming the
+/// scenario's key (they were accepted, or blamed on a line of the output file).
+#[test]
+fn an_absurd_scenario_value_is_refused_naming_its_key() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let unit = "[unit]\npreset = \"paper\"\n";
+    let cases = [
+        ("thermal.self_heating_C", TINY.replace(unit, &format!("{unit}[thermal]\nself_heating_C = 500.0\n"))),
+        ("step[0].f_g[0]", TINY.replace("position = \"TP3\"", "f_g = [1.0e6, 0.0, 0.0]")),
+        ("noise.white_V[0]", TINY.replace(unit, &format!("{unit}[noise]\nwhite_V = 1.0e300\n"))),
+        ("noise.adc_lsb_V", TINY.replace(unit, &format!("{unit}[noise]\nadc_lsb_V = 1.0e-320\n"))),
+        ("recording.start_f_g[2]", TINY.replace("rate_Hz = 10.0\n", "rate_Hz = 10.0\nstart_f_g = [0.0, 0.0, 1.0e9]\n")),
+    ];
+    for (key, text) in cases {
+        assert_ne!(text, TINY, "{key}: the edit applies");
+        std::fs::write(dir.join("scen.toml"), text).unwrap();
+        let args = ["simulate", "scen.toml", "-o", "out.csv", "--quiet"];
+        let e = assert_refused(&run_bounded(dir, &args, 60), &args, &["scen.toml", key]);
+        assert!(!e.contains("out.csv"), "blamed on the output: {e}");
+        assert!(!dir.join("out.csv").exists());
+    }
+}
+
+/// Round 2, item 11: `--ihex` places the blob only where the CALIB region of the linker
+/// script can hold it: a region shorter than the blob, an ORIGIN not word-aligned, a second
+/// CALIB region are refused naming the linker script, and neither output is written.
+#[test]
+fn ihex_is_refused_outside_the_calib_region() {
+    let f = fixture();
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    copy(&f.cal_toml, dir, "cal.toml");
+    let cases = [
+        ("CALIB : ORIGIN = 0x003FF000, LENGTH = 16\n", "LENGTH of 16 bytes"),
+        ("CALIB : ORIGIN = 0x003FF001, LENGTH = 4K\n", "not a multiple of 4"),
+        ("CALIB : ORIGIN = 0x003FF000, LENGTH = 4K\n  CALIB (r) : ORIGIN = 0x003FE000, LENGTH = 4K\n", "second CALIB"),
+    ];
+    for (region, why) in cases {
+        let text = format!("MEMORY\n{{\n  FLASH : ORIGIN = 0x00000000, LENGTH = 1M\n  {region}}}\n");
+        std::fs::write(dir.join("m.x"), text).unwrap();
+        let args = ["blob", "encode", "cal.toml", "-o", "c.bin", "--ihex", "c.hex", "--memory-x", "m.x"];
+        assert_refused(&run_in(dir, &args), &args, &["m.x", why]);
+        let args = ["calibrate", "--tilter", s(&f.rec), "--model", "poly:2", "-o", "c.toml", "--blob", "c.bin"];
+        let mut args = args.to_vec();
+        args.extend(["--ihex", "c.hex", "--memory-x", "m.x"]);
+        assert_refused(&run_in(dir, &args), &args, &["m.x", why]);
+        assert_eq!(listing(dir), ["cal.toml", "m.x"], "{why}: nothing written");
+    }
+}
+
+/// Round 2, item 12: `tempco` refuses a temperature of 1e6 °C and an all-zero K row;
+/// `vibration` refuses a PSD of 1e300 (it printed `inf`) and K1 = 0.
+#[test]
+fn tempco_and_vibration_refuse_absurd_values() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let table = std::fs::read_to_string(common::repo("data/paper-constants.csv")).unwrap();
+    let row70 = table.lines().find(|l| l.starts_with("70,")).unwrap();
+    let cases = [
+        ("hot.csv", table.replace(row70, &row70.replacen("70,", "1e6,", 1)), "1000000 °C"),
+        ("zero.csv", table.replace(row70, &format!("70,0,0,0,{}", row70.splitn(5, ',').nth(4).unwrap())), "Kxx"),
+    ];
+    for (name, text, why) in cases {
+        std::fs::write(dir.join(name), text).unwrap();
+        let args = ["tempco", "--constants", name];
+        assert_refused(&run_in(dir, &args), &args, &[name, "line", why]);
+    }
+    let cf = std::fs::read_to_string(common::repo("data/al15-coefficients.csv")).unwrap();
+    let row = cf.lines().find(|l| l.starts_with("3.324,")).unwrap();
+    std::fs::write(dir.join("k0.csv"), cf.replace(row, &row.replacen("-1.6698", "0", 1))).unwrap();
+    let env = common::repo("data/vibration-env-paper.toml");
+    let args = ["vibration", "--cf", "k0.csv", "--env", s(&env)];
+    assert_refused(&run_in(dir, &args), &args, &["k0.csv", "K1_V_per_g"]);
+    let text = std::fs::read_to_string(&env).unwrap();
+    let psd = text.lines().find(|l| l.starts_with("psd_g2_per_Hz")).unwrap();
+    std::fs::write(dir.join("env.toml"), text.replace(psd, "psd_g2_per_Hz = [0.0, 1e300]")).unwrap();
+    let cfp = common::repo("data/al15-coefficients.csv");
+    let args = ["vibration", "--cf", s(&cfp), "--env", "env.toml"];
+    let e = assert_refused(&run_in(dir, &args), &args, &["env.toml", "psd_g2_per_Hz"]);
+    assert!(!e.contains("inf"), "{e}");
+}
+
+/// Round 2, item 13 (containers): a calibration is a blob or a calibration file by its
+/// content, whatever its name: `verify`, `diagnose --calib` and `replay` take a blob named
+/// `.toml` and a calibration file named `.bin`; `blob encode` given a blob says it is one
+/// (it said "stream did not contain valid UTF-8").
+#[test]
+fn a_calibration_is_told_blob_or_file_by_its_content() {
+    let f = fixture();
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    copy(&f.rec, dir, "t.csv");
+    copy(&f.cal_bin, dir, "blob.toml");
+    copy(&f.cal_toml, dir, "file.bin");
+    for cal in ["blob.toml", "file.bin"] {
+        let runs: [&[&str]; 4] = [
+            &["verify", "--check", "t.csv", "--calib", cal, "--pos-prefix", "TP", "-o", "v"],
+            &["diagnose", "--calib", cal, "--real", "t.csv", "--report", "r.json"],
+            &["replay", "--rec", "t.csv", "--calib", cal, "-o", "r.csv"],
+            &["blob", "check", cal],
+        ];
+        for args in runs {
+            let o = run_bounded(dir, args, 120);
+            assert!(o.status.success(), "{args:?}: {}", text(&o.stderr));
+        }
+    }
+    // The two containers give one replay.
+    common::ok(&[
+        "replay",
+        "--rec",
+        s(&dir.join("t.csv")),
+        "--calib",
+        s(&dir.join("file.bin")),
+        "-o",
+        s(&dir.join("r2.csv")),
+    ]);
+    assert_eq!(std::fs::read(dir.join("r.csv")).unwrap(), std::fs::read(dir.join("r2.csv")).unwrap());
+    let args = ["blob", "encode", "blob.toml", "-o", "x.bin"];
+    assert_refused(&run_in(dir, &args), &args, &["blob.toml", "a calibration blob", "blob decode"]);
+    let args = ["blob", "decode", "file.bin", "-o", "x.toml"];
+    assert_refused(&run_in(dir, &args), &args, &["file.bin", "a calibration file (TOML), not a blob"]);
+}

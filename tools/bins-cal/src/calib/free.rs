@@ -49,17 +49,17 @@ use std::path::Path;
 #[derive(Clone, Copy, Debug, clap::Args)]
 pub struct StaticOptions {
     /// Free fit: the initial still period whose signal variance is the reference \[s\].
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 2.0, value_parser = crate::numarg::duration_s)]
     pub init_s: f64,
     /// Free fit: a row is static when the signals' variance over the window is at most this
     /// multiple of the initial period's.
-    #[arg(long, default_value_t = 6.0)]
+    #[arg(long, default_value_t = 6.0, value_parser = crate::numarg::positive)]
     pub static_threshold: f64,
     /// Free fit: the window of the variance \[s\].
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::numarg::duration_s)]
     pub static_window_s: f64,
     /// Free fit: the shortest static interval used \[s\].
-    #[arg(long, default_value_t = 1.5)]
+    #[arg(long, default_value_t = 1.5, value_parser = crate::numarg::duration_s)]
     pub min_static_s: f64,
 }
 

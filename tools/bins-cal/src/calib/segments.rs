@@ -17,16 +17,16 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Copy, Debug, clap::Args)]
 pub struct Options {
     /// Settling margin dropped at the start of each dwell \[s\] (at most a quarter of the dwell).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::numarg::duration_or_zero_s)]
     pub settle_s: f64,
     /// Largest standard deviation of a signal in a stationary dwell \[V\].
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, default_value_t = 0.01, value_parser = crate::numarg::positive)]
     pub max_std_v: f64,
     /// Largest temperature rate in a settled dwell [°C/min].
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = crate::numarg::positive)]
     pub max_rate_c_per_min: f64,
     /// Dwells whose mean temperatures differ by at most this much form one temperature [°C].
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, default_value_t = 3.0, value_parser = crate::numarg::positive)]
     pub temp_tol_c: f64,
 }
 

@@ -2,8 +2,8 @@
 //! region, decode a blob back into a calibration file, check either.
 
 use anyhow::{Context, anyhow};
-use bins_cal::calfile::{CalibrationFile, describe, method_name};
-use bins_cal::{fsio, ihex, memmap};
+use bins_cal::calfile::{CalibrationFile, describe, is_blob, method_name};
+use bins_cal::{fsio, memmap};
 use bins_comp::TempModel;
 use bins_comp::blob::{self, ParsedCalibration};
 use std::path::{Path, PathBuf};
@@ -40,8 +40,8 @@ enum BlobCommand {
         #[arg(short, long)]
         output: Option<PathBuf>,
     },
-    /// Checks a blob (or a calibration file, by its .toml extension): one summary line and
-    /// exit 0 if valid, one error line and exit 1 if not.
+    /// Checks a blob or a calibration file (told apart by the content: a blob starts with the
+    /// magic `BCAL`): one summary line and exit 0 if valid, one error line and exit 1 if not.
     Check {
         /// The blob or calibration file.
         file: PathBuf,
@@ -63,24 +63,42 @@ fn encode(input: &Path, output: &Path, hex: Option<&Path>, memory_x: Option<&Pat
     fsio::refuse_overwriting_inputs([input].into_iter().chain(memory_x), [output].into_iter().chain(hex))?;
     let file = CalibrationFile::read(input)?;
     let bytes = file.to_blob().map_err(|e| anyhow!("{}: {e}", input.display()))?;
-    let hex_text = match hex {
-        Some(_) => {
-            let (origin, from) = memmap::resolve_calib_origin(memory_x)?;
-            Some((ihex::encode(origin, &bytes).map_err(|e| anyhow!(e))?, origin, from))
+    let summary = summary(&blob::parse(&bytes).context("re-parse")?);
+    match hex {
+        Some(path) => {
+            let (text, region, from) = memmap::calib_hex(memory_x, &bytes)?;
+            fsio::write_all_or_nothing(&[(output, &bytes), (path, text.as_bytes())])?;
+            println!("{}: {summary}", output.display());
+            println!("{}: Intel HEX at 0x{:08X} ({from})", path.display(), region.origin);
         }
-        None => None,
-    };
-    fsio::write_atomic(output, &bytes)?;
-    println!("{}: {}", output.display(), summary(&blob::parse(&bytes).context("re-parse")?));
-    if let (Some(path), Some((text, origin, from))) = (hex, hex_text) {
-        fsio::write_atomic(path, text.as_bytes())?;
-        println!("{}: Intel HEX at 0x{origin:08X} ({from})", path.display());
+        None => {
+            fsio::write_atomic(output, &bytes)?;
+            println!("{}: {summary}", output.display());
+        }
     }
     Ok(())
 }
 
+/// The first bytes of a file (enough for the magic).
+fn read_head(path: &Path) -> anyhow::Result<Vec<u8>> {
+    use std::io::Read;
+    let mut head = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(blob::MAGIC.len() as u64).read_to_end(&mut head))
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    Ok(head)
+}
+
 fn read_blob(path: &Path) -> anyhow::Result<Vec<u8>> {
-    let bytes = std::fs::read(path).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    // One byte more than a blob may have: enough to say it is too long.
+    let bytes = fsio::read_capped(path, blob::MAX_BLOB_BYTES as u64 + 1)
+        .or_else(|_| fsio::read_capped(path, fsio::MAX_TEXT_INPUT_BYTES))?;
+    if !is_blob(&bytes) && CalibrationFile::from_toml(&String::from_utf8_lossy(&bytes)).is_ok() {
+        return Err(anyhow!(
+            "{}: a calibration file (TOML), not a blob; `bins-cal blob encode` makes its blob",
+            path.display()
+        ));
+    }
     if bytes.len() > blob::MAX_BLOB_BYTES {
         return Err(anyhow!(
             "{}: {} bytes, larger than the {}-byte CALIB region",
@@ -108,8 +126,11 @@ fn decode(input: &Path, output: Option<&Path>) -> anyhow::Result<()> {
 }
 
 fn check(path: &Path) -> anyhow::Result<()> {
-    let is_toml = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
-    let bytes = if is_toml {
+    // A blob or a calibration file by the content: UTF-8 text not starting with the blob's
+    // magic is a calibration file, anything else is checked as a blob.
+    let head = read_head(path)?;
+    let text = !is_blob(&head) && fsio::read_text(path).is_ok();
+    let bytes = if text {
         let file = CalibrationFile::read(path)?;
         file.to_blob().map_err(|e| anyhow!("{}: {e}", path.display()))?
     } else {

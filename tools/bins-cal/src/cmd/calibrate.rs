@@ -33,7 +33,7 @@ use bins_cal::calib::dynamics::{self, Request, Series};
 use bins_cal::calib::free::{self, FrameFree, FreeParams, StaticOptions};
 use bins_cal::calib::segments::{self, Reference, Segment};
 use bins_cal::calib::tilter::{ModelArg, ModelRequest, TempFit, fit_temperature, parse_model};
-use bins_cal::{fsio, ihex, memmap};
+use bins_cal::{fsio, memmap};
 use bins_comp::blob::Meta;
 use bins_comp::{CalibrationParams, Constants, Form, Method};
 use std::path::PathBuf;
@@ -47,14 +47,14 @@ pub struct Args {
     tilter: Vec<PathBuf>,
     /// Reference temperature T0 [°C]: the dwells nearest to it give the T0 constants, and
     /// their measured mean temperature becomes the calibration's T0.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 20.0, value_parser = bins_cal::numarg::temp_c)]
     t0: f64,
     /// Temperature model: `pwl` (knots at the calibration temperatures), `poly:N` (N = 1..4),
     /// `none` (T0 constants only) or `auto` (`pwl`, or `none` with one temperature).
     #[arg(long, default_value = "auto")]
     model: String,
     /// For `pwl`: use only the temperatures nearest to these [°C] as knots (T0 is always one).
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = bins_cal::numarg::temp_c)]
     knots: Vec<f64>,
     /// Compensation method: 1 (coefficient correction) or 2 (output correction).
     #[arg(long, default_value_t = 1)]
@@ -106,7 +106,7 @@ pub struct Args {
     #[arg(long, conflicts_with = "free")]
     tilt: bool,
     /// The rig's tilt tolerance [mrad]: the prior of `--tilt`, and a dwell beyond it is warned of.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = bins_cal::numarg::positive)]
     tilt_tol_mrad: f64,
     /// Thermal dynamics: `identify` (lag, play and bias play fitted jointly with the
     /// polynomial model from every dwell, ramps included; needs `--model poly:N`), or a TOML
@@ -115,7 +115,7 @@ pub struct Args {
     #[arg(long, value_name = "identify|MODEL.toml", conflicts_with = "free")]
     dynamics: Option<String>,
     /// `--dynamics identify`: dwells enter the fit as means over blocks of at most this [s].
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = bins_cal::numarg::duration_s)]
     dynamics_block_s: f64,
 }
 
@@ -349,10 +349,7 @@ fn finish(
     // Everything is computed and checked before anything is written.
     let blob = file.to_blob().map_err(|e| anyhow!("{files}: the calibration is not valid: {e}"))?;
     let hex = match &args.ihex {
-        Some(_) => {
-            let (origin, _) = memmap::resolve_calib_origin(args.memory_x.as_deref())?;
-            Some(ihex::encode(origin, &blob).map_err(|e| anyhow!(e))?)
-        }
+        Some(_) => Some(memmap::calib_hex(args.memory_x.as_deref(), &blob)?.0),
         None => None,
     };
     let mut header = String::from("# bins-cal calibrate from: ");
@@ -369,7 +366,15 @@ fn finish(
         header.push('\n');
     }
     let text = header + &file.to_toml();
-    fsio::write_atomic(&args.output, text.as_bytes())?;
+    // All or nothing: the file, the blob and the HEX.
+    let mut outputs: Vec<(&std::path::Path, &[u8])> = vec![(&args.output, text.as_bytes())];
+    if let Some(p) = &args.blob {
+        outputs.push((p, &blob));
+    }
+    if let (Some(p), Some(h)) = (&args.ihex, &hex) {
+        outputs.push((p, h.as_bytes()));
+    }
+    fsio::write_all_or_nothing(&outputs)?;
     println!();
     for n in &notes {
         println!("note: {n}");
@@ -381,11 +386,9 @@ fn finish(
         bins_cal::calfile::method_name(method)
     );
     if let Some(p) = &args.blob {
-        fsio::write_atomic(p, &blob)?;
         println!("wrote {} ({} bytes)", p.display(), blob.len());
     }
-    if let (Some(p), Some(h)) = (&args.ihex, hex) {
-        fsio::write_atomic(p, h.as_bytes())?;
+    if let Some(p) = &args.ihex {
         println!("wrote {}", p.display());
     }
     Ok(())

@@ -38,10 +38,9 @@ pub struct Args {
 
 /// Runs `bins-cal diagnose`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    fsio::refuse_overwriting_inputs(
-        [args.sim.as_ref(), args.calib.as_ref(), Some(&args.real)].into_iter().flatten(),
-        [Some(&args.report), args.model.as_ref()].into_iter().flatten(),
-    )?;
+    let inputs: Vec<&PathBuf> =
+        [args.sim.as_ref(), args.calib.as_ref(), Some(&args.real)].into_iter().flatten().collect();
+    fsio::refuse_overwriting_inputs(inputs.iter(), [Some(&args.report), args.model.as_ref()].into_iter().flatten())?;
     let t0 = std::time::Instant::now();
     let opt = Options { random_walk_mg_per_sqrt_h: args.random_walk };
     let d = match (&args.sim, &args.calib) {
@@ -52,17 +51,44 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     .map_err(|e| anyhow!("{e}"))?;
     let r = &d.report;
     let json = serde_json::to_string_pretty(r).context("report")?;
-    fsio::write_atomic(&args.report, json.as_bytes())?;
-    if let Some(m) = &args.model {
-        let text = toml::to_string(&r.model).with_context(|| format!("{}", m.display()))?;
-        let head = "# bins-cal diagnose: terms missing from the simulation (add to its model); [thermal_dynamics]:\n\
-                    # the dynamics they name, for `bins-cal calibrate --dynamics` (calibration-file keys).\n";
-        fsio::write_atomic(m, format!("{head}{text}").as_bytes())?;
+    let model = match &args.model {
+        Some(m) => {
+            let text = toml::to_string(&r.model).with_context(|| format!("{}", m.display()))?;
+            let head = "# bins-cal diagnose: terms missing from the simulation (add to its model); [thermal_dynamics]:\n\
+                        # the dynamics they name, for `bins-cal calibrate --dynamics` (calibration-file keys).\n";
+            Some(format!("{head}{text}"))
+        }
+        None => None,
+    };
+    let plots = match &args.plots {
+        Some(dir) => plot::render_plots(&d, dir).map_err(|e| anyhow!("{e}"))?,
+        None => Vec::new(),
+    };
+    // Every output named, the plots' included, is checked against the inputs again, then all
+    // are written or none.
+    fsio::refuse_overwriting_inputs(
+        inputs,
+        [Some(&args.report), args.model.as_ref()].into_iter().flatten().chain(plots.iter().map(|p| &p.0)),
+    )?;
+    let mut outputs: Vec<(&std::path::Path, &[u8])> = vec![(&args.report, json.as_bytes())];
+    if let (Some(m), Some(text)) = (&args.model, &model) {
+        outputs.push((m, text.as_bytes()));
     }
-    let mut plots = Vec::new();
-    if let Some(dir) = &args.plots {
-        plots = plot::write_plots(&d, dir).map_err(|e| anyhow!("{e}"))?;
+    outputs.extend(plots.iter().map(|(p, png)| (p.as_path(), png.as_slice())));
+    let created = match &args.plots {
+        Some(dir) if !dir.exists() => {
+            std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
+            Some(dir)
+        }
+        _ => None,
+    };
+    if let Err(e) = fsio::write_all_or_nothing(&outputs) {
+        if let Some(dir) = created {
+            let _ = std::fs::remove_dir(dir);
+        }
+        return Err(e);
     }
+    let plots: Vec<PathBuf> = plots.into_iter().map(|p| p.0).collect();
     println!("diagnosed {} rows ({} used) in {:.1} s", r.rows, r.rows_used, t0.elapsed().as_secs_f64());
     for n in &r.notes {
         println!("note: {n}");

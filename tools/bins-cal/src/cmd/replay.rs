@@ -22,7 +22,7 @@ pub struct Args {
     /// The recording (format v1).
     #[arg(long)]
     rec: PathBuf,
-    /// The calibration: a blob (`.bin`) or a calibration file (`.toml`).
+    /// The calibration: a blob or a calibration file (TOML), told apart by the content.
     #[arg(long, required_unless_present_any = ["write_stream", "read_stream"])]
     calib: Option<PathBuf>,
     /// The output CSV (`t_s,ax_g,ay_g,az_g,status`).
@@ -70,7 +70,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let Some(output) = &args.output else { bail!("--output is required") };
     let mut csv = AtomicFile::create(output)?;
-    writeln!(csv.writer(), "t_s,ax_g,ay_g,az_g,status")?;
+    // A write error (a full disk) names the output.
+    let named = |e: std::io::Error| anyhow::anyhow!("{}: {e}", output.display());
+    writeln!(csv.writer(), "t_s,ax_g,ay_g,az_g,status").map_err(named)?;
     let mut rows = 0u64;
     if let Some(stream) = &args.read_stream {
         let bytes = std::fs::read(stream).with_context(|| stream.display().to_string())?;
@@ -87,7 +89,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             check_result(&sample).map_err(|e| {
                 anyhow::anyhow!("{}: result {} (byte {}): {e}", stream.display(), rows + 1, rows * OUTPUT_BYTES as u64)
             })?;
-            write_row(csv.writer(), row.t_s, &sample)?;
+            write_row(csv.writer(), row.t_s, &sample).map_err(named)?;
             rows += 1;
         }
         if results.next().is_some() {
@@ -95,9 +97,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     } else {
         let Some(calib) = &args.calib else { bail!("--calib is required") };
-        let mut tick = Tick::<f32, WINDOW>::new(load_pipeline(calib, args.tick_hz)?);
+        let (pipeline, profiles) = load_pipeline(calib, args.tick_hz)?;
+        if let VibrationSource::Profile(n) = args.ve
+            && usize::from(n) >= profiles
+        {
+            bail!(
+                "--ve profile:{n}: {} has {profiles} flight-phase profile(s){}",
+                calib.display(),
+                if profiles == 0 { String::new() } else { format!(", profile:0 to profile:{}", profiles - 1) }
+            );
+        }
+        let mut tick = Tick::<f32, WINDOW>::new(pipeline);
         while reader.read_row(&mut row)? {
-            write_row(csv.writer(), row.t_s, &tick.step(&input_of(&row), args.ve))?;
+            write_row(csv.writer(), row.t_s, &tick.step(&input_of(&row), args.ve)).map_err(named)?;
         }
     }
     reader.require_rows()?;
@@ -148,22 +160,19 @@ fn write_row(w: &mut impl Write, t_s: f64, s: &Sample<f32>) -> std::io::Result<(
 }
 
 /// The `f32` calibration, vibration-error model and thermal dynamics (at the period
-/// `1/tick_hz`, computed as the firmware computes it) of a blob or (by its `.toml` extension)
-/// a calibration file: the pipeline the firmware builds from the same blob. A calibration
-/// file is encoded into its blob first ([`CalibrationFile::read_checked`]), so both containers
-/// pass the same checks and the firmware's parser.
-pub fn load_pipeline(path: &Path, tick_hz: u32) -> anyhow::Result<Pipeline<f32>> {
+/// `1/tick_hz`, computed as the firmware computes it) of a blob or a calibration file (told
+/// apart by the content, [`CalibrationFile::read_checked`]): the pipeline the firmware builds
+/// from the same blob. Both containers pass the same checks and the firmware's parser.
+pub fn load_pipeline(path: &Path, tick_hz: u32) -> anyhow::Result<(Pipeline<f32>, usize)> {
     let err = |e: String| anyhow::anyhow!("{}: {e}", path.display());
-    let bytes = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml")) {
-        CalibrationFile::read_checked(path)?.1
-    } else {
-        std::fs::read(path).with_context(|| path.display().to_string())?
-    };
+    let (file, bytes) = CalibrationFile::read_checked(path)?;
+    let profiles = file.vibration.as_ref().map_or(0, |v| v.profile.len());
     let parsed = bins_comp::blob::parse(&bytes).map_err(|e| err(describe(&e)))?;
     let (cal, vib) = parsed.configs::<f32>().map_err(|e| err(describe(&e)))?;
     let pipeline = Pipeline::new(cal, vib);
-    Ok(match parsed.dynamics_at_rate(1.0 / tick_hz as f32).map_err(|e| err(describe(&e)))? {
+    let pipeline = match parsed.dynamics_at_rate(1.0 / tick_hz as f32).map_err(|e| err(describe(&e)))? {
         Some(d) => pipeline.with_dynamics(d),
         None => pipeline,
-    })
+    };
+    Ok((pipeline, profiles))
 }

@@ -17,7 +17,7 @@ pub struct Args {
     #[arg(long)]
     constants: PathBuf,
     /// The reference temperature T0 [°C]; the table must have a row at T0.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 20.0, value_parser = bins_cal::numarg::temp_c)]
     t0: f64,
     /// `pwl` (piecewise-linear through every temperature) or `poly:N` (order N = 1..4).
     #[arg(long, default_value = "pwl")]

@@ -15,6 +15,7 @@ use anyhow::{Context, anyhow, bail};
 use bins_cal::calfile::CalibrationFile;
 use bins_cal::calib::dynamics;
 use bins_cal::calib::segments::{self, Segment};
+use bins_cal::diagnose::plot::drawing_error;
 use bins_cal::fsio;
 use bins_cal::recording::read_all;
 use bins_comp::dynamics::Effective;
@@ -83,6 +84,10 @@ pub const REPLAYED: &str = "replayed";
 /// mean temperature [°C], Δg \[mg\] per method, in the order of the method labels).
 pub type Panel = (String, &'static str, Vec<(String, f64, Vec<f64>)>);
 
+/// The largest acceleration a replayed output may hold \[g\]: far beyond any accelerometer
+/// the tool calibrates; a larger value is a corrupted file, not a reading.
+pub const MAX_REPLAYED_G: f64 = 1.0e4;
+
 /// A replayed output CSV: rows `(t_s, accel \[g\], status bits)` in file order.
 pub struct Replayed {
     path: PathBuf,
@@ -109,7 +114,16 @@ impl Replayed {
             if c.len() != 5 {
                 return Err(bad("expected 5 fields"));
             }
-            let num = |i: usize| c[i].parse::<f64>().map_err(|_| bad("not a number"));
+            let num = |i: usize| {
+                let x = c[i].parse::<f64>().map_err(|_| bad("not a number"))?;
+                if !x.is_finite() {
+                    return Err(bad(&format!("`{}` is not a finite number", c[i])));
+                }
+                if i > 0 && x.abs() > MAX_REPLAYED_G {
+                    return Err(bad(&format!("{x} g is beyond ±{MAX_REPLAYED_G} g: not a replayed acceleration")));
+                }
+                Ok(x)
+            };
             let status = c[4].parse::<u32>().map_err(|_| bad("status is not an unsigned integer"))?;
             rows.push((num(0)?, [num(1)?, num(2)?, num(3)?], status));
         }
@@ -254,11 +268,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let (csv, table) = tables(&panels, &params, &names);
-    std::fs::create_dir_all(&args.output).with_context(|| format!("{}", args.output.display()))?;
     let png = plot(&panels, &names, &format!("T0 = {:.2} °C, {}", params.t0_c, args.calib.display()))?;
     print!("{table}");
-    fsio::write_atomic(&args.output.join("verify.csv"), csv.as_bytes())?;
-    fsio::write_atomic(&args.output.join("verify.png"), &png)?;
+    // Both or neither; a directory created here is removed again when they cannot be written.
+    let created = !args.output.exists();
+    std::fs::create_dir_all(&args.output).with_context(|| format!("{}", args.output.display()))?;
+    let (csv_path, png_path) = (args.output.join("verify.csv"), args.output.join("verify.png"));
+    if let Err(e) = fsio::write_all_or_nothing(&[(&csv_path, csv.as_bytes()), (&png_path, &png)]) {
+        if created {
+            let _ = std::fs::remove_dir(&args.output);
+        }
+        return Err(e);
+    }
     println!("wrote {} and {}", args.output.join("verify.csv").display(), args.output.join("verify.png").display());
     Ok(())
 }
@@ -310,18 +331,18 @@ pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec
     use plotters::style::{FontStyle, register_font};
     let _ = register_font("sans-serif", FontStyle::Normal, FONT);
     let (w, h) = (1000u32, 420 * panels.len() as u32 + 60);
-    let dir = tempdir_png()?;
-    let path = dir.join("plot.png");
+    let dir = fsio::ScratchDir::new("verify")?;
+    let path = dir.path().join("plot.png");
     {
         let root = BitMapBackend::new(&path, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
+        root.fill(&WHITE).map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
         let (top, body) = root.split_vertically(70);
         top.draw(&Text::new(
             format!("|g| error in the check positions — {title}"),
             (20, 15),
             ("sans-serif", 20).into_font(),
         ))
-        .map_err(|e| anyhow!("plot: {e}"))?;
+        .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
         let areas = body.split_evenly((panels.len(), 1));
         let colors = [
             RGBColor(120, 120, 120),
@@ -337,13 +358,17 @@ pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec
         let font = ("sans-serif", 14).into_font();
         let mut x = 20;
         for (k, name) in names.iter().take(m).enumerate() {
-            top.draw(&Rectangle::new([(x, 45), (x + 14, 59)], colors[k].filled())).map_err(|e| anyhow!("plot: {e}"))?;
-            top.draw(&Text::new(name.to_string(), (x + 20, 45), font.clone())).map_err(|e| anyhow!("plot: {e}"))?;
+            top.draw(&Rectangle::new([(x, 45), (x + 14, 59)], colors[k].filled()))
+                .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
+            top.draw(&Text::new(name.to_string(), (x + 20, 45), font.clone()))
+                .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
             x += 30 + 7 * name.len() as i32;
         }
         for (label, style) in [("±0.3 mg", BLACK.stroke_width(2)), ("±1 mg", RGBColor(150, 0, 150).stroke_width(1))] {
-            top.draw(&PathElement::new([(x, 52), (x + 20, 52)], style)).map_err(|e| anyhow!("plot: {e}"))?;
-            top.draw(&Text::new(label.to_string(), (x + 26, 45), font.clone())).map_err(|e| anyhow!("plot: {e}"))?;
+            top.draw(&PathElement::new([(x, 52), (x + 20, 52)], style))
+                .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
+            top.draw(&Text::new(label.to_string(), (x + 26, 45), font.clone()))
+                .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
             x += 100;
         }
         for ((title, phase, rows), area) in panels.iter().zip(areas) {
@@ -359,7 +384,7 @@ pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec
                 .x_label_area_size(30)
                 .y_label_area_size(60)
                 .build_cartesian_2d(0f64..n as f64, -lim..lim)
-                .map_err(|e| anyhow!("plot: {e}"))?;
+                .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
             let labels: Vec<String> = rows.iter().map(|r| r.0.clone()).collect();
             chart
                 .configure_mesh()
@@ -376,7 +401,7 @@ pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec
                 .y_desc("Δg [mg]")
                 .label_style(("sans-serif", 14))
                 .draw()
-                .map_err(|e| anyhow!("plot: {e}"))?;
+                .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
             let bw = 0.8 / m as f64;
             for (k, c) in colors.iter().take(m).enumerate() {
                 chart
@@ -384,27 +409,26 @@ pub fn plot(panels: &[Panel], names: &[&str], title: &str) -> anyhow::Result<Vec
                         let x0 = i as f64 + 0.1 + k as f64 * bw;
                         Rectangle::new([(x0, 0.0), (x0 + bw * 0.9, r.2.get(k).copied().unwrap_or(0.0))], c.filled())
                     }))
-                    .map_err(|e| anyhow!("plot: {e}"))?;
+                    .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
             }
             for (tol, style) in [(0.3, BLACK.stroke_width(2)), (1.0, RGBColor(150, 0, 150).stroke_width(1))] {
                 for s in [-1.0, 1.0] {
                     chart
                         .draw_series(LineSeries::new([(0.0, s * tol), (n as f64, s * tol)], style))
-                        .map_err(|e| anyhow!("plot: {e}"))?;
+                        .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
                 }
             }
         }
-        root.present().map_err(|e| anyhow!("plot: {e}"))?;
+        root.present().map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
     }
     let bytes = std::fs::read(&path).with_context(|| format!("{}", path.display()))?;
-    let _ = std::fs::remove_dir_all(&dir);
     Ok(bytes)
 }
 
 /// A panel of dwells during a ramp: Δg against the dwell's temperature, a point per dwell and
 /// method (the T0 constants, whose error is tens of times larger, are left out: they are in
 /// `verify.csv`).
-fn ramp_panel<DB: plotters::prelude::DrawingBackend>(
+fn ramp_panel<DB: plotters::prelude::DrawingBackend<ErrorType: 'static>>(
     area: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
     title: &str,
     rows: &[(String, f64, Vec<f64>)],
@@ -419,14 +443,14 @@ fn ramp_panel<DB: plotters::prelude::DrawingBackend>(
         .x_label_area_size(35)
         .y_label_area_size(60)
         .build_cartesian_2d((lo - 2.0)..(hi + 2.0), -lim..lim)
-        .map_err(|e| anyhow!("plot: {e}"))?;
+        .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
     chart
         .configure_mesh()
         .x_desc("temperature read by the unit [°C]")
         .y_desc("Δg [mg]")
         .label_style(("sans-serif", 14))
         .draw()
-        .map_err(|e| anyhow!("plot: {e}"))?;
+        .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
     for (k, c) in colors.iter().enumerate().skip(1) {
         chart
             .draw_series(
@@ -434,21 +458,14 @@ fn ramp_panel<DB: plotters::prelude::DrawingBackend>(
                     r.2.get(k).filter(|v| v.is_finite()).map(|v| Circle::new((r.1, *v), 3, c.filled()))
                 }),
             )
-            .map_err(|e| anyhow!("plot: {e}"))?;
+            .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
     }
     for (tol, style) in [(0.3, BLACK.stroke_width(2)), (1.0, RGBColor(150, 0, 150).stroke_width(1))] {
         for s in [-1.0, 1.0] {
             chart
                 .draw_series(LineSeries::new([(lo - 2.0, s * tol), (hi + 2.0, s * tol)], style))
-                .map_err(|e| anyhow!("plot: {e}"))?;
+                .map_err(|e| anyhow!("plot: {}", drawing_error(e)))?;
         }
     }
     Ok(())
-}
-
-/// A private scratch directory for the bitmap backend (which writes files only).
-fn tempdir_png() -> anyhow::Result<PathBuf> {
-    let d = std::env::temp_dir().join(format!("bins-cal-verify-{}", std::process::id()));
-    std::fs::create_dir_all(&d).with_context(|| format!("{}", d.display()))?;
-    Ok(d)
 }

@@ -3,7 +3,7 @@
 //! variant (reproduces Tables V4/V5) or the exact one. Each environment entry gives ranges
 //! (low, high); the table shows the VE at both ends.
 
-use anyhow::{Context, anyhow, bail};
+use anyhow::{anyhow, bail};
 use bins_comp::vibration::{AccelAxes, AccelVibration, ConversionFunction, Variant, VeTerms, ve_terms};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -46,10 +46,13 @@ pub struct HarmonicEntry {
     /// Row label.
     pub label: String,
     /// Amplitude along IA (low, high) \[g\].
+    #[serde(deserialize_with = "bins_cal::exact::array")]
     pub ia_amp_g: [f64; 2],
     /// Amplitude along OA (low, high) \[g\].
+    #[serde(deserialize_with = "bins_cal::exact::array")]
     pub oa_amp_g: [f64; 2],
     /// Amplitude along PA (low, high) \[g\].
+    #[serde(deserialize_with = "bins_cal::exact::array")]
     pub pa_amp_g: [f64; 2],
 }
 
@@ -62,15 +65,24 @@ pub struct RandomEntry {
     pub label: String,
     /// Band (f_low, f_up) \[Hz\].
     #[serde(rename = "band_Hz")]
+    #[serde(deserialize_with = "bins_cal::exact::array")]
     pub band_hz: [f64; 2],
     /// Spectral density range (low, high) [g²/Hz].
     #[serde(rename = "psd_g2_per_Hz")]
+    #[serde(deserialize_with = "bins_cal::exact::array")]
     pub psd_g2_per_hz: [f64; 2],
 }
 
+/// Largest |K1| \[V/g\] of a conversion function.
+pub const MAX_K1_V_PER_G: f64 = 1.0e3;
+/// Largest amplitude of a harmonic environment and σ of a random one \[g\].
+pub const MAX_ENV_G: f64 = 100.0;
+/// Highest frequency of a random environment's band \[Hz\].
+pub const MAX_ENV_HZ: f64 = 1.0e6;
+
 /// Reads conversion functions from a Table V1-style CSV (errors name file, line, column).
 pub fn read_cf(path: &Path) -> anyhow::Result<Vec<(f64, ConversionFunction<f64>)>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    let text = bins_cal::fsio::read_text(path)?;
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.starts_with('#') && !l.trim().is_empty());
     let (_, header) = lines.next().ok_or_else(|| anyhow!("{}: no header row", path.display()))?;
     let header: Vec<&str> = header.split(',').map(str::trim).collect();
@@ -119,6 +131,14 @@ pub fn read_cf(path: &Path) -> anyhow::Result<Vec<(f64, ConversionFunction<f64>)
             m31_g_per_g2: v[9],
             m32_g_per_g2: v[10],
         };
+        if !(v[1] != 0.0 && v[1].abs() <= MAX_K1_V_PER_G) {
+            bail!(
+                "{}: line {}, column `K1_V_per_g`: {} V/g: the scale factor must be nonzero and within ±{MAX_K1_V_PER_G} V/g",
+                path.display(),
+                n + 1,
+                v[1]
+            );
+        }
         out.push((v[1], cf));
     }
     if out.is_empty() {
@@ -129,25 +149,42 @@ pub fn read_cf(path: &Path) -> anyhow::Result<Vec<(f64, ConversionFunction<f64>)
 
 /// Reads an environment file (errors name the file and the key).
 pub fn read_env(path: &Path) -> anyhow::Result<Env> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
-    let env: Env = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e.message()))?;
+    let text = bins_cal::fsio::read_text(path)?;
+    let env: Env = toml::from_str(&text)
+        .map_err(|e| anyhow!("{}: {}", path.display(), bins_cal::calfile::one_line(&e.to_string())))?;
     let bad = |what: &str| Err(anyhow!("{}: {what}", path.display()));
     if !(env.a_p3_g.is_finite() && env.a_p3_g.abs() <= 100.0) {
         return bad("`a_p3_g` must be a finite acceleration within ±100 g");
     }
     for h in &env.harmonic {
         for (k, r) in [("ia_amp_g", h.ia_amp_g), ("oa_amp_g", h.oa_amp_g), ("pa_amp_g", h.pa_amp_g)] {
-            if !(r.iter().all(|x| x.is_finite() && *x >= 0.0) && r[0] <= r[1]) {
-                return bad(&format!("harmonic `{}`: `{k}` must be a range [low, high] of amplitudes ≥ 0", h.label));
+            if !(r.iter().all(|x| x.is_finite() && *x >= 0.0 && *x <= MAX_ENV_G) && r[0] <= r[1]) {
+                return bad(&format!(
+                    "harmonic `{}`: `{k}` must be a range [low, high] of amplitudes from 0 to {MAX_ENV_G} g",
+                    h.label
+                ));
             }
         }
     }
     for r in &env.random {
-        if !(r.band_hz.iter().all(|x| x.is_finite() && *x >= 0.0) && r.band_hz[0] < r.band_hz[1]) {
-            return bad(&format!("random `{}`: `band_Hz` must be [low, high] with low < high", r.label));
+        if !(r.band_hz.iter().all(|x| x.is_finite() && *x >= 0.0 && *x <= MAX_ENV_HZ) && r.band_hz[0] < r.band_hz[1]) {
+            return bad(&format!(
+                "random `{}`: `band_Hz` must be [low, high] with 0 ≤ low < high ≤ {MAX_ENV_HZ:e} Hz",
+                r.label
+            ));
         }
         if !(r.psd_g2_per_hz.iter().all(|x| x.is_finite() && *x >= 0.0) && r.psd_g2_per_hz[0] <= r.psd_g2_per_hz[1]) {
             return bad(&format!("random `{}`: `psd_g2_per_Hz` must be a range [low, high] ≥ 0", r.label));
+        }
+        // σ = √(PSD·bandwidth).
+        let sigma_g = (r.psd_g2_per_hz[1] * (r.band_hz[1] - r.band_hz[0])).sqrt();
+        if !(sigma_g <= MAX_ENV_G) {
+            return bad(&format!(
+                "random `{}`: `psd_g2_per_Hz` {} over {} Hz is σ = {sigma_g} g, more than {MAX_ENV_G} g",
+                r.label,
+                r.psd_g2_per_hz[1],
+                r.band_hz[1] - r.band_hz[0]
+            ));
         }
     }
     if env.harmonic.is_empty() && env.random.is_empty() {
@@ -189,6 +226,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let cfs = read_cf(&args.cf)?;
     let env = read_env(&args.env)?;
     let a = env.a_p3_g;
+    // Every value of the table finite, or the entry and accelerometer named.
+    for (n, (_, cf)) in cfs.iter().enumerate() {
+        for (label, lo, hi) in table(cf, &env, variant) {
+            if ![lo, hi].iter().all(|t| {
+                t.total_g(a).is_finite() && t.d0_1_g.is_finite() && t.d0_2_g.is_finite() && t.d0_3_g.is_finite()
+            }) {
+                bail!(
+                    "{} and {}: the vibration error of accelerometer {} in `{label}` is not finite (coefficients or environment out of range)",
+                    args.cf.display(),
+                    args.env.display(),
+                    n + 1
+                );
+            }
+        }
+    }
     for (n, (k1, cf)) in cfs.iter().enumerate() {
         println!(
             "accelerometer {} (K1 = {k1} V/g), {} variant, a_p3 = {a} g; each cell low … high",

@@ -7,7 +7,8 @@
 //! - `effect_<id>_<axis>.png`: the partial residual (residual − the rest of the model, offset
 //!   removed) against the term's fitted contribution, with the line y = x and binned means.
 //!
-//! Each file is drawn into a temporary sibling and renamed, so none is half-written.
+//! The plots are rendered to bytes ([`render_plots`]); the command writes them with its other
+//! outputs, all or nothing (`fsio::write_all_or_nothing`).
 
 use super::{DiagnoseError, Diagnosis};
 use plotters::prelude::*;
@@ -45,35 +46,58 @@ fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
-/// Draws into `dir/name` through a temporary sibling.
+/// A plotters error in words: an I/O or encoder error by its own message (the bitmap
+/// backend's `Display` is its `Debug`), anything else as plotters says it.
+pub fn drawing_error<E: std::error::Error + Send + Sync + 'static>(e: DrawingAreaErrorKind<E>) -> String {
+    use plotters::drawing::DrawingAreaErrorKind as A;
+    use plotters_backend::DrawingErrorKind as D;
+    if let A::BackendError(D::DrawingError(inner)) = &e {
+        match (inner as &dyn std::any::Any).downcast_ref::<plotters_bitmap::BitMapBackendError>() {
+            Some(plotters_bitmap::BitMapBackendError::IOError(io)) => return io.to_string(),
+            Some(plotters_bitmap::BitMapBackendError::ImageError(i)) => return i.to_string(),
+            _ => {}
+        }
+    }
+    e.to_string()
+}
+
+/// Renders a plot of `size` pixels as PNG bytes (drawn in a private scratch directory, as the
+/// encoder writes only to a path). Errors name `what`.
+pub fn render_png(
+    what: &Path,
+    size: (u32, u32),
+    f: impl FnOnce(&DrawingArea<BitMapBackend, plotters::coord::Shift>) -> Result<(), String>,
+) -> Result<Vec<u8>, DiagnoseError> {
+    let scratch =
+        crate::fsio::ScratchDir::new("plot").map_err(|e| DiagnoseError(format!("{}: {e}", what.display())))?;
+    let tmp = scratch.path().join("plot.png");
+    let result = {
+        let root = BitMapBackend::new(&tmp, size).into_drawing_area();
+        root.fill(&WHITE)
+            .map_err(drawing_error)
+            .and_then(|_| f(&root))
+            .and_then(|_| root.present().map_err(drawing_error))
+    };
+    result.and_then(|_| std::fs::read(&tmp).map_err(|e| e.to_string())).map_err(|e| err(what, e))
+}
+
+/// Renders `dir/name`; returns the path and the PNG bytes (written by the caller with the
+/// other outputs).
 fn draw(
     dir: &Path,
     name: &str,
     f: impl FnOnce(&DrawingArea<BitMapBackend, plotters::coord::Shift>) -> Result<(), String>,
-) -> Result<PathBuf, DiagnoseError> {
+) -> Result<(PathBuf, Vec<u8>), DiagnoseError> {
     let path = dir.join(name);
-    let tmp = dir.join(format!(".{name}.tmp-{}.png", std::process::id()));
-    let result = {
-        let root = BitMapBackend::new(&tmp, (1000, 520)).into_drawing_area();
-        root.fill(&WHITE)
-            .map_err(|e| e.to_string())
-            .and_then(|_| f(&root))
-            .and_then(|_| root.present().map_err(|e| e.to_string()))
-    };
-    match result.and_then(|_| std::fs::rename(&tmp, &path).map_err(|e| e.to_string())) {
-        Ok(()) => Ok(path),
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(err(&path, e))
-        }
-    }
+    let png = render_png(&path, (1000, 520), f)?;
+    Ok((path, png))
 }
 
-/// Writes the plots of `d` into `dir` (created if missing); returns the files written.
-pub fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, DiagnoseError> {
+/// Renders the plots of `d` for the directory `dir`; returns each file's path and PNG bytes,
+/// for the caller to write with its other outputs, all or nothing (nothing is written here).
+pub fn render_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<(PathBuf, Vec<u8>)>, DiagnoseError> {
     use plotters::style::{FontStyle, register_font};
     let _ = register_font("sans-serif", FontStyle::Normal, FONT);
-    std::fs::create_dir_all(dir).map_err(|e| err(dir, e))?;
     let p = &d.prepared;
     let hours: Vec<f64> = p.t.iter().map(|t| t / 3600.0).collect();
     let mut out = Vec::new();
@@ -104,30 +128,30 @@ pub fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, DiagnoseEr
                 .x_label_area_size(40)
                 .y_label_area_size(70)
                 .build_cartesian_2d(x0..x1, y0..y1)
-                .map_err(|e| e.to_string())?;
+                .map_err(drawing_error)?;
             chart
                 .configure_mesh()
                 .x_desc("time [h]")
                 .y_desc("residual [mg]")
                 .label_style(("sans-serif", 14))
                 .draw()
-                .map_err(|e| e.to_string())?;
+                .map_err(drawing_error)?;
             let cb = RGBColor(214, 39, 40);
             let ca = RGBColor(31, 119, 180);
             chart
                 .draw_series(LineSeries::new(pb.iter().copied(), cb.stroke_width(1)))
-                .map_err(|e| e.to_string())?
+                .map_err(drawing_error)?
                 .label("before (REAL − SIM)")
                 .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], cb.stroke_width(2)));
             chart
                 .draw_series(LineSeries::new(pa.iter().copied(), ca.stroke_width(1)))
-                .map_err(|e| e.to_string())?
+                .map_err(drawing_error)?
                 .label("after the found terms")
                 .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], ca.stroke_width(2)));
             let cd = RGBColor(44, 160, 44);
             chart
                 .draw_series(LineSeries::new(pd.iter().copied(), cd.stroke_width(2)))
-                .map_err(|e| e.to_string())?
+                .map_err(drawing_error)?
                 .label("drift left (random walk, not subtracted)")
                 .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], cd.stroke_width(2)));
             chart
@@ -137,7 +161,7 @@ pub fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, DiagnoseEr
                 .border_style(BLACK)
                 .label_font(("sans-serif", 14))
                 .draw()
-                .map_err(|e| e.to_string())
+                .map_err(drawing_error)
         })?);
         for term in fit.terms.iter() {
             let partial: Vec<f64> = (0..y.len()).map(|i| y[i] - fit.prediction[i] + term.contribution[i]).collect();
@@ -163,29 +187,29 @@ pub fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, DiagnoseEr
                     .x_label_area_size(40)
                     .y_label_area_size(70)
                     .build_cartesian_2d(x0..x1, y0..y1)
-                    .map_err(|e| e.to_string())?;
+                    .map_err(drawing_error)?;
                 chart
                     .configure_mesh()
                     .x_desc("fitted term [mg]")
                     .y_desc("residual − other terms, offset removed [mg]")
                     .label_style(("sans-serif", 14))
                     .draw()
-                    .map_err(|e| e.to_string())?;
+                    .map_err(drawing_error)?;
                 let grey = RGBColor(160, 160, 160);
                 chart
                     .draw_series(pts.iter().map(|&(x, y)| Circle::new((x, y), 1, grey.filled())))
-                    .map_err(|e| e.to_string())?
+                    .map_err(drawing_error)?
                     .label("rows")
                     .legend(move |(x, y)| Circle::new((x + 7, y), 3, grey.filled()));
                 let c = RGBColor(214, 39, 40);
                 chart
                     .draw_series(bins.iter().map(|&(x, y)| Circle::new((x, y), 4, c.filled())))
-                    .map_err(|e| e.to_string())?
+                    .map_err(drawing_error)?
                     .label("binned means")
                     .legend(move |(x, y)| Circle::new((x + 7, y), 4, c.filled()));
                 chart
                     .draw_series(LineSeries::new([(x0, x0), (x1, x1)], BLACK.stroke_width(2)))
-                    .map_err(|e| e.to_string())?
+                    .map_err(drawing_error)?
                     .label("y = x")
                     .legend(|(x, y)| PathElement::new([(x, y), (x + 14, y)], BLACK.stroke_width(2)));
                 chart
@@ -195,7 +219,7 @@ pub fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, DiagnoseEr
                     .border_style(BLACK)
                     .label_font(("sans-serif", 14))
                     .draw()
-                    .map_err(|e| e.to_string())
+                    .map_err(drawing_error)
             })?);
         }
     }

@@ -10,6 +10,7 @@ use super::rig::Timeline;
 use super::thermal::ThermalParams;
 use super::unit::{NoiseParams, UnitModel};
 use crate::calfile::{CalibrationFile, MethodKind, MethodSpec, ModelSpec};
+use bins_comp::dynamics::{MAX_TAU_S, MAX_WIDTH_C};
 use bins_comp::ident::{self, TILTER_POSITIONS_G, check_positions_g};
 use bins_comp::temperature::MAX_POLY_ORDER;
 use bins_comp::vibration::{self, AccelAxes, Axis, ConversionFunction, Vibration};
@@ -54,6 +55,7 @@ pub struct RecordingSpec {
     pub log_chamber: bool,
     /// The unit's static specific force before the first step \[g\] (default TP1, `[0, 0, 1]`).
     #[serde(default)]
+    #[serde(deserialize_with = "crate::exact::option_array")]
     pub start_f_g: Option<[f64; 3]>,
     /// Further comment lines.
     #[serde(default)]
@@ -77,9 +79,11 @@ pub struct UnitSpec {
     pub t0_c: Option<f64>,
     /// K at T0 [V/g].
     #[serde(default, rename = "k_V_per_g")]
+    #[serde(deserialize_with = "crate::exact::option_matrix")]
     pub k_v_per_g: Option<[[f64; 3]; 3]>,
     /// U0 at T0 \[V\].
     #[serde(default, rename = "u0_V")]
+    #[serde(deserialize_with = "crate::exact::option_array")]
     pub u0_v: Option<[f64; 3]>,
     /// Constants measured at further temperatures.
     #[serde(default)]
@@ -99,12 +103,14 @@ pub struct UnitSpec {
     pub conversion: Option<ConversionSpec>,
     /// Warm-up transient at power-on \[V\] per axis.
     #[serde(default, rename = "warmup_V")]
+    #[serde(deserialize_with = "crate::exact::array")]
     pub warmup_v: [f64; 3],
     /// Warm-up time constant \[s\].
     #[serde(default)]
     pub warmup_tau_s: f64,
     /// Additive bias play: heating/cooling bias difference per axis \[mg\] (±this beyond the play).
     #[serde(default, rename = "bias_play_mg")]
+    #[serde(deserialize_with = "crate::exact::array")]
     pub bias_play_mg: [f64; 3],
     /// Width of the bias play [°C] (on the temperature the constants follow).
     #[serde(default, rename = "bias_play_width_C")]
@@ -140,9 +146,11 @@ pub struct AtSpec {
     pub temp_c: f64,
     /// K [V/g].
     #[serde(rename = "k_V_per_g")]
+    #[serde(deserialize_with = "crate::exact::matrix")]
     pub k_v_per_g: [[f64; 3]; 3],
     /// U0 \[V\].
     #[serde(rename = "u0_V")]
+    #[serde(deserialize_with = "crate::exact::array")]
     pub u0_v: [f64; 3],
 }
 
@@ -381,6 +389,7 @@ pub enum StepSpec {
         freq_hz: Option<f64>,
         /// Random band \[Hz\].
         #[serde(default, rename = "band_Hz")]
+        #[serde(deserialize_with = "keyed_band_hz_opt")]
         band_hz: Option<[f64; 2]>,
         /// Quiet hold per position \[s\].
         quiet_s: f64,
@@ -394,6 +403,7 @@ pub enum StepSpec {
     Hold {
         /// Static specific force \[g\].
         #[serde(default)]
+        #[serde(deserialize_with = "keyed_f_g")]
         f_g: Option<[f64; 3]>,
         /// Or a position label: TP1…TP6, CP1…CP6 (with `theta_deg`).
         #[serde(default)]
@@ -416,6 +426,7 @@ pub enum StepSpec {
     /// A flight segment: ramp to an acceleration, hold it under vibration.
     Flight {
         /// Static specific force \[g\].
+        #[serde(deserialize_with = "keyed_accel_g")]
         accel_g: [f64; 3],
         /// Ramp from the previous acceleration \[s\] (reference known).
         #[serde(default)]
@@ -457,6 +468,14 @@ pub enum ShakeKind {
     Random,
 }
 
+crate::keyed_array!(keyed_band_hz_opt, "band_Hz", Option, 2);
+crate::keyed_array!(keyed_f_g, "f_g", Option, 3);
+crate::keyed_array!(keyed_accel_g, "accel_g", 3);
+crate::keyed_array!(keyed_amp_g, "amp_g", 3);
+crate::keyed_array!(keyed_sigma_g, "sigma_g", Option, 3);
+crate::keyed_array!(keyed_psd, "psd_g2_per_Hz", Option, 3);
+crate::keyed_array!(keyed_band_hz, "band_Hz", 2);
+
 /// A vibration, by `kind`.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
@@ -466,6 +485,7 @@ pub enum VibSpec {
     /// Harmonic, in phase on all axes.
     Sine {
         /// Peak amplitude per axis \[g\].
+        #[serde(deserialize_with = "keyed_amp_g")]
         amp_g: [f64; 3],
         /// Frequency \[Hz\].
         #[serde(rename = "freq_Hz")]
@@ -475,12 +495,15 @@ pub enum VibSpec {
     Random {
         /// σ per axis \[g\] (or `psd_g2_per_Hz`).
         #[serde(default)]
+        #[serde(deserialize_with = "keyed_sigma_g")]
         sigma_g: Option<[f64; 3]>,
         /// Spectral density per axis [g²/Hz] (σ² = S·Δf).
         #[serde(default, rename = "psd_g2_per_Hz")]
+        #[serde(deserialize_with = "keyed_psd")]
         psd: Option<[f64; 3]>,
         /// Band \[Hz\].
         #[serde(rename = "band_Hz")]
+        #[serde(deserialize_with = "keyed_band_hz")]
         band_hz: [f64; 2],
     },
     /// One of the core's flight profiles from Tables V2/V3
@@ -556,6 +579,40 @@ fn temp_c(key: &str, v: f64) -> Check<f64> {
 /// Most rows a scenario may make (about 11 days at 1 kHz).
 pub const MAX_ROWS: f64 = 1e9;
 
+/// Most rig segments (holds, moves, ramps) a scenario may make: checked as the steps are
+/// built, so that a step like `holds = 1000000000` is refused before its segments are
+/// allocated.
+pub const MAX_SEGMENTS: usize = 1_000_000;
+
+/// Largest noise amplitude of the signals \[V\] (white, random walk per √s, bias
+/// instability): far above any accelerometer's, well below what overflows the sums.
+pub const MAX_NOISE_V: f64 = 1.0;
+
+/// Smallest ADC step \[V\] other than 0 (off): a 32-bit converter over 1 V has a step of
+/// 2.3e-10 V.
+pub const MIN_ADC_LSB_V: f64 = 1.0e-12;
+
+/// A value in `lo..=hi`, the key named.
+fn within(key: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Check<f64> {
+    if v.is_finite() && (lo..=hi).contains(&v) {
+        Ok(v)
+    } else {
+        Err(kerr(key, format!("must be within {lo} … {hi} {unit}, got {v}")))
+    }
+}
+
+/// A static specific force within the measuring range, each component's key named.
+fn static_force(key: &str, f: &[f64; 3]) -> Check<()> {
+    for (i, x) in f.iter().enumerate() {
+        let kk = format!("{key}[{i}]");
+        let a = finite(&kk, *x)?;
+        if a.abs() > vibration::MAX_STATIC_G {
+            return Err(kerr(kk, format!("{a} g is beyond the ±{} g measuring range", vibration::MAX_STATIC_G)));
+        }
+    }
+    Ok(())
+}
+
 impl ScenarioFile {
     /// Parses TOML text; errors name `file`, the key path and, for syntax errors, the line.
     pub fn parse(text: &str, file: &Path) -> Result<Self, ScenarioError> {
@@ -582,11 +639,16 @@ impl ScenarioFile {
 
     /// Reads and parses a file.
     pub fn read(path: &Path) -> Result<Self, ScenarioError> {
-        let text = std::fs::read_to_string(path).map_err(|e| ScenarioError {
-            file: path.to_path_buf(),
-            line: None,
-            key: None,
-            reason: e.to_string(),
+        let text = crate::fsio::read_text(path).map_err(|e| {
+            // read_text names the file; the error adds it again.
+            let reason = e.to_string();
+            let prefix = format!("{}: ", path.display());
+            ScenarioError {
+                file: path.to_path_buf(),
+                line: None,
+                key: None,
+                reason: reason.strip_prefix(&prefix).unwrap_or(&reason).to_string(),
+            }
         })?;
         Self::parse(&text, path)
     }
@@ -615,9 +677,7 @@ impl ScenarioFile {
         let noise = self.noise.build()?;
         let start_f = match r.start_f_g {
             Some(f) => {
-                for (i, v) in f.iter().enumerate() {
-                    finite(&format!("recording.start_f_g[{i}]"), *v)?;
-                }
+                static_force("recording.start_f_g", &f)?;
                 f
             }
             None => TILTER_POSITIONS_G[0],
@@ -628,6 +688,9 @@ impl ScenarioFile {
         let mut tl = Timeline::new(start_f);
         for (i, s) in self.step.iter().enumerate() {
             build_step(&mut tl, s, &format!("step[{i}]"))?;
+            if tl.segments.len() > MAX_SEGMENTS {
+                return Err(kerr(format!("step[{i}]"), format!("more than {MAX_SEGMENTS} rig segments in all")));
+            }
         }
         let rows = tl.duration_s() * rate_hz;
         if rows > MAX_ROWS {
@@ -704,6 +767,10 @@ fn build_step(tl: &mut Timeline, s: &StepSpec, key: &str) -> Check<()> {
             if *holds == 0 {
                 return Err(kerr(k("holds"), "at least one orientation"));
             }
+            // Two segments (move, hold) per orientation, checked before any is made.
+            if *holds > MAX_SEGMENTS / 2 {
+                return Err(kerr(k("holds"), format!("{holds} orientations: at most {}", MAX_SEGMENTS / 2)));
+            }
             if let Some(c) = chamber_c {
                 tl.set_chamber(temp_c(&k("chamber_C"), *c)?);
             }
@@ -760,6 +827,9 @@ fn build_step(tl: &mut Timeline, s: &StepSpec, key: &str) -> Check<()> {
                     ));
                 }
                 tl.shake_plan(axis, l, &make, quiet, shake, mv);
+                if tl.segments.len() > MAX_SEGMENTS {
+                    return Err(kerr(lk, format!("more than {MAX_SEGMENTS} rig segments in all")));
+                }
             }
         }
         StepSpec::Hold { f_g, position, theta_deg, dwell_s, move_s, vibration: v, label } => {
@@ -767,9 +837,7 @@ fn build_step(tl: &mut Timeline, s: &StepSpec, key: &str) -> Check<()> {
                 (Some(_), Some(_)) => return Err(kerr(k("position"), "give f_g or position, not both")),
                 (None, None) => return Err(kerr(key, "needs f_g or position")),
                 (Some(f), None) => {
-                    for (i, x) in f.iter().enumerate() {
-                        finite(&format!("{}[{i}]", k("f_g")), *x)?;
-                    }
+                    static_force(&k("f_g"), f)?;
                     (*f, None)
                 }
                 (None, Some(p)) => {
@@ -1054,12 +1122,12 @@ impl ThermalSpec {
         Ok(ThermalParams {
             start_c: temp_c("thermal.start_C", self.start_c.unwrap_or(t0_c))?,
             rate_c_per_s: rate / 60.0,
-            case_tau_s: non_negative("thermal.case_tau_s", self.case_tau_s)?,
-            die_tau_s: non_negative("thermal.die_tau_s", self.die_tau_s)?,
-            self_heating_c: finite("thermal.self_heating_C", self.self_heating_c)?,
+            case_tau_s: within("thermal.case_tau_s", self.case_tau_s, 0.0, MAX_TAU_S, "s")?,
+            die_tau_s: within("thermal.die_tau_s", self.die_tau_s, 0.0, MAX_TAU_S, "s")?,
+            self_heating_c: within("thermal.self_heating_C", self.self_heating_c, -MAX_WIDTH_C, MAX_WIDTH_C, "°C")?,
             thermistor_at: at,
-            thermistor_tau_s: non_negative("thermal.thermistor_tau_s", self.thermistor_tau_s)?,
-            hysteresis_c: non_negative("thermal.hysteresis_C", self.hysteresis_c)?,
+            thermistor_tau_s: within("thermal.thermistor_tau_s", self.thermistor_tau_s, 0.0, MAX_TAU_S, "s")?,
+            hysteresis_c: within("thermal.hysteresis_C", self.hysteresis_c, 0.0, MAX_WIDTH_C, "°C")?,
         })
     }
 }
@@ -1069,12 +1137,12 @@ impl NoiseSpec {
         let per = |key: &str, v: PerAxis| -> Check<[f64; 3]> {
             let a = v.get();
             for (i, x) in a.iter().enumerate() {
-                non_negative(&format!("noise.{key}[{i}]"), *x)?;
+                within(&format!("noise.{key}[{i}]"), *x, 0.0, MAX_NOISE_V, "V")?;
             }
             Ok(a)
         };
         let bias_instability_v = per("bias_instability_V", self.bias_instability)?;
-        let bias_tau_s = non_negative("noise.bias_tau_s", self.bias_tau_s)?;
+        let bias_tau_s = within("noise.bias_tau_s", self.bias_tau_s, 0.0, MAX_TAU_S, "s")?;
         if bias_instability_v.iter().any(|&b| b > 0.0) && bias_tau_s == 0.0 {
             return Err(kerr("noise.bias_tau_s", "must be > 0 when bias_instability_V is given"));
         }
@@ -1083,10 +1151,18 @@ impl NoiseSpec {
             random_walk_v_per_sqrt_s: per("random_walk_V_per_sqrt_s", self.random_walk)?,
             bias_instability_v,
             bias_tau_s,
-            adc_lsb_v: non_negative("noise.adc_lsb_V", self.adc_lsb_v)?,
-            temp_noise_c: non_negative("noise.temp_noise_C", self.temp_noise_c)?,
-            temp_resolution_c: non_negative("noise.temp_resolution_C", self.temp_resolution_c)?,
-            temp_offset_c: finite("noise.temp_offset_C", self.temp_offset_c)?,
+            adc_lsb_v: match within("noise.adc_lsb_V", self.adc_lsb_v, 0.0, MAX_NOISE_V, "V")? {
+                v if v > 0.0 && v < MIN_ADC_LSB_V => {
+                    return Err(kerr(
+                        "noise.adc_lsb_V",
+                        format!("{v} V: 0 (no quantisation) or at least {MIN_ADC_LSB_V} V"),
+                    ));
+                }
+                v => v,
+            },
+            temp_noise_c: within("noise.temp_noise_C", self.temp_noise_c, 0.0, MAX_WIDTH_C, "°C")?,
+            temp_resolution_c: within("noise.temp_resolution_C", self.temp_resolution_c, 0.0, MAX_WIDTH_C, "°C")?,
+            temp_offset_c: within("noise.temp_offset_C", self.temp_offset_c, -MAX_WIDTH_C, MAX_WIDTH_C, "°C")?,
             vibration_sampling: self.vibration_sampling,
         })
     }
