@@ -27,6 +27,14 @@ use std::fs::File;
 use std::io::{self, BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 
+/// Longest line the reader accepts \[B\], line break excluded. A recording's row is a few
+/// hundred bytes; a longer line is not a recording (a binary file, `/dev/zero`, a file without
+/// line breaks) and is refused when this many bytes have been read, before it fills memory.
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+/// Most cells a line may have. The format defines 17 columns; a header or row with more cells
+/// than this is refused as soon as the count is passed.
+pub const MAX_COLUMNS: usize = 4096;
+
 /// Header names of the columns the format defines, in the order the writer puts them.
 pub mod col {
     /// Time since the start of the recording \[s\].
@@ -306,6 +314,10 @@ pub enum ErrorKind {
     },
     /// A line that is not UTF-8.
     NotUtf8,
+    /// A line longer than [`MAX_LINE_BYTES`].
+    LineTooLong,
+    /// A line with more cells than [`MAX_COLUMNS`].
+    TooManyCells,
     /// A quoted cell without its closing quote.
     UnterminatedQuote,
     /// The writer was given a value it cannot write (non-finite number, a comment or a cell
@@ -361,6 +373,10 @@ impl fmt::Display for Error {
                 write!(f, "time {this} s does not increase (previous row {previous} s)")
             }
             ErrorKind::NotUtf8 => write!(f, "line is not UTF-8"),
+            ErrorKind::LineTooLong => {
+                write!(f, "line longer than {MAX_LINE_BYTES} bytes (not a recording: no line breaks, or binary data)")
+            }
+            ErrorKind::TooManyCells => write!(f, "more than {MAX_COLUMNS} cells in the line"),
             ErrorKind::UnterminatedQuote => write!(f, "quoted cell without a closing quote"),
             ErrorKind::Unwritable(s) => write!(f, "cannot write {s}"),
         }
@@ -448,6 +464,9 @@ fn split_line(line: &str, buf: &mut String, bounds: &mut Vec<(usize, usize)>) ->
         }
         if i >= bytes.len() {
             return Ok(());
+        }
+        if bounds.len() == MAX_COLUMNS {
+            return Err(ErrorKind::TooManyCells);
         }
         i += 1; // the comma
     }
@@ -598,14 +617,38 @@ impl<R: BufRead> Reader<R> {
         }
     }
 
-    /// Reads the next physical line into `raw` without its line ending; false at the end.
+    /// Reads the next physical line into `raw` without its line ending; false at the end. A
+    /// line longer than [`MAX_LINE_BYTES`] is an error as soon as that many bytes are read.
     fn next_line(&mut self) -> Result<bool, Error> {
         self.raw.clear();
-        let n = self.src.read_until(b'\n', &mut self.raw).map_err(|e| {
-            self.line_no += 1;
-            self.err(None, ErrorKind::Io(e.to_string()))
-        })?;
-        if n == 0 {
+        loop {
+            let buf = match self.src.fill_buf() {
+                Ok(buf) => buf,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    self.line_no += 1;
+                    return Err(self.err(None, ErrorKind::Io(e.to_string())));
+                }
+            };
+            if buf.is_empty() {
+                break;
+            }
+            let (take, ended) = match memchr::memchr(b'\n', buf) {
+                Some(i) => (i + 1, true),
+                None => (buf.len(), false),
+            };
+            // The line break and a carriage return before it are not counted.
+            if self.raw.len() + take > MAX_LINE_BYTES + 2 {
+                self.line_no += 1;
+                return Err(self.err(None, ErrorKind::LineTooLong));
+            }
+            self.raw.extend_from_slice(&buf[..take]);
+            self.src.consume(take);
+            if ended {
+                break;
+            }
+        }
+        if self.raw.is_empty() {
             return Ok(false);
         }
         self.line_no += 1;
