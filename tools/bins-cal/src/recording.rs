@@ -107,33 +107,72 @@ pub const ACCEL_LIMIT: Limit = Limit { min: -1000.0, max: 1000.0, unit: "g" };
 /// The physical range of column `name`, if the format gives it one (time, frequencies and
 /// power-on time have none beyond being finite; `t_s` must increase).
 pub fn limit_of(name: &str) -> Option<Limit> {
-    field_of(name).and_then(field_limit)
+    column(name).and_then(|c| COLUMNS[c].limit)
 }
 
-fn field_limit(f: Field) -> Option<Limit> {
-    match f {
-        Field::Temp | Field::Chamber => Some(TEMP_LIMIT),
-        Field::U(_) => Some(SIGNAL_LIMIT),
-        Field::F(_) | Field::Vib(_) => Some(ACCEL_LIMIT),
-        _ => None,
-    }
+/// Which columns a writer puts in a file together ([`Columns`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Group {
+    /// Always present: time, the three signals, the temperature.
+    Required,
+    /// What the rig applied: static force and vibration.
+    Reference,
+    /// `chamber_C`.
+    Chamber,
+    /// `pos`.
+    Pos,
+    /// `power_s`.
+    Power,
 }
 
-/// The five required columns.
-pub const REQUIRED: [&str; 5] = [col::T_S, col::UX_V, col::UY_V, col::UZ_V, col::TEMP_C];
+/// One column the format defines: its header name, its group, its physical range and where
+/// its cells go in a [`Row`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ColumnDef {
+    /// The header name.
+    pub name: &'static str,
+    /// Required, reference or one of the optional columns.
+    pub group: Group,
+    /// The physical range of its numbers, if it has one.
+    pub limit: Option<Limit>,
+    field: Field,
+}
 
-/// The reference columns (what the rig applied).
-pub const REFERENCE: [&str; 9] = [
-    col::FX_G,
-    col::FY_G,
-    col::FZ_G,
-    col::VIB_KIND,
-    col::VIB_X_G,
-    col::VIB_Y_G,
-    col::VIB_Z_G,
-    col::VIB_HZ,
-    col::VIB_BW_HZ,
+const fn def(name: &'static str, group: Group, limit: Option<Limit>, field: Field) -> ColumnDef {
+    ColumnDef { name, group, limit, field }
+}
+
+/// Every column the format defines, in the order the writer puts them: the one table the
+/// reader, the writer, [`limit_of`] and [`Columns`] read.
+pub const COLUMNS: [ColumnDef; 17] = [
+    def(col::T_S, Group::Required, None, Field::T),
+    def(col::UX_V, Group::Required, Some(SIGNAL_LIMIT), Field::U(0)),
+    def(col::UY_V, Group::Required, Some(SIGNAL_LIMIT), Field::U(1)),
+    def(col::UZ_V, Group::Required, Some(SIGNAL_LIMIT), Field::U(2)),
+    def(col::TEMP_C, Group::Required, Some(TEMP_LIMIT), Field::Temp),
+    def(col::FX_G, Group::Reference, Some(ACCEL_LIMIT), Field::F(0)),
+    def(col::FY_G, Group::Reference, Some(ACCEL_LIMIT), Field::F(1)),
+    def(col::FZ_G, Group::Reference, Some(ACCEL_LIMIT), Field::F(2)),
+    def(col::VIB_KIND, Group::Reference, None, Field::VibKind),
+    def(col::VIB_X_G, Group::Reference, Some(ACCEL_LIMIT), Field::Vib(0)),
+    def(col::VIB_Y_G, Group::Reference, Some(ACCEL_LIMIT), Field::Vib(1)),
+    def(col::VIB_Z_G, Group::Reference, Some(ACCEL_LIMIT), Field::Vib(2)),
+    def(col::VIB_HZ, Group::Reference, None, Field::VibHz),
+    def(col::VIB_BW_HZ, Group::Reference, None, Field::VibBw),
+    def(col::CHAMBER_C, Group::Chamber, Some(TEMP_LIMIT), Field::Chamber),
+    def(col::POS, Group::Pos, None, Field::Pos),
+    def(col::POWER_S, Group::Power, None, Field::Power),
 ];
+
+/// The position in [`COLUMNS`] of the column named `name`.
+fn column(name: &str) -> Option<usize> {
+    COLUMNS.iter().position(|c| c.name == name)
+}
+
+/// The names of the columns of `group`, in [`COLUMNS`] order.
+pub fn names_of(group: Group) -> impl Iterator<Item = &'static str> {
+    COLUMNS.iter().filter(move |c| c.group == group).map(|c| c.name)
+}
 
 /// `vib_kind`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -385,7 +424,7 @@ impl fmt::Display for Error {
 
 impl std::error::Error for Error {}
 
-/// What a header position holds.
+/// Where a defined column's cells go in a [`Row`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Field {
     T,
@@ -399,30 +438,14 @@ enum Field {
     Chamber,
     Pos,
     Power,
-    Extra(usize),
 }
 
-fn field_of(name: &str) -> Option<Field> {
-    Some(match name {
-        col::T_S => Field::T,
-        col::UX_V => Field::U(0),
-        col::UY_V => Field::U(1),
-        col::UZ_V => Field::U(2),
-        col::TEMP_C => Field::Temp,
-        col::FX_G => Field::F(0),
-        col::FY_G => Field::F(1),
-        col::FZ_G => Field::F(2),
-        col::VIB_KIND => Field::VibKind,
-        col::VIB_X_G => Field::Vib(0),
-        col::VIB_Y_G => Field::Vib(1),
-        col::VIB_Z_G => Field::Vib(2),
-        col::VIB_HZ => Field::VibHz,
-        col::VIB_BW_HZ => Field::VibBw,
-        col::CHAMBER_C => Field::Chamber,
-        col::POS => Field::Pos,
-        col::POWER_S => Field::Power,
-        _ => return None,
-    })
+/// What a header position holds: a column of [`COLUMNS`] (by its position there) or the n-th
+/// extra column.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Slot {
+    Defined(usize),
+    Extra(usize),
 }
 
 /// Splits one CSV line into cells (RFC 4180 quoting within the line; a quoted cell cannot
@@ -479,9 +502,10 @@ pub struct Reader<R> {
     line_no: u64,
     comments: Vec<String>,
     header: Vec<String>,
-    fields: Vec<Field>,
+    slots: Vec<Slot>,
     extra: Vec<String>,
-    has: [bool; 17],
+    /// Which of [`COLUMNS`] the header has.
+    present: [bool; COLUMNS.len()],
     raw: Vec<u8>,
     cells: String,
     bounds: Vec<(usize, usize)>,
@@ -515,9 +539,9 @@ impl<R: BufRead> Reader<R> {
             line_no: 0,
             comments: Vec::new(),
             header: Vec::new(),
-            fields: Vec::new(),
+            slots: Vec::new(),
             extra: Vec::new(),
-            has: [false; 17],
+            present: [false; COLUMNS.len()],
             raw: Vec::new(),
             cells: String::new(),
             bounds: Vec::new(),
@@ -552,23 +576,21 @@ impl<R: BufRead> Reader<R> {
                 r.header.push(name.clone());
                 return Err(r.err(Some(pos), ErrorKind::DuplicateColumn(name)));
             }
-            let field = match field_of(&name) {
-                Some(f) => f,
+            let slot = match column(&name) {
+                Some(c) => {
+                    r.present[c] = true;
+                    Slot::Defined(c)
+                }
                 None => {
                     r.extra.push(name.clone());
-                    Field::Extra(r.extra.len() - 1)
+                    Slot::Extra(r.extra.len() - 1)
                 }
             };
-            if let Some(i) = flag_index(field) {
-                r.has[i] = true;
-            }
-            r.fields.push(field);
+            r.slots.push(slot);
             r.header.push(name);
         }
-        for req in REQUIRED {
-            if !r.header.iter().any(|h| h == req) {
-                return Err(r.err(None, ErrorKind::MissingColumn(req)));
-            }
+        if let Some(c) = COLUMNS.iter().zip(r.present).find(|(c, here)| c.group == Group::Required && !here) {
+            return Err(r.err(None, ErrorKind::MissingColumn(c.0.name)));
         }
         Ok(r)
     }
@@ -595,7 +617,7 @@ impl<R: BufRead> Reader<R> {
 
     /// True when the header has every reference column.
     pub fn has_reference(&self) -> bool {
-        REFERENCE.iter().all(|c| self.has_column(c))
+        COLUMNS.iter().zip(self.present).all(|(c, here)| here || c.group != Group::Reference)
     }
 
     /// The file named in errors.
@@ -721,13 +743,14 @@ impl<R: BufRead> Reader<R> {
         // Trailing empty cells of optional columns may be left out (CSV writers drop them;
         // the real recording in `data/real/` does): they read as empty. Anything else with a
         // cell count other than the header's is an error.
-        if bounds.len() < self.fields.len() && !self.line_ended {
-            return Err(self.err(None, ErrorKind::CutOff { expected: self.fields.len(), got: bounds.len() }));
+        let expected = self.slots.len();
+        if bounds.len() < expected && !self.line_ended {
+            return Err(self.err(None, ErrorKind::CutOff { expected, got: bounds.len() }));
         }
-        let short_ok = bounds.len() < self.fields.len()
-            && self.fields[bounds.len()..].iter().all(|f| flag_index(*f).is_none_or(|i| i > 4));
-        if bounds.len() != self.fields.len() && !short_ok {
-            return Err(self.err(None, ErrorKind::CellCount { expected: self.fields.len(), got: bounds.len() }));
+        let required = |s: &Slot| matches!(s, Slot::Defined(c) if COLUMNS[*c].group == Group::Required);
+        let short_ok = bounds.len() < expected && !self.slots[bounds.len()..].iter().any(required);
+        if bounds.len() != expected && !short_ok {
+            return Err(self.err(None, ErrorKind::CellCount { expected, got: bounds.len() }));
         }
         row.line = self.line_no;
         row.clear_reference();
@@ -735,20 +758,28 @@ impl<R: BufRead> Reader<R> {
         row.power_s = None;
         let mut pos_buf = row.pos.take();
         row.extra.resize(self.extra.len(), String::new());
-        for (f, _) in self.fields.iter().zip(0..).skip(bounds.len()) {
-            if let Field::Extra(i) = f {
+        for slot in &self.slots[bounds.len().min(expected)..] {
+            if let Slot::Extra(i) = slot {
                 row.extra[*i].clear();
             }
         }
         let mut pos_set = false;
-        for (p, (&(a, b), &field)) in bounds.iter().zip(&self.fields).enumerate() {
+        for (p, (&(a, b), &slot)) in bounds.iter().zip(&self.slots).enumerate() {
             let cell = &cells[a..b];
+            let c = match slot {
+                Slot::Defined(c) => &COLUMNS[c],
+                Slot::Extra(i) => {
+                    row.extra[i].clear();
+                    row.extra[i].push_str(cell);
+                    continue;
+                }
+            };
             let num = |required: bool| -> Result<Option<f64>, Error> {
                 if cell.is_empty() {
                     return if required { Err(self.err(Some(p), ErrorKind::EmptyRequired)) } else { Ok(None) };
                 }
                 match cell.parse::<f64>() {
-                    Ok(v) if v.is_finite() => match field_limit(field) {
+                    Ok(v) if v.is_finite() => match c.limit {
                         Some(limit) if !limit.contains(v) => {
                             Err(self.err(Some(p), ErrorKind::OutOfRange { value: cell.to_string(), limit }))
                         }
@@ -757,7 +788,7 @@ impl<R: BufRead> Reader<R> {
                     _ => Err(self.err(Some(p), ErrorKind::NotANumber(cell.to_string()))),
                 }
             };
-            match field {
+            match c.field {
                 Field::T => row.t_s = num(true)?.unwrap_or_default(),
                 Field::U(i) => row.u_v[i] = num(true)?.unwrap_or_default(),
                 Field::Temp => row.temp_c = num(true)?.unwrap_or_default(),
@@ -786,10 +817,6 @@ impl<R: BufRead> Reader<R> {
                         pos_set = true;
                     }
                 }
-                Field::Extra(i) => {
-                    row.extra[i].clear();
-                    row.extra[i].push_str(cell);
-                }
             }
         }
         if !pos_set {
@@ -798,29 +825,12 @@ impl<R: BufRead> Reader<R> {
         if let Some(prev) = self.prev_t
             && !(row.t_s > prev)
         {
-            let p = self.fields.iter().position(|f| *f == Field::T);
+            let p = self.slots.iter().position(|s| matches!(s, Slot::Defined(c) if COLUMNS[*c].field == Field::T));
             return Err(self.err(p, ErrorKind::TimeNotIncreasing { previous: prev, this: row.t_s }));
         }
         self.prev_t = Some(row.t_s);
         Ok(())
     }
-}
-
-fn flag_index(f: Field) -> Option<usize> {
-    Some(match f {
-        Field::T => 0,
-        Field::U(i) => 1 + i,
-        Field::Temp => 4,
-        Field::F(i) => 5 + i,
-        Field::VibKind => 8,
-        Field::Vib(i) => 9 + i,
-        Field::VibHz => 12,
-        Field::VibBw => 13,
-        Field::Chamber => 14,
-        Field::Pos => 15,
-        Field::Power => 16,
-        Field::Extra(_) => return None,
-    })
 }
 
 impl<R: BufRead> Iterator for Reader<R> {
@@ -857,32 +867,35 @@ impl Columns {
         Columns { reference: true, chamber: true, pos: true, power: true, extra: Vec::new() }
     }
 
+    /// True when the columns of `group` are written.
+    pub fn has(&self, group: Group) -> bool {
+        match group {
+            Group::Required => true,
+            Group::Reference => self.reference,
+            Group::Chamber => self.chamber,
+            Group::Pos => self.pos,
+            Group::Power => self.power,
+        }
+    }
+
+    /// The defined columns written, in the order the writer uses.
+    fn defined(&self) -> impl Iterator<Item = &'static ColumnDef> + '_ {
+        COLUMNS.iter().filter(|c| self.has(c.group))
+    }
+
     /// The header names in the order the writer uses.
     pub fn names(&self) -> Vec<String> {
-        let mut v: Vec<String> = REQUIRED.iter().map(|s| s.to_string()).collect();
-        if self.reference {
-            v.extend(REFERENCE.iter().map(|s| s.to_string()));
-        }
-        if self.chamber {
-            v.push(col::CHAMBER_C.into());
-        }
-        if self.pos {
-            v.push(col::POS.into());
-        }
-        if self.power {
-            v.push(col::POWER_S.into());
-        }
-        v.extend(self.extra.iter().cloned());
-        v
+        self.defined().map(|c| c.name.to_string()).chain(self.extra.iter().cloned()).collect()
     }
 
     /// The columns a reader's file has (for copying a recording).
     pub fn of_reader<R>(r: &Reader<R>) -> Self {
+        let any = |g: Group| COLUMNS.iter().zip(r.present).any(|(c, here)| here && c.group == g);
         Columns {
-            reference: REFERENCE.iter().any(|c| r.header.iter().any(|h| h == c)),
-            chamber: r.has[14],
-            pos: r.has[15],
-            power: r.has[16],
+            reference: any(Group::Reference),
+            chamber: any(Group::Chamber),
+            pos: any(Group::Pos),
+            power: any(Group::Power),
             extra: r.extra.clone(),
         }
     }
@@ -925,7 +938,7 @@ impl<W: Write> Writer<W> {
             w.flush_line()?;
         }
         for (i, n) in w.columns.extra.iter().enumerate() {
-            if n.is_empty() || field_of(n).is_some() || w.columns.extra[..i].contains(n) || n.contains(['\n', '\r']) {
+            if n.is_empty() || column(n).is_some() || w.columns.extra[..i].contains(n) || n.contains(['\n', '\r']) {
                 return Err(w.err(None, ErrorKind::Unwritable(format!("extra column name {n:?}"))));
             }
         }
@@ -958,27 +971,23 @@ impl<W: Write> Writer<W> {
         Ok(())
     }
 
-    fn num(&mut self, name: &'static str, v: f64) -> Result<(), Error> {
+    fn num(&mut self, c: &ColumnDef, v: f64) -> Result<(), Error> {
         if !v.is_finite() {
-            return Err(self.err(Some(name), ErrorKind::Unwritable(format!("non-finite value {v}"))));
+            return Err(self.err(Some(c.name), ErrorKind::Unwritable(format!("non-finite value {v}"))));
         }
-        if let Some(limit) = limit_of(name)
+        if let Some(limit) = c.limit
             && !limit.contains(v)
         {
-            return Err(self.err(Some(name), ErrorKind::OutOfRange { value: v.to_string(), limit }));
+            return Err(self.err(Some(c.name), ErrorKind::OutOfRange { value: v.to_string(), limit }));
         }
-        self.line.push(b',');
         self.line.extend_from_slice(self.ryu.format_finite(v).as_bytes());
         Ok(())
     }
 
-    fn opt(&mut self, name: &'static str, v: Option<f64>) -> Result<(), Error> {
+    fn opt(&mut self, c: &ColumnDef, v: Option<f64>) -> Result<(), Error> {
         match v {
-            Some(v) => self.num(name, v),
-            None => {
-                self.line.push(b',');
-                Ok(())
-            }
+            Some(v) => self.num(c, v),
+            None => Ok(()),
         }
     }
 
@@ -993,41 +1002,38 @@ impl<W: Write> Writer<W> {
             return Err(self.err(Some(col::T_S), ErrorKind::TimeNotIncreasing { previous: prev, this: row.t_s }));
         }
         self.line.clear();
-        self.line.extend_from_slice(self.ryu.format_finite(row.t_s).as_bytes());
-        self.num(col::UX_V, row.u_v[0])?;
-        self.num(col::UY_V, row.u_v[1])?;
-        self.num(col::UZ_V, row.u_v[2])?;
-        self.num(col::TEMP_C, row.temp_c)?;
-        if self.columns.reference {
-            self.opt(col::FX_G, row.f_g[0])?;
-            self.opt(col::FY_G, row.f_g[1])?;
-            self.opt(col::FZ_G, row.f_g[2])?;
-            self.line.push(b',');
-            if let Some(k) = row.vib_kind {
-                self.line.extend_from_slice(k.as_str().as_bytes());
+        for c in &COLUMNS {
+            if !self.columns.has(c.group) {
+                continue;
             }
-            self.opt(col::VIB_X_G, row.vib_g[0])?;
-            self.opt(col::VIB_Y_G, row.vib_g[1])?;
-            self.opt(col::VIB_Z_G, row.vib_g[2])?;
-            self.opt(col::VIB_HZ, row.vib_hz)?;
-            self.opt(col::VIB_BW_HZ, row.vib_bw_hz)?;
-        }
-        if self.columns.chamber {
-            self.opt(col::CHAMBER_C, row.chamber_c)?;
-        }
-        if self.columns.pos {
-            self.line.push(b',');
-            if let Some(p) = &row.pos {
-                if p.contains(['\n', '\r']) {
-                    return Err(
-                        self.err(Some(col::POS), ErrorKind::Unwritable(format!("cell with a line break: {p:?}")))
-                    );
+            if c.field != Field::T {
+                self.line.push(b',');
+            }
+            match c.field {
+                Field::T => self.num(c, row.t_s)?,
+                Field::U(i) => self.num(c, row.u_v[i])?,
+                Field::Temp => self.num(c, row.temp_c)?,
+                Field::F(i) => self.opt(c, row.f_g[i])?,
+                Field::VibKind => {
+                    if let Some(k) = row.vib_kind {
+                        self.line.extend_from_slice(k.as_str().as_bytes());
+                    }
                 }
-                push_text(&mut self.line, p);
+                Field::Vib(i) => self.opt(c, row.vib_g[i])?,
+                Field::VibHz => self.opt(c, row.vib_hz)?,
+                Field::VibBw => self.opt(c, row.vib_bw_hz)?,
+                Field::Chamber => self.opt(c, row.chamber_c)?,
+                Field::Pos => {
+                    if let Some(p) = &row.pos {
+                        if p.contains(['\n', '\r']) {
+                            return Err(self
+                                .err(Some(col::POS), ErrorKind::Unwritable(format!("cell with a line break: {p:?}"))));
+                        }
+                        push_text(&mut self.line, p);
+                    }
+                }
+                Field::Power => self.opt(c, row.power_s)?,
             }
-        }
-        if self.columns.power {
-            self.opt(col::POWER_S, row.power_s)?;
         }
         for i in 0..self.columns.extra.len() {
             self.line.push(b',');
