@@ -1,8 +1,10 @@
 //! Tables of the 12 constants measured at several temperatures (the form of
 //! `data/paper-constants.csv`: `temp_C`, `Kxx` … `Kzz`, `U0x` … `U0z`, `#` comments), read
-//! with errors that name the file, line and column.
+//! through [`Table`] (the recordings' tokenizer and caps) with errors that name the file, line
+//! and column.
 
-use anyhow::{Context, anyhow, bail};
+use crate::recording::Table;
+use anyhow::bail;
 use bins_comp::Constants;
 use std::path::Path;
 
@@ -13,41 +15,26 @@ pub const U0_NAMES: [&str; 3] = ["U0x", "U0y", "U0z"];
 
 /// Reads a constants table: (temperature [°C], constants) per data row, in file order.
 pub fn read(path: &Path) -> anyhow::Result<Vec<(f64, Constants<f64>)>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
-    parse(&text).map_err(|e| anyhow!("{}: {e}", path.display()))
+    from_table(&Table::read(path)?)
 }
 
 /// Parses the text of a constants table (errors name the line and column).
 pub fn parse(text: &str) -> anyhow::Result<Vec<(f64, Constants<f64>)>> {
-    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim_start().starts_with('#') && !l.trim().is_empty());
-    let (_, header) = lines.next().ok_or_else(|| anyhow!("no header row"))?;
-    let header: Vec<&str> = header.split(',').map(str::trim).collect();
-    let col = |name: &str| -> anyhow::Result<usize> {
-        header.iter().position(|h| *h == name).ok_or_else(|| anyhow!("missing column `{name}`"))
-    };
-    let t_col = col("temp_C")?;
+    from_table(&Table::from_reader(text.as_bytes(), "constants table")?)
+}
+
+fn from_table(table: &Table) -> anyhow::Result<Vec<(f64, Constants<f64>)>> {
+    let t_col = table.column("temp_C")?;
     let mut k_cols = [[0usize; 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
-            k_cols[i][j] = col(K_NAMES[i][j])?;
+            k_cols[i][j] = table.column(K_NAMES[i][j])?;
         }
     }
-    let u0_cols = [col(U0_NAMES[0])?, col(U0_NAMES[1])?, col(U0_NAMES[2])?];
+    let u0_cols = [table.column(U0_NAMES[0])?, table.column(U0_NAMES[1])?, table.column(U0_NAMES[2])?];
     let mut out: Vec<(f64, Constants<f64>)> = Vec::new();
-    for (n, line) in lines {
-        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        if cells.len() != header.len() {
-            bail!("line {}: {} cells, the header has {}", n + 1, cells.len(), header.len());
-        }
-        let num = |c: usize| -> anyhow::Result<f64> {
-            let v: f64 = cells[c]
-                .parse()
-                .map_err(|_| anyhow!("line {}, column `{}`: `{}` is not a number", n + 1, header[c], cells[c]))?;
-            if !v.is_finite() {
-                bail!("line {}, column `{}`: not finite", n + 1, header[c]);
-            }
-            Ok(v)
-        };
+    for (line, cells) in &table.rows {
+        let num = |c: usize| table.number(*line, cells, c);
         let mut c = Constants { k_v_per_g: [[0.0; 3]; 3], u0_v: [0.0; 3] };
         for i in 0..3 {
             c.u0_v[i] = num(u0_cols[i])?;
@@ -57,12 +44,12 @@ pub fn parse(text: &str) -> anyhow::Result<Vec<(f64, Constants<f64>)>> {
         }
         let t = num(t_col)?;
         if out.iter().any(|(u, _)| *u == t) {
-            bail!("line {}: temperature {t} °C appears twice", n + 1);
+            bail!("{}:{line}: temperature {t} °C appears twice", table.file.display());
         }
         out.push((t, c));
     }
     if out.is_empty() {
-        bail!("no data rows");
+        bail!("{}: no data rows", table.file.display());
     }
     Ok(out)
 }

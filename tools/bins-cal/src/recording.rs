@@ -310,6 +310,8 @@ pub enum ErrorKind {
     NoHeader,
     /// A required column is not in the header.
     MissingColumn(&'static str),
+    /// A column a table needs is not in its header.
+    NoColumn(String),
     /// A header name appears twice.
     DuplicateColumn(String),
     /// An empty header name.
@@ -392,6 +394,7 @@ impl fmt::Display for Error {
             ErrorKind::Io(e) => write!(f, "{e}"),
             ErrorKind::NoHeader => write!(f, "no header row (recording format v1 needs one)"),
             ErrorKind::MissingColumn(c) => write!(f, "required column `{c}` missing from the header"),
+            ErrorKind::NoColumn(c) => write!(f, "missing column `{c}` in the header"),
             ErrorKind::DuplicateColumn(c) => write!(f, "column `{c}` appears twice in the header"),
             ErrorKind::EmptyColumnName => write!(f, "empty column name in the header"),
             ErrorKind::CellCount { expected, got } => write!(f, "{got} cells, the header has {expected}"),
@@ -492,6 +495,35 @@ fn split_line(line: &str, buf: &mut String, bounds: &mut Vec<(usize, usize)>) ->
             return Err(ErrorKind::TooManyCells);
         }
         i += 1; // the comma
+    }
+}
+
+/// Reads the next physical line of `src` into `raw`, line break included (empty at the end of
+/// `src`). A line longer than [`MAX_LINE_BYTES`] is an error as soon as that many bytes are read.
+fn read_line(src: &mut impl BufRead, raw: &mut Vec<u8>) -> Result<(), ErrorKind> {
+    raw.clear();
+    loop {
+        let buf = match src.fill_buf() {
+            Ok(buf) => buf,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(ErrorKind::Io(e.to_string())),
+        };
+        if buf.is_empty() {
+            return Ok(());
+        }
+        let (take, ended) = match memchr::memchr(b'\n', buf) {
+            Some(i) => (i + 1, true),
+            None => (buf.len(), false),
+        };
+        // The line break and a carriage return before it are not counted.
+        if raw.len() + take > MAX_LINE_BYTES + 2 {
+            return Err(ErrorKind::LineTooLong);
+        }
+        raw.extend_from_slice(&buf[..take]);
+        src.consume(take);
+        if ended {
+            return Ok(());
+        }
     }
 }
 
@@ -642,33 +674,9 @@ impl<R: BufRead> Reader<R> {
     /// Reads the next physical line into `raw` without its line ending; false at the end. A
     /// line longer than [`MAX_LINE_BYTES`] is an error as soon as that many bytes are read.
     fn next_line(&mut self) -> Result<bool, Error> {
-        self.raw.clear();
-        loop {
-            let buf = match self.src.fill_buf() {
-                Ok(buf) => buf,
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
-                Err(e) => {
-                    self.line_no += 1;
-                    return Err(self.err(None, ErrorKind::Io(e.to_string())));
-                }
-            };
-            if buf.is_empty() {
-                break;
-            }
-            let (take, ended) = match memchr::memchr(b'\n', buf) {
-                Some(i) => (i + 1, true),
-                None => (buf.len(), false),
-            };
-            // The line break and a carriage return before it are not counted.
-            if self.raw.len() + take > MAX_LINE_BYTES + 2 {
-                self.line_no += 1;
-                return Err(self.err(None, ErrorKind::LineTooLong));
-            }
-            self.raw.extend_from_slice(&buf[..take]);
-            self.src.consume(take);
-            if ended {
-                break;
-            }
+        if let Err(kind) = read_line(&mut self.src, &mut self.raw) {
+            self.line_no += 1;
+            return Err(self.err(None, kind));
         }
         if self.raw.is_empty() {
             return Ok(false);
@@ -1084,6 +1092,89 @@ fn push_text(line: &mut Vec<u8>, s: &str) {
         line.push(b'"');
     } else {
         line.extend_from_slice(s.as_bytes());
+    }
+}
+
+/// A small CSV table that is not a recording (a constants table, a coefficient table, a
+/// replay's output), read by the same line reader, tokenizer and caps as recordings: `#`
+/// comment lines and blank lines are skipped, the first other line is the header, every
+/// further line a row with as many cells as the header. Columns are found by header name;
+/// errors name the file, the line and the column.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Table {
+    /// The file named in errors.
+    pub file: PathBuf,
+    /// The header names in file order.
+    pub header: Vec<String>,
+    /// The rows: line number (1-based) and cells (trimmed, unquoted).
+    pub rows: Vec<(u64, Vec<String>)>,
+}
+
+impl Table {
+    /// Reads the table in the file `path`.
+    pub fn read(path: &Path) -> Result<Table, Error> {
+        let f = File::open(path).map_err(|e| io_error(path, e))?;
+        Table::from_reader(BufReader::new(f), path)
+    }
+
+    /// Reads a table from `src`; `name` is the file named in errors.
+    pub fn from_reader(mut src: impl BufRead, name: impl AsRef<Path>) -> Result<Table, Error> {
+        let mut t = Table { file: name.as_ref().to_path_buf(), header: Vec::new(), rows: Vec::new() };
+        let (mut raw, mut cells, mut bounds) = (Vec::new(), String::new(), Vec::new());
+        let mut line_no = 0;
+        let mut header = true;
+        loop {
+            line_no += 1;
+            let at = |kind| Error { file: t.file.clone(), line: line_no, column: None, kind };
+            read_line(&mut src, &mut raw).map_err(at)?;
+            if raw.is_empty() {
+                break;
+            }
+            let text = std::str::from_utf8(&raw).map_err(|_| at(ErrorKind::NotUtf8))?;
+            let text = text.strip_prefix('\u{feff}').unwrap_or(text).trim_end_matches(['\n', '\r']);
+            if text.trim_start().starts_with('#') || text.trim().is_empty() {
+                continue;
+            }
+            split_line(text, &mut cells, &mut bounds).map_err(at)?;
+            let row: Vec<String> = bounds.iter().map(|&(a, b)| cells[a..b].to_string()).collect();
+            if header {
+                t.header = row;
+                header = false;
+            } else if row.len() != t.header.len() {
+                return Err(at(ErrorKind::CellCount { expected: t.header.len(), got: row.len() }));
+            } else {
+                t.rows.push((line_no, row));
+            }
+        }
+        if header {
+            return Err(Error { file: t.file, line: 0, column: None, kind: ErrorKind::NoHeader });
+        }
+        Ok(t)
+    }
+
+    /// The position of column `name` in the header.
+    pub fn column(&self, name: &str) -> Result<usize, Error> {
+        self.header.iter().position(|h| h == name).ok_or_else(|| Error {
+            file: self.file.clone(),
+            line: 0,
+            column: None,
+            kind: ErrorKind::NoColumn(name.to_string()),
+        })
+    }
+
+    /// An error at `line` in column position `col`.
+    pub fn error(&self, line: u64, col: usize, kind: ErrorKind) -> Error {
+        let column = Some((col + 1, self.header.get(col).cloned().unwrap_or_default()));
+        Error { file: self.file.clone(), line, column, kind }
+    }
+
+    /// The finite number in column `col` of the row at `line` with `cells`.
+    pub fn number(&self, line: u64, cells: &[String], col: usize) -> Result<f64, Error> {
+        let cell = cells.get(col).map_or("", String::as_str);
+        match cell.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err(self.error(line, col, ErrorKind::NotANumber(cell.to_string()))),
+        }
     }
 }
 

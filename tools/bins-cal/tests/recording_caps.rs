@@ -96,3 +96,28 @@ fn the_command_refuses_dev_zero_in_bounded_memory() {
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
     assert!(err.starts_with("bins-cal: error: /dev/zero:1: line longer than"), "{err}");
 }
+
+/// Tables that are not recordings (constants, coefficients) go through the same line reader,
+/// tokenizer and caps.
+#[test]
+fn a_table_is_read_by_header_name_with_the_same_tokenizer_and_caps() {
+    use bins_cal::recording::Table;
+    let text = "\u{feff}# comment\n\nb , a,\"c, d\"\n1, 2 ,\"x \"\"y\"\"\"\n# between\n3,4,5\n";
+    let t = Table::from_reader(Cursor::new(text.as_bytes()), "t.csv").unwrap();
+    assert_eq!(t.header, ["b", "a", "c, d"]);
+    assert_eq!(
+        t.rows,
+        [(4, vec!["1".into(), "2".into(), "x \"y\"".into()]), (6, vec!["3".into(), "4".into(), "5".into()])]
+    );
+    let a = t.column("a").unwrap();
+    assert_eq!(t.number(t.rows[1].0, &t.rows[1].1, a).unwrap(), 4.0);
+    let e = t.number(t.rows[0].0, &t.rows[0].1, 2).unwrap_err();
+    assert_eq!(e.to_string(), "t.csv:4: column 3 `c, d`: `x \"y\"` is not a finite number");
+    assert_eq!(t.column("z").unwrap_err().to_string(), "t.csv: missing column `z` in the header");
+    let e = Table::from_reader(Cursor::new("a,b\n1,2,3\n".as_bytes()), "t.csv").unwrap_err();
+    assert_eq!(e.to_string(), "t.csv:2: 3 cells, the header has 2");
+    let t0 = Instant::now();
+    let e = Table::read(Path::new("/dev/zero")).unwrap_err();
+    assert!(t0.elapsed() < Duration::from_secs(1));
+    assert_eq!((e.kind, e.line), (ErrorKind::LineTooLong, 1));
+}

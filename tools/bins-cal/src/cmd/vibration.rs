@@ -4,6 +4,7 @@
 //! (low, high); the table shows the VE at both ends.
 
 use anyhow::{Context, anyhow, bail};
+use bins_cal::recording::Table;
 use bins_comp::vibration::{AccelAxes, AccelVibration, ConversionFunction, Variant, VeTerms, ve_terms};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -70,10 +71,7 @@ pub struct RandomEntry {
 
 /// Reads conversion functions from a Table V1-style CSV (errors name file, line, column).
 pub fn read_cf(path: &Path) -> anyhow::Result<Vec<(f64, ConversionFunction<f64>)>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
-    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.starts_with('#') && !l.trim().is_empty());
-    let (_, header) = lines.next().ok_or_else(|| anyhow!("{}: no header row", path.display()))?;
-    let header: Vec<&str> = header.split(',').map(str::trim).collect();
+    let table = Table::read(path)?;
     // (column, scale to g units)
     let cols: [(&str, f64); 11] = [
         ("a0_mg", 1e-3),
@@ -88,24 +86,12 @@ pub fn read_cf(path: &Path) -> anyhow::Result<Vec<(f64, ConversionFunction<f64>)
         ("m31_ug_per_g2", 1e-6),
         ("m32_ug_per_g2", 1e-6),
     ];
-    let idx: Vec<usize> = cols
-        .iter()
-        .map(|(name, _)| {
-            header.iter().position(|h| h == name).ok_or_else(|| anyhow!("{}: missing column `{name}`", path.display()))
-        })
-        .collect::<anyhow::Result<_>>()?;
+    let idx: Vec<usize> = cols.iter().map(|(name, _)| table.column(name)).collect::<Result<_, _>>()?;
     let mut out = Vec::new();
-    for (n, line) in lines {
-        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        if cells.len() != header.len() {
-            bail!("{}: line {}: {} cells, the header has {}", path.display(), n + 1, cells.len(), header.len());
-        }
+    for (line, cells) in &table.rows {
         let mut v = [0.0; 11];
-        for (k, (&c, (name, scale))) in idx.iter().zip(cols.iter()).enumerate() {
-            let x: f64 = cells[c].parse().ok().filter(|x: &f64| x.is_finite()).ok_or_else(|| {
-                anyhow!("{}: line {}, column `{name}`: `{}` is not a number", path.display(), n + 1, cells[c])
-            })?;
-            v[k] = x * scale;
+        for (k, (&c, (_, scale))) in idx.iter().zip(cols.iter()).enumerate() {
+            v[k] = table.number(*line, cells, c)? * scale;
         }
         let cf = ConversionFunction {
             a0_g: v[0],
