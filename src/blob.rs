@@ -753,6 +753,14 @@ impl core::error::Error for BlobError {}
 /// Bit by bit, without a table: it runs once per blob at boot (at most [`MAX_BLOB_BYTES`]:
 /// about 130 000 instructions, under 1 ms on a Cortex-M4), so the 1 KiB of flash a table
 /// would take is not worth it.
+///
+/// ```
+/// use bins_comp::blob::crc32;
+///
+/// assert_eq!(crc32(b"123456789"), 0xCBF4_3926); // the standard check value
+/// assert_eq!(crc32(b""), 0);
+/// assert_ne!(crc32(b"123456788"), crc32(b"123456789"));
+/// ```
 #[cfg_attr(unstable_target, optimize(size))]
 pub fn crc32(bytes: &[u8]) -> u32 {
     let mut c = !0u32;
@@ -1507,6 +1515,30 @@ impl Writer<'_> {
 /// firmware would refuse, with the same error (offsets refer to the written blob). Polynomial
 /// coefficients above the order and knots beyond the count are not stored (they are zero
 /// after parsing).
+///
+/// # Example
+///
+/// Encode the paper's calibration, parse it back, and see one flipped bit refused.
+///
+/// ```
+/// use bins_comp::blob::{self, BlobError, Meta, MAX_BLOB_BYTES};
+/// use bins_comp::compensate::Method;
+/// use bins_comp::paper;
+///
+/// let params = paper::params(paper::two_range_model()?, Method::CoefficientCorrection);
+/// let meta = Meta { serial: "SN-0042", date: None, tool_version: "example 1" };
+/// let mut bytes = [0u8; MAX_BLOB_BYTES];
+/// let n = blob::encode(&params, &meta, &mut bytes)?;
+///
+/// let parsed = blob::parse(&bytes[..n])?;
+/// assert_eq!(parsed.params, params);
+/// assert_eq!(parsed.meta.serial, "SN-0042");
+/// assert!(parsed.vibration.is_none() && parsed.dynamics.is_none());
+///
+/// bytes[n / 2] ^= 0x10;
+/// assert!(matches!(blob::parse(&bytes[..n]), Err(BlobError::CrcMismatch { .. })));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn encode(params: &CalibrationParams, meta: &Meta<'_>, out: &mut [u8]) -> Result<usize, BlobError> {
     encode_with_vibration(params, None, meta, out)
 }

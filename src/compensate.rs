@@ -1,5 +1,6 @@
 //! The per-sample step: raw signals and the unit's temperature in, compensated acceleration
 //! and a status word out. Owns the two compensation methods of §5 and the status policy.
+//! The equations T(2), T(5)…T(8) it evaluates are written out in `docs/equations.md`.
 //!
 //! # Sign convention (§4 erratum)
 //!
@@ -555,6 +556,30 @@ impl<F: Float> Calibration<F> {
     /// specific force \[g\] and status. Allocation-free, panic-free, bounded time; the output is
     /// always finite (see the module's policies). Equal, bit for bit, to
     /// [`apply`](Self::apply) of [`at_temperature`](Self::at_temperature).
+    ///
+    /// # Example
+    ///
+    /// The paper's unit with its two-range model (T(4)/T(12)) and method 1, in `f32`: lying
+    /// in TP1 (1 g along z) at +70 °C, where its constants are those of Tables T1/T2.
+    ///
+    /// ```
+    /// use bins_comp::compensate::{Calibration, Method, Status};
+    /// use bins_comp::paper;
+    ///
+    /// let params = paper::params(paper::two_range_model()?, Method::CoefficientCorrection);
+    /// let cal = Calibration::<f32>::new(&params)?;
+    /// let u_v = paper::TABLE_CONSTANTS[2].signals_v(&[0.0, 0.0, 1.0]).map(|u| u as f32);
+    ///
+    /// let sample = cal.compensate(u_v, 70.0);
+    /// assert_eq!(sample.status, Status::OK);
+    /// let [x, y, z] = sample.accel_g;
+    /// assert!(x.abs() < 2e-6 && y.abs() < 2e-6 && (z - 1.0).abs() < 2e-6, "{x} {y} {z}");
+    ///
+    /// // The T0 constants alone are off by milli-g at +70 °C (U0_y moved by 2 mV).
+    /// let t0_only = Calibration::<f32>::new(&params.with_method(Method::Uncorrected))?;
+    /// assert!(t0_only.compensate(u_v, 70.0).accel_g[1].abs() > 1e-3);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     #[inline]
     pub fn compensate(&self, u_v: Vec3<F>, temp_c: F) -> Sample<F> {
         self.apply(u_v, &self.at_temperature(temp_c))

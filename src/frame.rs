@@ -265,6 +265,27 @@ impl Frame {
     }
 
     /// The frame in 24 bytes: sync, CRC and kind checked.
+    ///
+    /// # Example
+    ///
+    /// A compensated sample as the flight image sends it, and back.
+    ///
+    /// ```
+    /// use bins_comp::compensate::{Sample, Status};
+    /// use bins_comp::frame::{Frame, FrameError, SampleFrame};
+    ///
+    /// let sample = Sample { accel_g: [0.25, -1.0, 200.0], status: Status::TEMP_CLAMPED };
+    /// let frame = Frame::Sample(SampleFrame::from_sample(7, &sample));
+    /// let mut bytes = frame.encode();
+    ///
+    /// let Ok(Frame::Sample(back)) = Frame::decode(&bytes) else { panic!("not a sample frame") };
+    /// assert_eq!((back.seq, back.status), (7, Status::TEMP_CLAMPED));
+    /// assert_eq!(back.accel_g[0].to_num::<f32>(), 0.25);
+    /// assert_eq!(back.saturated, [false, false, true]); // 200 g is beyond the frame's range
+    ///
+    /// bytes[10] ^= 1;
+    /// assert!(matches!(Frame::decode(&bytes), Err(FrameError::Crc { .. })));
+    /// ```
     pub fn decode(b: &[u8; FRAME_BYTES]) -> Result<Frame, FrameError> {
         let [s0, s1, kind, flags, q0, q1, w @ .., t0, t1, t2, t3, c0, c1] = *b;
         if [s0, s1] != SYNC {

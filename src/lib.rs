@@ -9,8 +9,9 @@
 //! Cortex-M4F and as `f64` on the host, where it is the reference the `f32` results are tested
 //! against.
 //!
-//! Equation numbers refer to the project's physics specification: `T(n)` for the
-//! temperature paper, `V(n)` for the vibration paper.
+//! Equation numbers `T(n)` (temperature paper) and `V(n)` (vibration paper) each have a
+//! heading with the formula, units and errata in `docs/equations.md` of the repository
+//! (`docs/equations.md#t5` for T(5)).
 //!
 //! | module | owns |
 //! |---|---|

@@ -244,6 +244,30 @@ impl<F: Float> Pipeline<F> {
 
     /// The per-sample step: signals `u_v` \[V\] and temperature `temp_c` [°C] to specific
     /// force \[g\] with the VE for `source` subtracted, and status.
+    ///
+    /// # Example
+    ///
+    /// Without a VE model the step is the calibration's [`compensate`](Calibration::compensate),
+    /// bit for bit; the state is the caller's (the sampling interrupt holds both).
+    ///
+    /// ```
+    /// use bins_comp::compensate::Method;
+    /// use bins_comp::paper;
+    /// use bins_comp::pipeline::{Pipeline, PipelineState, VibrationSource};
+    /// use bins_comp::vibration::VibrationConfig;
+    ///
+    /// let cal = paper::calibration::<f32>(paper::two_range_model()?, Method::CoefficientCorrection)?;
+    /// let pipeline = Pipeline::new(cal, VibrationConfig::none());
+    /// let mut state = PipelineState::<f32, 64>::new();
+    /// let u_v = paper::TABLE_CONSTANTS[0].signals_v(&[0.6, -0.8, 0.0]).map(|u| u as f32);
+    ///
+    /// for _ in 0..3 {
+    ///     let sample = pipeline.step(&mut state, u_v, 20.0, VibrationSource::None);
+    ///     assert_eq!(sample, cal.compensate(u_v, 20.0));
+    ///     assert!((sample.accel_g[0] - 0.6).abs() < 2e-6 && (sample.accel_g[1] + 0.8).abs() < 2e-6);
+    /// }
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     #[inline]
     pub fn step<const W: usize>(
         &self,

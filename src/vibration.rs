@@ -1,5 +1,5 @@
-//! The vibration error (VE) of the three navigation accelerometers, §7–§8 of the physics
-//! specification: the nonlinear conversion function V(2), the vibration environments V(3)–V(6),
+//! The vibration error (VE) of the three navigation accelerometers (the vibration paper's
+//! equations, written out in `docs/equations.md`): the nonlinear conversion function V(2), the vibration environments V(3)–V(6),
 //! the VE for harmonic V(13) and broadband random V(14) vibration split into its additive and
 //! multiplicative components V(15)/V(16), in the paper's printed form and in an exact form, and
 //! the run-time vibration configuration (coefficients and flight-phase profiles) the per-sample

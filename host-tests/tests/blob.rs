@@ -737,7 +737,7 @@ fn error_messages_name_field_and_offset() {
 fn vibration_sections_equal_the_spec_and_parse_to_their_configuration() {
     let v = vib_params();
     let b = typical_vib();
-    assert_eq!((typical().len(), b.len()), (596, 1260), "sizes quoted in README.md");
+    assert_eq!((typical().len(), b.len()), (596, 1260), "sizes quoted in docs/measurements.md");
     assert_eq!(b, build(&spec_sections_vib(&paper_params(), Some(&v), SERIAL, Some((2024, 2, 29)), TOOL)));
     // Both sections written REQUIRED, in id order between the range and the serial.
     let ids: Vec<(u16, u16)> = table(&b).iter().map(|e| (e.0, e.1)).collect();

@@ -12,6 +12,7 @@
 //! painted below the current stack pointer before the heaviest case and scanned after it.
 #![no_std]
 #![no_main]
+#![allow(unsafe_code, reason = "volatile inputs, the painted stack read by address, the Cortex-M runtime's entry")]
 
 mod interrupts;
 

@@ -11,6 +11,7 @@
 //! least one record was read and none mismatched. A panic or a HardFault exits with failure.
 #![no_std]
 #![no_main]
+#![allow(unsafe_code, reason = "the Cortex-M runtime's entry and exception handlers, the CALIB region read by address")]
 
 use core::sync::atomic::{AtomicBool, Ordering};
 

@@ -25,6 +25,10 @@
 //! processor: the next boot frame on the link shows it.
 #![no_std]
 #![no_main]
+#![allow(
+    unsafe_code,
+    reason = "the Cortex-M runtime's entry and exception handlers, SysTick, the queue between the interrupt and `main`, the board's registers"
+)]
 #![cfg_attr(unstable_target, feature(optimize_attribute))]
 
 use core::cell::RefCell;

@@ -3,8 +3,8 @@
 //! names the VE source of its steps as a constant, `crate::VE_SOURCE`.
 //!
 //! Deadline: one tick period (1 ms at the default 1 kHz). The body takes one sample, runs one
-//! [`Tick::step`] (bounded: see `bench` in the README for the instructions it takes) and pushes
-//! the result into the consumer's queue without waiting. Whatever cannot be done in the slot
+//! [`Tick::step`] (bounded: the instructions it takes are in `docs/measurements.md`, benchmarks)
+//! and pushes the result into the consumer's queue without waiting. Whatever cannot be done in the slot
 //! is counted and flagged ([`Status::OVERRUN`](bins_comp::Status::OVERRUN)), never waited for.
 
 use bins_comp::replay::{Input, Tick, WINDOW};

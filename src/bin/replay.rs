@@ -16,6 +16,10 @@
 //! It exits with success iff every sample was processed with no overrun.
 #![no_std]
 #![no_main]
+#![allow(
+    unsafe_code,
+    reason = "the Cortex-M runtime's entry and exception handlers, SysTick, the queues between the interrupt and `main`"
+)]
 
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, Ordering};

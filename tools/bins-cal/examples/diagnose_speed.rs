@@ -6,6 +6,7 @@
 //! generating them is not timed. Exits non-zero when a budget is missed.
 //!
 //! `cargo run --release -p bins-cal --example diagnose_speed`
+#![allow(unsafe_code, reason = "libc: the thread's CPU time (`clock_gettime`), which std does not give")]
 
 use bins_cal::diagnose::{cases, diagnose};
 use std::path::Path;

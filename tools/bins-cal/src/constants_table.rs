@@ -1,8 +1,10 @@
 //! Tables of the 12 constants measured at several temperatures (the form of
 //! `data/paper-constants.csv`: `temp_C`, `Kxx` … `Kzz`, `U0x` … `U0z`, `#` comments), read
-//! with errors that name the file, line and column.
+//! through [`Table`] (the recordings' tokenizer and caps) with errors that name the file, line
+//! and column.
 
-use anyhow::{anyhow, bail};
+use crate::recording::Table;
+use anyhow::bail;
 use bins_comp::Constants;
 use std::path::Path;
 
@@ -23,41 +25,26 @@ pub const MAX_ABS_V: f64 = 1.0e3;
 
 /// Reads a constants table: (temperature [°C], constants) per data row, in file order.
 pub fn read(path: &Path) -> anyhow::Result<Vec<(f64, Constants<f64>)>> {
-    let text = crate::fsio::read_text(path)?;
-    parse(&text).map_err(|e| anyhow!("{}: {e}", path.display()))
+    from_table(&Table::read(path)?)
 }
 
 /// Parses the text of a constants table (errors name the line and column).
 pub fn parse(text: &str) -> anyhow::Result<Vec<(f64, Constants<f64>)>> {
-    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim_start().starts_with('#') && !l.trim().is_empty());
-    let (_, header) = lines.next().ok_or_else(|| anyhow!("no header row"))?;
-    let header: Vec<&str> = header.split(',').map(str::trim).collect();
-    let col = |name: &str| -> anyhow::Result<usize> {
-        header.iter().position(|h| *h == name).ok_or_else(|| anyhow!("missing column `{name}`"))
-    };
-    let t_col = col("temp_C")?;
+    from_table(&Table::from_reader(text.as_bytes(), "constants table")?)
+}
+
+fn from_table(table: &Table) -> anyhow::Result<Vec<(f64, Constants<f64>)>> {
+    let t_col = table.column("temp_C")?;
     let mut k_cols = [[0usize; 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
-            k_cols[i][j] = col(K_NAMES[i][j])?;
+            k_cols[i][j] = table.column(K_NAMES[i][j])?;
         }
     }
-    let u0_cols = [col(U0_NAMES[0])?, col(U0_NAMES[1])?, col(U0_NAMES[2])?];
+    let u0_cols = [table.column(U0_NAMES[0])?, table.column(U0_NAMES[1])?, table.column(U0_NAMES[2])?];
     let mut out: Vec<(f64, Constants<f64>)> = Vec::new();
-    for (n, line) in lines {
-        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        if cells.len() != header.len() {
-            bail!("line {}: {} cells, the header has {}", n + 1, cells.len(), header.len());
-        }
-        let num = |c: usize| -> anyhow::Result<f64> {
-            let v: f64 = cells[c]
-                .parse()
-                .map_err(|_| anyhow!("line {}, column `{}`: `{}` is not a number", n + 1, header[c], cells[c]))?;
-            if !v.is_finite() {
-                bail!("line {}, column `{}`: not finite", n + 1, header[c]);
-            }
-            Ok(v)
-        };
+    for (line, cells) in &table.rows {
+        let num = |c: usize| table.number(*line, cells, c);
         let mut c = Constants { k_v_per_g: [[0.0; 3]; 3], u0_v: [0.0; 3] };
         for i in 0..3 {
             c.u0_v[i] = num(u0_cols[i])?;
@@ -66,34 +53,34 @@ pub fn parse(text: &str) -> anyhow::Result<Vec<(f64, Constants<f64>)>> {
             }
         }
         let t = num(t_col)?;
+        let file = table.file.display();
         if !(MIN_TEMP_C..=MAX_TEMP_C).contains(&t) {
-            bail!("line {}, column `temp_C`: {t} °C is outside {MIN_TEMP_C} … {MAX_TEMP_C} °C", n + 1);
+            bail!("{file}:{line}, column `temp_C`: {t} °C is outside {MIN_TEMP_C} … {MAX_TEMP_C} °C");
         }
         for i in 0..3 {
             if !(c.k_v_per_g[i][i].abs() >= MIN_K_DIAG_V_PER_G) {
                 bail!(
-                    "line {}, column `{}`: {} V/g: the scale factor of an accelerometer must be at least {MIN_K_DIAG_V_PER_G} V/g in magnitude",
-                    n + 1,
+                    "{file}:{line}, column `{}`: {} V/g: the scale factor of an accelerometer must be at least {MIN_K_DIAG_V_PER_G} V/g in magnitude",
                     K_NAMES[i][i],
                     c.k_v_per_g[i][i]
                 );
             }
             for (j, k) in c.k_v_per_g[i].iter().enumerate() {
                 if k.abs() > MAX_ABS_V {
-                    bail!("line {}, column `{}`: {k} V/g is beyond ±{MAX_ABS_V}", n + 1, K_NAMES[i][j]);
+                    bail!("{file}:{line}, column `{}`: {k} V/g is beyond ±{MAX_ABS_V}", K_NAMES[i][j]);
                 }
             }
             if c.u0_v[i].abs() > MAX_ABS_V {
-                bail!("line {}, column `{}`: {} V is beyond ±{MAX_ABS_V}", n + 1, U0_NAMES[i], c.u0_v[i]);
+                bail!("{file}:{line}, column `{}`: {} V is beyond ±{MAX_ABS_V}", U0_NAMES[i], c.u0_v[i]);
             }
         }
         if out.iter().any(|(u, _)| *u == t) {
-            bail!("line {}: temperature {t} °C appears twice", n + 1);
+            bail!("{}:{line}: temperature {t} °C appears twice", table.file.display());
         }
         out.push((t, c));
     }
     if out.is_empty() {
-        bail!("no data rows");
+        bail!("{}: no data rows", table.file.display());
     }
     Ok(out)
 }

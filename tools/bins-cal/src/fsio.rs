@@ -1,5 +1,6 @@
 //! Output safety (`docs/output-safety.md`): writing outputs so that nothing is ever
 //! half-written, nothing is left behind and no input is ever written over.
+#![allow(unsafe_code, reason = "libc: `kill(pid, 0)` to find dead runs, the signals' dispositions")]
 //!
 //! - The data goes to a temporary file `.NAME.tmp-PID` in the destination's directory, is
 //!   flushed to disk, and is renamed over the destination ([`write_atomic`], [`AtomicFile`]).
@@ -396,59 +397,48 @@ impl Drop for ScratchDir {
 
 /// Removes the registered temporary files when the process receives SIGINT, SIGTERM or SIGHUP,
 /// then ends it by that signal (its parent sees the usual status, 130 for SIGINT, 143 for
-/// SIGTERM). The signals are blocked in the calling thread, and so in every thread it starts
-/// later; call it first in `main`. A signal the process was started with ignored (`nohup`)
-/// stays ignored.
+/// SIGTERM). The signals are taken by `signal-hook` (its handler only writes to a pipe) and
+/// read by a thread of their own, which holds the list of temporary files from then on, so no
+/// temporary file is created or renamed after the signal is handled. Call it first in `main`:
+/// the signals are registered when it returns. A signal the process was started with ignored
+/// (`nohup`) stays ignored.
 #[cfg(unix)]
 pub fn remove_temporaries_on_signals() {
-    // SAFETY: `sigset_t` is plain data, initialised by `sigemptyset` before any other use;
-    // `signal(s, SIG_IGN)` followed by restoring the previous disposition only reads the
-    // disposition; `pthread_sigmask` changes this thread's mask. Nothing else runs yet.
-    let set = unsafe {
-        let mut set: libc::sigset_t = std::mem::zeroed();
-        libc::sigemptyset(&mut set);
-        let mut any = false;
-        for s in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
-            let previous = libc::signal(s, libc::SIG_IGN);
-            if previous != libc::SIG_IGN {
-                libc::signal(s, previous);
-                libc::sigaddset(&mut set, s);
-                any = true;
-            }
-        }
-        if !any || libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut()) != 0 {
-            return;
-        }
-        set
-    };
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let taken: Vec<libc::c_int> = [SIGINT, SIGTERM, SIGHUP].into_iter().filter(|&s| !ignored(s)).collect();
+    if taken.is_empty() {
+        return;
+    }
+    // The thread registers the signals and says so before it waits: without a thread nothing
+    // is registered, and the signals keep their default action.
+    let (registered, wait) = std::sync::mpsc::sync_channel(1);
     let spawned = std::thread::Builder::new().name("signals".into()).spawn(move || {
-        let mut sig: libc::c_int = 0;
-        // SAFETY: `set` is an initialised signal set, `sig` a valid out-pointer. It fails
-        // only for an invalid set; the signals then stay blocked (and the process running).
-        if unsafe { libc::sigwait(&set, &mut sig) } != 0 {
-            return;
-        }
+        let signals = signal_hook::iterator::Signals::new(&taken);
+        let _ = registered.send(());
+        let Ok(mut signals) = signals else { return };
+        let Some(sig) = signals.forever().next() else { return };
         // Held to the end: no temporary file is created or renamed from here on.
         let live = live();
         for p in live.iter() {
             let _ = std::fs::remove_file(p);
         }
-        // SAFETY: default disposition, unblocked in this thread only, then raised in this
-        // thread: the process ends by `sig` as if it had not been handled.
-        unsafe {
-            let mut one: libc::sigset_t = std::mem::zeroed();
-            libc::sigemptyset(&mut one);
-            libc::sigaddset(&mut one, sig);
-            libc::signal(sig, libc::SIG_DFL);
-            libc::pthread_sigmask(libc::SIG_UNBLOCK, &one, std::ptr::null_mut());
-            libc::raise(sig);
-        }
+        // The default action of `sig`: the process ends by it as if it had not been handled.
+        let _ = signal_hook::low_level::emulate_default_handler(sig);
         std::process::exit(128 + sig);
     });
-    if spawned.is_err() {
-        // No thread to take them: unblock, the signals keep their default action.
-        // SAFETY: as above, this thread's mask only.
-        unsafe { libc::pthread_sigmask(libc::SIG_UNBLOCK, &set, std::ptr::null_mut()) };
+    if spawned.is_ok() {
+        let _ = wait.recv();
+    }
+}
+
+/// True when signal `sig` is ignored (`SIG_IGN`, as `nohup` leaves SIGHUP).
+#[cfg(unix)]
+fn ignored(sig: libc::c_int) -> bool {
+    // SAFETY: `sigaction` with a null new action only reads the current disposition into
+    // `old`, a plain-data struct it fully writes on success.
+    unsafe {
+        let mut old: libc::sigaction = std::mem::zeroed();
+        libc::sigaction(sig, std::ptr::null(), &mut old) == 0 && old.sa_sigaction == libc::SIG_IGN
     }
 }
 

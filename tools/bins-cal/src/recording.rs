@@ -27,6 +27,14 @@ use std::fs::File;
 use std::io::{self, BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 
+/// Longest line the reader accepts \[B\], line break excluded. A recording's row is a few
+/// hundred bytes; a longer line is not a recording (a binary file, `/dev/zero`, a file without
+/// line breaks) and is refused when this many bytes have been read, before it fills memory.
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+/// Most cells a line may have. The format defines 17 columns; a header or row with more cells
+/// than this is refused as soon as the count is passed.
+pub const MAX_COLUMNS: usize = 4096;
+
 /// Header names of the columns the format defines, in the order the writer puts them.
 pub mod col {
     /// Time since the start of the recording \[s\].
@@ -99,33 +107,72 @@ pub const ACCEL_LIMIT: Limit = Limit { min: -1000.0, max: 1000.0, unit: "g" };
 /// The physical range of column `name`, if the format gives it one (time, frequencies and
 /// power-on time have none beyond being finite; `t_s` must increase).
 pub fn limit_of(name: &str) -> Option<Limit> {
-    field_of(name).and_then(field_limit)
+    column(name).and_then(|c| COLUMNS[c].limit)
 }
 
-fn field_limit(f: Field) -> Option<Limit> {
-    match f {
-        Field::Temp | Field::Chamber => Some(TEMP_LIMIT),
-        Field::U(_) => Some(SIGNAL_LIMIT),
-        Field::F(_) | Field::Vib(_) => Some(ACCEL_LIMIT),
-        _ => None,
-    }
+/// Which columns a writer puts in a file together ([`Columns`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Group {
+    /// Always present: time, the three signals, the temperature.
+    Required,
+    /// What the rig applied: static force and vibration.
+    Reference,
+    /// `chamber_C`.
+    Chamber,
+    /// `pos`.
+    Pos,
+    /// `power_s`.
+    Power,
 }
 
-/// The five required columns.
-pub const REQUIRED: [&str; 5] = [col::T_S, col::UX_V, col::UY_V, col::UZ_V, col::TEMP_C];
+/// One column the format defines: its header name, its group, its physical range and where
+/// its cells go in a [`Row`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ColumnDef {
+    /// The header name.
+    pub name: &'static str,
+    /// Required, reference or one of the optional columns.
+    pub group: Group,
+    /// The physical range of its numbers, if it has one.
+    pub limit: Option<Limit>,
+    field: Field,
+}
 
-/// The reference columns (what the rig applied).
-pub const REFERENCE: [&str; 9] = [
-    col::FX_G,
-    col::FY_G,
-    col::FZ_G,
-    col::VIB_KIND,
-    col::VIB_X_G,
-    col::VIB_Y_G,
-    col::VIB_Z_G,
-    col::VIB_HZ,
-    col::VIB_BW_HZ,
+const fn def(name: &'static str, group: Group, limit: Option<Limit>, field: Field) -> ColumnDef {
+    ColumnDef { name, group, limit, field }
+}
+
+/// Every column the format defines, in the order the writer puts them: the one table the
+/// reader, the writer, [`limit_of`] and [`Columns`] read.
+pub const COLUMNS: [ColumnDef; 17] = [
+    def(col::T_S, Group::Required, None, Field::T),
+    def(col::UX_V, Group::Required, Some(SIGNAL_LIMIT), Field::U(0)),
+    def(col::UY_V, Group::Required, Some(SIGNAL_LIMIT), Field::U(1)),
+    def(col::UZ_V, Group::Required, Some(SIGNAL_LIMIT), Field::U(2)),
+    def(col::TEMP_C, Group::Required, Some(TEMP_LIMIT), Field::Temp),
+    def(col::FX_G, Group::Reference, Some(ACCEL_LIMIT), Field::F(0)),
+    def(col::FY_G, Group::Reference, Some(ACCEL_LIMIT), Field::F(1)),
+    def(col::FZ_G, Group::Reference, Some(ACCEL_LIMIT), Field::F(2)),
+    def(col::VIB_KIND, Group::Reference, None, Field::VibKind),
+    def(col::VIB_X_G, Group::Reference, Some(ACCEL_LIMIT), Field::Vib(0)),
+    def(col::VIB_Y_G, Group::Reference, Some(ACCEL_LIMIT), Field::Vib(1)),
+    def(col::VIB_Z_G, Group::Reference, Some(ACCEL_LIMIT), Field::Vib(2)),
+    def(col::VIB_HZ, Group::Reference, None, Field::VibHz),
+    def(col::VIB_BW_HZ, Group::Reference, None, Field::VibBw),
+    def(col::CHAMBER_C, Group::Chamber, Some(TEMP_LIMIT), Field::Chamber),
+    def(col::POS, Group::Pos, None, Field::Pos),
+    def(col::POWER_S, Group::Power, None, Field::Power),
 ];
+
+/// The position in [`COLUMNS`] of the column named `name`.
+fn column(name: &str) -> Option<usize> {
+    COLUMNS.iter().position(|c| c.name == name)
+}
+
+/// The names of the columns of `group`, in [`COLUMNS`] order.
+pub fn names_of(group: Group) -> impl Iterator<Item = &'static str> {
+    COLUMNS.iter().filter(move |c| c.group == group).map(|c| c.name)
+}
 
 /// `vib_kind`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -263,6 +310,8 @@ pub enum ErrorKind {
     NoHeader,
     /// A required column is not in the header.
     MissingColumn(&'static str),
+    /// A column a table needs is not in its header.
+    NoColumn(String),
     /// A header name appears twice.
     DuplicateColumn(String),
     /// An empty header name.
@@ -306,6 +355,10 @@ pub enum ErrorKind {
     },
     /// A line that is not UTF-8.
     NotUtf8,
+    /// A line longer than [`MAX_LINE_BYTES`].
+    LineTooLong,
+    /// A line with more cells than [`MAX_COLUMNS`].
+    TooManyCells,
     /// A quoted cell without its closing quote.
     UnterminatedQuote,
     /// The writer was given a value it cannot write (non-finite number, a comment or a cell
@@ -341,6 +394,7 @@ impl fmt::Display for Error {
             ErrorKind::Io(e) => write!(f, "{e}"),
             ErrorKind::NoHeader => write!(f, "no header row (recording format v1 needs one)"),
             ErrorKind::MissingColumn(c) => write!(f, "required column `{c}` missing from the header"),
+            ErrorKind::NoColumn(c) => write!(f, "missing column `{c}` in the header"),
             ErrorKind::DuplicateColumn(c) => write!(f, "column `{c}` appears twice in the header"),
             ErrorKind::EmptyColumnName => write!(f, "empty column name in the header"),
             ErrorKind::CellCount { expected, got } => write!(f, "{got} cells, the header has {expected}"),
@@ -361,6 +415,10 @@ impl fmt::Display for Error {
                 write!(f, "time {this} s does not increase (previous row {previous} s)")
             }
             ErrorKind::NotUtf8 => write!(f, "line is not UTF-8"),
+            ErrorKind::LineTooLong => {
+                write!(f, "line longer than {MAX_LINE_BYTES} bytes (not a recording: no line breaks, or binary data)")
+            }
+            ErrorKind::TooManyCells => write!(f, "more than {MAX_COLUMNS} cells in the line"),
             ErrorKind::UnterminatedQuote => write!(f, "quoted cell without a closing quote"),
             ErrorKind::Unwritable(s) => write!(f, "cannot write {s}"),
         }
@@ -369,7 +427,7 @@ impl fmt::Display for Error {
 
 impl std::error::Error for Error {}
 
-/// What a header position holds.
+/// Where a defined column's cells go in a [`Row`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Field {
     T,
@@ -383,30 +441,14 @@ enum Field {
     Chamber,
     Pos,
     Power,
-    Extra(usize),
 }
 
-fn field_of(name: &str) -> Option<Field> {
-    Some(match name {
-        col::T_S => Field::T,
-        col::UX_V => Field::U(0),
-        col::UY_V => Field::U(1),
-        col::UZ_V => Field::U(2),
-        col::TEMP_C => Field::Temp,
-        col::FX_G => Field::F(0),
-        col::FY_G => Field::F(1),
-        col::FZ_G => Field::F(2),
-        col::VIB_KIND => Field::VibKind,
-        col::VIB_X_G => Field::Vib(0),
-        col::VIB_Y_G => Field::Vib(1),
-        col::VIB_Z_G => Field::Vib(2),
-        col::VIB_HZ => Field::VibHz,
-        col::VIB_BW_HZ => Field::VibBw,
-        col::CHAMBER_C => Field::Chamber,
-        col::POS => Field::Pos,
-        col::POWER_S => Field::Power,
-        _ => return None,
-    })
+/// What a header position holds: a column of [`COLUMNS`] (by its position there) or the n-th
+/// extra column.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Slot {
+    Defined(usize),
+    Extra(usize),
 }
 
 /// Splits one CSV line into cells (RFC 4180 quoting within the line; a quoted cell cannot
@@ -449,7 +491,39 @@ fn split_line(line: &str, buf: &mut String, bounds: &mut Vec<(usize, usize)>) ->
         if i >= bytes.len() {
             return Ok(());
         }
+        if bounds.len() == MAX_COLUMNS {
+            return Err(ErrorKind::TooManyCells);
+        }
         i += 1; // the comma
+    }
+}
+
+/// Reads the next physical line of `src` into `raw`, line break included (empty at the end of
+/// `src`). A line longer than [`MAX_LINE_BYTES`] is an error as soon as that many bytes are read.
+fn read_line(src: &mut impl BufRead, raw: &mut Vec<u8>) -> Result<(), ErrorKind> {
+    raw.clear();
+    loop {
+        let buf = match src.fill_buf() {
+            Ok(buf) => buf,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(ErrorKind::Io(e.to_string())),
+        };
+        if buf.is_empty() {
+            return Ok(());
+        }
+        let (take, ended) = match memchr::memchr(b'\n', buf) {
+            Some(i) => (i + 1, true),
+            None => (buf.len(), false),
+        };
+        // The line break and a carriage return before it are not counted.
+        if raw.len() + take > MAX_LINE_BYTES + 2 {
+            return Err(ErrorKind::LineTooLong);
+        }
+        raw.extend_from_slice(&buf[..take]);
+        src.consume(take);
+        if ended {
+            return Ok(());
+        }
     }
 }
 
@@ -460,9 +534,10 @@ pub struct Reader<R> {
     line_no: u64,
     comments: Vec<String>,
     header: Vec<String>,
-    fields: Vec<Field>,
+    slots: Vec<Slot>,
     extra: Vec<String>,
-    has: [bool; 17],
+    /// Which of [`COLUMNS`] the header has.
+    present: [bool; COLUMNS.len()],
     raw: Vec<u8>,
     cells: String,
     bounds: Vec<(usize, usize)>,
@@ -496,9 +571,9 @@ impl<R: BufRead> Reader<R> {
             line_no: 0,
             comments: Vec::new(),
             header: Vec::new(),
-            fields: Vec::new(),
+            slots: Vec::new(),
             extra: Vec::new(),
-            has: [false; 17],
+            present: [false; COLUMNS.len()],
             raw: Vec::new(),
             cells: String::new(),
             bounds: Vec::new(),
@@ -533,23 +608,21 @@ impl<R: BufRead> Reader<R> {
                 r.header.push(name.clone());
                 return Err(r.err(Some(pos), ErrorKind::DuplicateColumn(name)));
             }
-            let field = match field_of(&name) {
-                Some(f) => f,
+            let slot = match column(&name) {
+                Some(c) => {
+                    r.present[c] = true;
+                    Slot::Defined(c)
+                }
                 None => {
                     r.extra.push(name.clone());
-                    Field::Extra(r.extra.len() - 1)
+                    Slot::Extra(r.extra.len() - 1)
                 }
             };
-            if let Some(i) = flag_index(field) {
-                r.has[i] = true;
-            }
-            r.fields.push(field);
+            r.slots.push(slot);
             r.header.push(name);
         }
-        for req in REQUIRED {
-            if !r.header.iter().any(|h| h == req) {
-                return Err(r.err(None, ErrorKind::MissingColumn(req)));
-            }
+        if let Some(c) = COLUMNS.iter().zip(r.present).find(|(c, here)| c.group == Group::Required && !here) {
+            return Err(r.err(None, ErrorKind::MissingColumn(c.0.name)));
         }
         Ok(r)
     }
@@ -576,7 +649,7 @@ impl<R: BufRead> Reader<R> {
 
     /// True when the header has every reference column.
     pub fn has_reference(&self) -> bool {
-        REFERENCE.iter().all(|c| self.has_column(c))
+        COLUMNS.iter().zip(self.present).all(|(c, here)| here || c.group != Group::Reference)
     }
 
     /// The file named in errors.
@@ -598,14 +671,14 @@ impl<R: BufRead> Reader<R> {
         }
     }
 
-    /// Reads the next physical line into `raw` without its line ending; false at the end.
+    /// Reads the next physical line into `raw` without its line ending; false at the end. A
+    /// line longer than [`MAX_LINE_BYTES`] is an error as soon as that many bytes are read.
     fn next_line(&mut self) -> Result<bool, Error> {
-        self.raw.clear();
-        let n = self.src.read_until(b'\n', &mut self.raw).map_err(|e| {
+        if let Err(kind) = read_line(&mut self.src, &mut self.raw) {
             self.line_no += 1;
-            self.err(None, ErrorKind::Io(e.to_string()))
-        })?;
-        if n == 0 {
+            return Err(self.err(None, kind));
+        }
+        if self.raw.is_empty() {
             return Ok(false);
         }
         self.line_no += 1;
@@ -678,13 +751,14 @@ impl<R: BufRead> Reader<R> {
         // Trailing empty cells of optional columns may be left out (CSV writers drop them;
         // the real recording in `data/real/` does): they read as empty. Anything else with a
         // cell count other than the header's is an error.
-        if bounds.len() < self.fields.len() && !self.line_ended {
-            return Err(self.err(None, ErrorKind::CutOff { expected: self.fields.len(), got: bounds.len() }));
+        let expected = self.slots.len();
+        if bounds.len() < expected && !self.line_ended {
+            return Err(self.err(None, ErrorKind::CutOff { expected, got: bounds.len() }));
         }
-        let short_ok = bounds.len() < self.fields.len()
-            && self.fields[bounds.len()..].iter().all(|f| flag_index(*f).is_none_or(|i| i > 4));
-        if bounds.len() != self.fields.len() && !short_ok {
-            return Err(self.err(None, ErrorKind::CellCount { expected: self.fields.len(), got: bounds.len() }));
+        let required = |s: &Slot| matches!(s, Slot::Defined(c) if COLUMNS[*c].group == Group::Required);
+        let short_ok = bounds.len() < expected && !self.slots[bounds.len()..].iter().any(required);
+        if bounds.len() != expected && !short_ok {
+            return Err(self.err(None, ErrorKind::CellCount { expected, got: bounds.len() }));
         }
         row.line = self.line_no;
         row.clear_reference();
@@ -692,20 +766,28 @@ impl<R: BufRead> Reader<R> {
         row.power_s = None;
         let mut pos_buf = row.pos.take();
         row.extra.resize(self.extra.len(), String::new());
-        for (f, _) in self.fields.iter().zip(0..).skip(bounds.len()) {
-            if let Field::Extra(i) = f {
+        for slot in &self.slots[bounds.len().min(expected)..] {
+            if let Slot::Extra(i) = slot {
                 row.extra[*i].clear();
             }
         }
         let mut pos_set = false;
-        for (p, (&(a, b), &field)) in bounds.iter().zip(&self.fields).enumerate() {
+        for (p, (&(a, b), &slot)) in bounds.iter().zip(&self.slots).enumerate() {
             let cell = &cells[a..b];
+            let c = match slot {
+                Slot::Defined(c) => &COLUMNS[c],
+                Slot::Extra(i) => {
+                    row.extra[i].clear();
+                    row.extra[i].push_str(cell);
+                    continue;
+                }
+            };
             let num = |required: bool| -> Result<Option<f64>, Error> {
                 if cell.is_empty() {
                     return if required { Err(self.err(Some(p), ErrorKind::EmptyRequired)) } else { Ok(None) };
                 }
                 match cell.parse::<f64>() {
-                    Ok(v) if v.is_finite() => match field_limit(field) {
+                    Ok(v) if v.is_finite() => match c.limit {
                         Some(limit) if !limit.contains(v) => {
                             Err(self.err(Some(p), ErrorKind::OutOfRange { value: cell.to_string(), limit }))
                         }
@@ -714,7 +796,7 @@ impl<R: BufRead> Reader<R> {
                     _ => Err(self.err(Some(p), ErrorKind::NotANumber(cell.to_string()))),
                 }
             };
-            match field {
+            match c.field {
                 Field::T => row.t_s = num(true)?.unwrap_or_default(),
                 Field::U(i) => row.u_v[i] = num(true)?.unwrap_or_default(),
                 Field::Temp => row.temp_c = num(true)?.unwrap_or_default(),
@@ -743,10 +825,6 @@ impl<R: BufRead> Reader<R> {
                         pos_set = true;
                     }
                 }
-                Field::Extra(i) => {
-                    row.extra[i].clear();
-                    row.extra[i].push_str(cell);
-                }
             }
         }
         if !pos_set {
@@ -755,29 +833,12 @@ impl<R: BufRead> Reader<R> {
         if let Some(prev) = self.prev_t
             && !(row.t_s > prev)
         {
-            let p = self.fields.iter().position(|f| *f == Field::T);
+            let p = self.slots.iter().position(|s| matches!(s, Slot::Defined(c) if COLUMNS[*c].field == Field::T));
             return Err(self.err(p, ErrorKind::TimeNotIncreasing { previous: prev, this: row.t_s }));
         }
         self.prev_t = Some(row.t_s);
         Ok(())
     }
-}
-
-fn flag_index(f: Field) -> Option<usize> {
-    Some(match f {
-        Field::T => 0,
-        Field::U(i) => 1 + i,
-        Field::Temp => 4,
-        Field::F(i) => 5 + i,
-        Field::VibKind => 8,
-        Field::Vib(i) => 9 + i,
-        Field::VibHz => 12,
-        Field::VibBw => 13,
-        Field::Chamber => 14,
-        Field::Pos => 15,
-        Field::Power => 16,
-        Field::Extra(_) => return None,
-    })
 }
 
 impl<R: BufRead> Iterator for Reader<R> {
@@ -814,32 +875,35 @@ impl Columns {
         Columns { reference: true, chamber: true, pos: true, power: true, extra: Vec::new() }
     }
 
+    /// True when the columns of `group` are written.
+    pub fn has(&self, group: Group) -> bool {
+        match group {
+            Group::Required => true,
+            Group::Reference => self.reference,
+            Group::Chamber => self.chamber,
+            Group::Pos => self.pos,
+            Group::Power => self.power,
+        }
+    }
+
+    /// The defined columns written, in the order the writer uses.
+    fn defined(&self) -> impl Iterator<Item = &'static ColumnDef> + '_ {
+        COLUMNS.iter().filter(|c| self.has(c.group))
+    }
+
     /// The header names in the order the writer uses.
     pub fn names(&self) -> Vec<String> {
-        let mut v: Vec<String> = REQUIRED.iter().map(|s| s.to_string()).collect();
-        if self.reference {
-            v.extend(REFERENCE.iter().map(|s| s.to_string()));
-        }
-        if self.chamber {
-            v.push(col::CHAMBER_C.into());
-        }
-        if self.pos {
-            v.push(col::POS.into());
-        }
-        if self.power {
-            v.push(col::POWER_S.into());
-        }
-        v.extend(self.extra.iter().cloned());
-        v
+        self.defined().map(|c| c.name.to_string()).chain(self.extra.iter().cloned()).collect()
     }
 
     /// The columns a reader's file has (for copying a recording).
     pub fn of_reader<R>(r: &Reader<R>) -> Self {
+        let any = |g: Group| COLUMNS.iter().zip(r.present).any(|(c, here)| here && c.group == g);
         Columns {
-            reference: REFERENCE.iter().any(|c| r.header.iter().any(|h| h == c)),
-            chamber: r.has[14],
-            pos: r.has[15],
-            power: r.has[16],
+            reference: any(Group::Reference),
+            chamber: any(Group::Chamber),
+            pos: any(Group::Pos),
+            power: any(Group::Power),
             extra: r.extra.clone(),
         }
     }
@@ -882,7 +946,7 @@ impl<W: Write> Writer<W> {
             w.flush_line()?;
         }
         for (i, n) in w.columns.extra.iter().enumerate() {
-            if n.is_empty() || field_of(n).is_some() || w.columns.extra[..i].contains(n) || n.contains(['\n', '\r']) {
+            if n.is_empty() || column(n).is_some() || w.columns.extra[..i].contains(n) || n.contains(['\n', '\r']) {
                 return Err(w.err(None, ErrorKind::Unwritable(format!("extra column name {n:?}"))));
             }
         }
@@ -915,27 +979,23 @@ impl<W: Write> Writer<W> {
         Ok(())
     }
 
-    fn num(&mut self, name: &'static str, v: f64) -> Result<(), Error> {
+    fn num(&mut self, c: &ColumnDef, v: f64) -> Result<(), Error> {
         if !v.is_finite() {
-            return Err(self.err(Some(name), ErrorKind::Unwritable(format!("non-finite value {v}"))));
+            return Err(self.err(Some(c.name), ErrorKind::Unwritable(format!("non-finite value {v}"))));
         }
-        if let Some(limit) = limit_of(name)
+        if let Some(limit) = c.limit
             && !limit.contains(v)
         {
-            return Err(self.err(Some(name), ErrorKind::OutOfRange { value: v.to_string(), limit }));
+            return Err(self.err(Some(c.name), ErrorKind::OutOfRange { value: v.to_string(), limit }));
         }
-        self.line.push(b',');
         self.line.extend_from_slice(self.ryu.format_finite(v).as_bytes());
         Ok(())
     }
 
-    fn opt(&mut self, name: &'static str, v: Option<f64>) -> Result<(), Error> {
+    fn opt(&mut self, c: &ColumnDef, v: Option<f64>) -> Result<(), Error> {
         match v {
-            Some(v) => self.num(name, v),
-            None => {
-                self.line.push(b',');
-                Ok(())
-            }
+            Some(v) => self.num(c, v),
+            None => Ok(()),
         }
     }
 
@@ -950,41 +1010,38 @@ impl<W: Write> Writer<W> {
             return Err(self.err(Some(col::T_S), ErrorKind::TimeNotIncreasing { previous: prev, this: row.t_s }));
         }
         self.line.clear();
-        self.line.extend_from_slice(self.ryu.format_finite(row.t_s).as_bytes());
-        self.num(col::UX_V, row.u_v[0])?;
-        self.num(col::UY_V, row.u_v[1])?;
-        self.num(col::UZ_V, row.u_v[2])?;
-        self.num(col::TEMP_C, row.temp_c)?;
-        if self.columns.reference {
-            self.opt(col::FX_G, row.f_g[0])?;
-            self.opt(col::FY_G, row.f_g[1])?;
-            self.opt(col::FZ_G, row.f_g[2])?;
-            self.line.push(b',');
-            if let Some(k) = row.vib_kind {
-                self.line.extend_from_slice(k.as_str().as_bytes());
+        for c in &COLUMNS {
+            if !self.columns.has(c.group) {
+                continue;
             }
-            self.opt(col::VIB_X_G, row.vib_g[0])?;
-            self.opt(col::VIB_Y_G, row.vib_g[1])?;
-            self.opt(col::VIB_Z_G, row.vib_g[2])?;
-            self.opt(col::VIB_HZ, row.vib_hz)?;
-            self.opt(col::VIB_BW_HZ, row.vib_bw_hz)?;
-        }
-        if self.columns.chamber {
-            self.opt(col::CHAMBER_C, row.chamber_c)?;
-        }
-        if self.columns.pos {
-            self.line.push(b',');
-            if let Some(p) = &row.pos {
-                if p.contains(['\n', '\r']) {
-                    return Err(
-                        self.err(Some(col::POS), ErrorKind::Unwritable(format!("cell with a line break: {p:?}")))
-                    );
+            if c.field != Field::T {
+                self.line.push(b',');
+            }
+            match c.field {
+                Field::T => self.num(c, row.t_s)?,
+                Field::U(i) => self.num(c, row.u_v[i])?,
+                Field::Temp => self.num(c, row.temp_c)?,
+                Field::F(i) => self.opt(c, row.f_g[i])?,
+                Field::VibKind => {
+                    if let Some(k) = row.vib_kind {
+                        self.line.extend_from_slice(k.as_str().as_bytes());
+                    }
                 }
-                push_text(&mut self.line, p);
+                Field::Vib(i) => self.opt(c, row.vib_g[i])?,
+                Field::VibHz => self.opt(c, row.vib_hz)?,
+                Field::VibBw => self.opt(c, row.vib_bw_hz)?,
+                Field::Chamber => self.opt(c, row.chamber_c)?,
+                Field::Pos => {
+                    if let Some(p) = &row.pos {
+                        if p.contains(['\n', '\r']) {
+                            return Err(self
+                                .err(Some(col::POS), ErrorKind::Unwritable(format!("cell with a line break: {p:?}"))));
+                        }
+                        push_text(&mut self.line, p);
+                    }
+                }
+                Field::Power => self.opt(c, row.power_s)?,
             }
-        }
-        if self.columns.power {
-            self.opt(col::POWER_S, row.power_s)?;
         }
         for i in 0..self.columns.extra.len() {
             self.line.push(b',');
@@ -1035,6 +1092,89 @@ fn push_text(line: &mut Vec<u8>, s: &str) {
         line.push(b'"');
     } else {
         line.extend_from_slice(s.as_bytes());
+    }
+}
+
+/// A small CSV table that is not a recording (a constants table, a coefficient table, a
+/// replay's output), read by the same line reader, tokenizer and caps as recordings: `#`
+/// comment lines and blank lines are skipped, the first other line is the header, every
+/// further line a row with as many cells as the header. Columns are found by header name;
+/// errors name the file, the line and the column.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Table {
+    /// The file named in errors.
+    pub file: PathBuf,
+    /// The header names in file order.
+    pub header: Vec<String>,
+    /// The rows: line number (1-based) and cells (trimmed, unquoted).
+    pub rows: Vec<(u64, Vec<String>)>,
+}
+
+impl Table {
+    /// Reads the table in the file `path`.
+    pub fn read(path: &Path) -> Result<Table, Error> {
+        let f = File::open(path).map_err(|e| io_error(path, e))?;
+        Table::from_reader(BufReader::new(f), path)
+    }
+
+    /// Reads a table from `src`; `name` is the file named in errors.
+    pub fn from_reader(mut src: impl BufRead, name: impl AsRef<Path>) -> Result<Table, Error> {
+        let mut t = Table { file: name.as_ref().to_path_buf(), header: Vec::new(), rows: Vec::new() };
+        let (mut raw, mut cells, mut bounds) = (Vec::new(), String::new(), Vec::new());
+        let mut line_no = 0;
+        let mut header = true;
+        loop {
+            line_no += 1;
+            let at = |kind| Error { file: t.file.clone(), line: line_no, column: None, kind };
+            read_line(&mut src, &mut raw).map_err(at)?;
+            if raw.is_empty() {
+                break;
+            }
+            let text = std::str::from_utf8(&raw).map_err(|_| at(ErrorKind::NotUtf8))?;
+            let text = text.strip_prefix('\u{feff}').unwrap_or(text).trim_end_matches(['\n', '\r']);
+            if text.trim_start().starts_with('#') || text.trim().is_empty() {
+                continue;
+            }
+            split_line(text, &mut cells, &mut bounds).map_err(at)?;
+            let row: Vec<String> = bounds.iter().map(|&(a, b)| cells[a..b].to_string()).collect();
+            if header {
+                t.header = row;
+                header = false;
+            } else if row.len() != t.header.len() {
+                return Err(at(ErrorKind::CellCount { expected: t.header.len(), got: row.len() }));
+            } else {
+                t.rows.push((line_no, row));
+            }
+        }
+        if header {
+            return Err(Error { file: t.file, line: 0, column: None, kind: ErrorKind::NoHeader });
+        }
+        Ok(t)
+    }
+
+    /// The position of column `name` in the header.
+    pub fn column(&self, name: &str) -> Result<usize, Error> {
+        self.header.iter().position(|h| h == name).ok_or_else(|| Error {
+            file: self.file.clone(),
+            line: 0,
+            column: None,
+            kind: ErrorKind::NoColumn(name.to_string()),
+        })
+    }
+
+    /// An error at `line` in column position `col`.
+    pub fn error(&self, line: u64, col: usize, kind: ErrorKind) -> Error {
+        let column = Some((col + 1, self.header.get(col).cloned().unwrap_or_default()));
+        Error { file: self.file.clone(), line, column, kind }
+    }
+
+    /// The finite number in column `col` of the row at `line` with `cells`.
+    pub fn number(&self, line: u64, cells: &[String], col: usize) -> Result<f64, Error> {
+        let cell = cells.get(col).map_or("", String::as_str);
+        match cell.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err(self.error(line, col, ErrorKind::NotANumber(cell.to_string()))),
+        }
     }
 }
 

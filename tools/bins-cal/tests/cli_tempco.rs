@@ -127,6 +127,6 @@ fn tempco_bad_inputs_are_one_line_errors() {
     let csv = std::fs::read_to_string(data("paper-constants.csv")).unwrap();
     fails_with(&[], Some(&csv.replace("Kzy", "Kzq")), "missing column `Kzy`");
     let bad_cell = csv.replacen("-0.55074263", "abc", 1);
-    fails_with(&[], Some(&bad_cell), "column `Kxx`: `abc` is not a number");
+    fails_with(&[], Some(&bad_cell), "c.csv:5: column 2 `Kxx`: `abc` is not a finite number");
     fails_with(&[], Some("temp_C,Kxx\n"), "missing column");
 }

@@ -3,6 +3,7 @@
 //! itself, which keeps them fixed — no panic, no input destroyed, no temporary file left after
 //! SIGINT/SIGTERM, and a one-line error naming the file for every bad input.
 #![cfg(unix)]
+#![allow(unsafe_code, reason = "libc: signals sent to the child and its SIGINT disposition before exec")]
 
 mod common;
 

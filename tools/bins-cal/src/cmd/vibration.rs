@@ -3,7 +3,12 @@
 //! variant (reproduces Tables V4/V5) or the exact one. Each environment entry gives ranges
 //! (low, high); the table shows the VE at both ends.
 
+<<<<<<< HEAD
 use anyhow::{anyhow, bail};
+=======
+use anyhow::{Context, anyhow, bail};
+use bins_cal::recording::Table;
+>>>>>>> wip-27
 use bins_comp::vibration::{AccelAxes, AccelVibration, ConversionFunction, Variant, VeTerms, ve_terms};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -82,10 +87,14 @@ pub const MAX_ENV_HZ: f64 = 1.0e6;
 
 /// Reads conversion functions from a Table V1-style CSV (errors name file, line, column).
 pub fn read_cf(path: &Path) -> anyhow::Result<Vec<(f64, ConversionFunction<f64>)>> {
+<<<<<<< HEAD
     let text = bins_cal::fsio::read_text(path)?;
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.starts_with('#') && !l.trim().is_empty());
     let (_, header) = lines.next().ok_or_else(|| anyhow!("{}: no header row", path.display()))?;
     let header: Vec<&str> = header.split(',').map(str::trim).collect();
+=======
+    let table = Table::read(path)?;
+>>>>>>> wip-27
     // (column, scale to g units)
     let cols: [(&str, f64); 11] = [
         ("a0_mg", 1e-3),
@@ -100,24 +109,12 @@ pub fn read_cf(path: &Path) -> anyhow::Result<Vec<(f64, ConversionFunction<f64>)
         ("m31_ug_per_g2", 1e-6),
         ("m32_ug_per_g2", 1e-6),
     ];
-    let idx: Vec<usize> = cols
-        .iter()
-        .map(|(name, _)| {
-            header.iter().position(|h| h == name).ok_or_else(|| anyhow!("{}: missing column `{name}`", path.display()))
-        })
-        .collect::<anyhow::Result<_>>()?;
+    let idx: Vec<usize> = cols.iter().map(|(name, _)| table.column(name)).collect::<Result<_, _>>()?;
     let mut out = Vec::new();
-    for (n, line) in lines {
-        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        if cells.len() != header.len() {
-            bail!("{}: line {}: {} cells, the header has {}", path.display(), n + 1, cells.len(), header.len());
-        }
+    for (line, cells) in &table.rows {
         let mut v = [0.0; 11];
-        for (k, (&c, (name, scale))) in idx.iter().zip(cols.iter()).enumerate() {
-            let x: f64 = cells[c].parse().ok().filter(|x: &f64| x.is_finite()).ok_or_else(|| {
-                anyhow!("{}: line {}, column `{name}`: `{}` is not a number", path.display(), n + 1, cells[c])
-            })?;
-            v[k] = x * scale;
+        for (k, (&c, (_, scale))) in idx.iter().zip(cols.iter()).enumerate() {
+            v[k] = table.number(*line, cells, c)? * scale;
         }
         let cf = ConversionFunction {
             a0_g: v[0],
