@@ -9,7 +9,7 @@
 //! seconds at the logger's rate is enough. Kept segments are grouped by temperature: sorted
 //! by mean temperature and split where two neighbours differ by more than `temp_tol_c`.
 
-use crate::recording::{REFERENCE, Reader, Row, col};
+use crate::recording::{Group, Reader, Row, col, names_of};
 use anyhow::{anyhow, bail};
 use std::path::{Path, PathBuf};
 
@@ -102,7 +102,7 @@ pub const FORCE: [&str; 3] = [col::FX_G, col::FY_G, col::FZ_G];
 /// tilter's dwells need only [`FORCE`]). Errors name the file.
 pub fn missing_reference_columns(path: &Path) -> anyhow::Result<Vec<&'static str>> {
     let reader = Reader::open(path).map_err(|e| anyhow!("{e}"))?;
-    Ok(REFERENCE.iter().copied().filter(|c| !reader.has_column(c)).collect())
+    Ok(names_of(Group::Reference).filter(|c| !reader.has_column(c)).collect())
 }
 
 /// The [`Reference`] of a recording: its specific force `fx_g`, `fy_g`, `fz_g` (the
