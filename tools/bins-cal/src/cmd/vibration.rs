@@ -3,12 +3,8 @@
 //! variant (reproduces Tables V4/V5) or the exact one. Each environment entry gives ranges
 //! (low, high); the table shows the VE at both ends.
 
-<<<<<<< HEAD
 use anyhow::{anyhow, bail};
-=======
-use anyhow::{Context, anyhow, bail};
 use bins_cal::recording::Table;
->>>>>>> wip-27
 use bins_comp::vibration::{AccelAxes, AccelVibration, ConversionFunction, Variant, VeTerms, ve_terms};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -87,14 +83,7 @@ pub const MAX_ENV_HZ: f64 = 1.0e6;
 
 /// Reads conversion functions from a Table V1-style CSV (errors name file, line, column).
 pub fn read_cf(path: &Path) -> anyhow::Result<Vec<(f64, ConversionFunction<f64>)>> {
-<<<<<<< HEAD
-    let text = bins_cal::fsio::read_text(path)?;
-    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.starts_with('#') && !l.trim().is_empty());
-    let (_, header) = lines.next().ok_or_else(|| anyhow!("{}: no header row", path.display()))?;
-    let header: Vec<&str> = header.split(',').map(str::trim).collect();
-=======
     let table = Table::read(path)?;
->>>>>>> wip-27
     // (column, scale to g units)
     let cols: [(&str, f64); 11] = [
         ("a0_mg", 1e-3),
@@ -130,9 +119,8 @@ pub fn read_cf(path: &Path) -> anyhow::Result<Vec<(f64, ConversionFunction<f64>)
         };
         if !(v[1] != 0.0 && v[1].abs() <= MAX_K1_V_PER_G) {
             bail!(
-                "{}: line {}, column `K1_V_per_g`: {} V/g: the scale factor must be nonzero and within ±{MAX_K1_V_PER_G} V/g",
+                "{}:{line}, column `K1_V_per_g`: {} V/g: the scale factor must be nonzero and within ±{MAX_K1_V_PER_G} V/g",
                 path.display(),
-                n + 1,
                 v[1]
             );
         }
