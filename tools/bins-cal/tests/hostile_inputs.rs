@@ -800,7 +800,8 @@ fn tempco_and_vibration_refuse_absurd_values() {
     for (name, text, why) in cases {
         std::fs::write(dir.join(name), text).unwrap();
         let args = ["tempco", "--constants", name];
-        assert_refused(&run_in(dir, &args), &args, &[name, "line", why]);
+        // `FILE:LINE, column …`: the file and the line of the row.
+        assert_refused(&run_in(dir, &args), &args, &[&format!("{name}:"), ", column `", why]);
     }
     let cf = std::fs::read_to_string(common::repo("data/al15-coefficients.csv")).unwrap();
     let row = cf.lines().find(|l| l.starts_with("3.324,")).unwrap();
