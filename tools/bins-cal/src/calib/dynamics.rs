@@ -965,9 +965,12 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
             candidates.push(Candidate { mask, theta: th, sse_g2: sse, heldout_g2 });
         }
     }
-    // The best candidate of each combination (by its held-out residual).
+    // The best candidate of each combination (by its held-out residual). A candidate with a
+    // parameter at the top of its search range is not identified (the residual falls on beyond
+    // it, as when a wide play follows drift): it is printed, not chosen.
+    let at_top = |c: &Candidate| (0..3).any(|k| get(&c.theta, k) >= 0.98 * bound(k).1);
     let mut by_mask: Vec<Option<(Candidate, Vec<f64>)>> = vec![None; 8];
-    for c in &candidates {
+    for c in candidates.iter().filter(|c| !at_top(c)) {
         let better = by_mask[c.mask as usize].as_ref().is_none_or(|(b, _)| c.heldout_g2 < b.heldout_g2);
         if better {
             by_mask[c.mask as usize] = Some((c.clone(), blocks.heldout(&c.theta)));
@@ -977,13 +980,14 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
     progress("dynamics: candidates (block RMS of the fit, and of each block predicted without its fold) [µg]:");
     for c in &candidates {
         progress(&format!(
-            "  {:<32} τ = {:>7.1} s, h = {:>6.3} °C, h_b = {:>6.3} °C: fit {:>8.2}, held out {:>8.2}",
+            "  {:<32} τ = {:>7.1} s, h = {:>6.3} °C, h_b = {:>6.3} °C: fit {:>8.2}, held out {:>8.2}{}",
             c.label(),
             c.theta.lag_tau_s,
             c.theta.hysteresis_width_c,
             c.theta.bias_play_width_c,
             (c.sse_g2 / (3.0 * nb)).sqrt() * 1e6,
-            (c.heldout_g2 / (3.0 * nb)).sqrt() * 1e6
+            (c.heldout_g2 / (3.0 * nb)).sqrt() * 1e6,
+            if at_top(c) { " (at the top of the search range: not chosen)" } else { "" }
         ));
     }
     // Selection: from the combination that predicts the held-out blocks best, drop the
@@ -1052,7 +1056,15 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
         let (g, s) = z_of(with, without).unwrap_or((0.0, 0.0));
         let value = by_mask[with].as_ref().map_or(0.0, |c| get(&c.0.theta, k));
         let on_k = m & bit != 0;
+        let topped = candidates.iter().find(|c| c.mask as usize == with && at_top(c));
         let why_off = (!on_k).then(|| {
+            if let (None, Some(c)) = (&by_mask[with], topped) {
+                return format!(
+                    "best at {} {}, the top of its search range: not identified (a drift the component follows)",
+                    fmt_value(k, get(&c.theta, k)),
+                    if k == 0 { "s" } else { "°C" }
+                );
+            }
             let rel = g / by_mask[with].as_ref().map_or(f64::INFINITY, |c| c.0.heldout_g2).max(1e-300);
             format!(
                 "best at {} {}, held-out gain {:+.0} ± {:.0} µg² ({:.1} standard errors, {:+.1} %; {MIN_HELDOUT_Z} and {} % needed)",
