@@ -746,6 +746,9 @@ fn an_absurd_scenario_value_is_refused_naming_its_key() {
         ("noise.white_V[0]", TINY.replace(unit, &format!("{unit}[noise]\nwhite_V = 1.0e300\n"))),
         ("noise.adc_lsb_V", TINY.replace(unit, &format!("{unit}[noise]\nadc_lsb_V = 1.0e-320\n"))),
         ("recording.start_f_g[2]", TINY.replace("rate_Hz = 10.0\n", "rate_Hz = 10.0\nstart_f_g = [0.0, 0.0, 1.0e9]\n")),
+        ("unit.warmup_V[0]", TINY.replace(unit, &format!("{unit}warmup_V = [1.0e300, 0.0, 0.0]\n"))),
+        ("unit.bias_play_mg[0]", TINY.replace(unit, &format!("{unit}bias_play_mg = [1.0e300, 0.0, 0.0]\n"))),
+        ("recording.power_on_s", TINY.replace("rate_Hz = 10.0\n", "rate_Hz = 10.0\npower_on_s = 1.0e300\n")),
     ];
     for (key, text) in cases {
         assert_ne!(text, TINY, "{key}: the edit applies");
