@@ -563,7 +563,13 @@ fn an_over_long_array_is_refused_naming_the_key() {
     let with_dynamics = format!(
         "{cal}\n[thermal_dynamics]\nlag_tau_s = 10.0\nbias_play_width_C = 1.0\nbias_play_mg = [0.1, 0.2, 0.3]\n"
     );
+    // A piecewise-linear calibration of the same recording, for the knots' keys.
+    let pwl = dir.join("pwl-cal.toml");
+    common::ok(&["calibrate", "--tilter", s(&f.rec), "--model", "pwl", "-o", s(&pwl)]);
+    let pwl = std::fs::read_to_string(&pwl).unwrap();
     let cases: Vec<(&str, String)> = vec![
+        ("du0_V", one_more(&pwl, "du0_V")),
+        ("rel_k", one_more(&pwl, "rel_k")),
         ("u0_V", one_more(&cal, "u0_V")),
         ("temp_range_C", one_more(&cal, "temp_range_C")),
         ("k_V_per_g", one_more(&cal, "k_V_per_g")),
@@ -572,7 +578,7 @@ fn an_over_long_array_is_refused_naming_the_key() {
         ("bias_play_mg", one_more(&with_dynamics, "bias_play_mg")),
     ];
     for (key, text) in &cases {
-        assert_ne!(text, &cal, "{key}: the edit applies");
+        assert!(text.contains("[0.001, "), "{key}: the edit applies");
         let p = dir.join(format!("{key}.toml"));
         std::fs::write(&p, text).unwrap();
         for args in [vec!["blob", "check", s(&p)], vec!["blob", "encode", s(&p), "-o", "out.bin"]] {
@@ -747,6 +753,9 @@ fn an_absurd_scenario_value_is_refused_naming_its_key() {
         ("noise.white_V[0]", TINY.replace(unit, &format!("{unit}[noise]\nwhite_V = 1.0e300\n"))),
         ("noise.adc_lsb_V", TINY.replace(unit, &format!("{unit}[noise]\nadc_lsb_V = 1.0e-320\n"))),
         ("recording.start_f_g[2]", TINY.replace("rate_Hz = 10.0\n", "rate_Hz = 10.0\nstart_f_g = [0.0, 0.0, 1.0e9]\n")),
+        ("unit.warmup_V[0]", TINY.replace(unit, &format!("{unit}warmup_V = [1.0e300, 0.0, 0.0]\n"))),
+        ("unit.bias_play_mg[0]", TINY.replace(unit, &format!("{unit}bias_play_mg = [1.0e300, 0.0, 0.0]\n"))),
+        ("recording.power_on_s", TINY.replace("rate_Hz = 10.0\n", "rate_Hz = 10.0\npower_on_s = 1.0e300\n")),
     ];
     for (key, text) in cases {
         assert_ne!(text, TINY, "{key}: the edit applies");

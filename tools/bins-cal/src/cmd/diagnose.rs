@@ -13,8 +13,9 @@ pub struct Args {
     /// The simulated recording (format v1).
     #[arg(long, value_name = "SIM.csv", required_unless_present = "calib", conflicts_with = "calib")]
     sim: Option<PathBuf>,
-    /// Instead of SIM: the unit's calibration file; SIM is what it predicts for REAL's
-    /// reference, temperature and time, row for row.
+    /// Instead of SIM: the unit's calibration (a calibration file or a blob, told apart by the
+    /// content); SIM is what it predicts for REAL's reference, temperature and time, row for
+    /// row.
     #[arg(long, value_name = "CAL.toml")]
     calib: Option<PathBuf>,
     /// The real recording of the same test, row for row.

@@ -29,7 +29,7 @@ pub struct Args {
     /// Check recordings (format v1 with `pos` and fx/fy/fz), one or several.
     #[arg(long, num_args = 1.., required = true)]
     check: Vec<PathBuf>,
-    /// The calibration file (TOML).
+    /// The calibration: a calibration file (TOML) or a blob, told apart by the content.
     #[arg(long)]
     calib: PathBuf,
     /// Output directory: verify.csv, verify.png.

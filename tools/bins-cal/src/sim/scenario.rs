@@ -10,7 +10,7 @@ use super::rig::Timeline;
 use super::thermal::ThermalParams;
 use super::unit::{NoiseParams, UnitModel};
 use crate::calfile::{CalibrationFile, MethodKind, MethodSpec, ModelSpec};
-use bins_comp::dynamics::{MAX_TAU_S, MAX_WIDTH_C};
+use bins_comp::dynamics::{MAX_BIAS_PLAY_G, MAX_TAU_S, MAX_WIDTH_C};
 use bins_comp::ident::{self, TILTER_POSITIONS_G, check_positions_g};
 use bins_comp::temperature::MAX_POLY_ORDER;
 use bins_comp::vibration::{self, AccelAxes, Axis, ConversionFunction, Vibration};
@@ -666,7 +666,7 @@ impl ScenarioFile {
     fn build_inner(&self) -> Check<Simulation> {
         let r = &self.recording;
         let rate_hz = positive("recording.rate_Hz", r.rate_hz)?;
-        let power_on_s = non_negative("recording.power_on_s", r.power_on_s)?;
+        let power_on_s = within("recording.power_on_s", r.power_on_s, 0.0, crate::numarg::MAX_DURATION_S, "s")?;
         for (i, c) in r.comments.iter().enumerate() {
             if c.contains(['\n', '\r']) {
                 return Err(kerr(format!("recording.comments[{i}]"), "must be one line"));
@@ -947,21 +947,22 @@ impl UnitSpec {
             Some(c) => c.build()?,
         };
         for (i, w) in self.warmup_v.iter().enumerate() {
-            finite(&format!("unit.warmup_V[{i}]"), *w)?;
+            within(&format!("unit.warmup_V[{i}]"), *w, -MAX_NOISE_V, MAX_NOISE_V, "V")?;
         }
         Ok(UnitModel {
             params,
             cf,
             warmup_v: self.warmup_v,
-            warmup_tau_s: non_negative("unit.warmup_tau_s", self.warmup_tau_s)?,
+            warmup_tau_s: within("unit.warmup_tau_s", self.warmup_tau_s, 0.0, MAX_TAU_S, "s")?,
             bias_play_g: {
                 let mut g = [0.0; 3];
                 for (i, a) in self.bias_play_mg.iter().enumerate() {
-                    g[i] = finite(&format!("unit.bias_play_mg[{i}]"), *a)? * 1e-3;
+                    let max_mg = MAX_BIAS_PLAY_G * 1e3;
+                    g[i] = within(&format!("unit.bias_play_mg[{i}]"), *a, -max_mg, max_mg, "mg")? * 1e-3;
                 }
                 g
             },
-            bias_play_width_c: non_negative("unit.bias_play_width_C", self.bias_play_width_c)?,
+            bias_play_width_c: within("unit.bias_play_width_C", self.bias_play_width_c, 0.0, MAX_WIDTH_C, "°C")?,
         })
     }
 
