@@ -20,7 +20,7 @@ fn main() {
         row.t_s = 0.001 * x;
         row.u_v = [0.55 * (x * 1e-3).sin(), -0.55 * (x * 7e-4).cos(), 0.001 + 1e-6 * x.sqrt()];
         row.temp_c = 20.0 + 25.0 * (x * 1e-5).sin();
-        row.f_g = [Some(0.0), Some(-0.7071067811865476), Some(0.7071067811865476)];
+        row.f_g = [Some(0.0), Some(-std::f64::consts::FRAC_1_SQRT_2), Some(std::f64::consts::FRAC_1_SQRT_2)];
         row.vib_kind = Some(VibKind::Sine);
         row.vib_g = [Some(0.42), Some(0.8), Some(1.5)];
         row.vib_hz = Some(16.0);
