@@ -61,7 +61,7 @@ impl Bank {
         let mut cols: Vec<Vec<f64>> = ctx.nuisance.iter().filter_map(|c| unit_rms(c)).collect();
         let forced: Vec<usize> = (0..cols.len()).collect();
         let mut cands = Vec::new();
-        for m in Mech::ALL.into_iter().chain(Mech::ALTERNATIVES) {
+        for m in Mech::ALL {
             if !ctx.available(m) {
                 continue;
             }
@@ -629,10 +629,11 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                 model.remove(k);
             }
             None => {
-                let amb = match &last_grams {
+                let mut amb = match &last_grams {
                     Some(g) => ambiguity(&bank, &model, g, fit.inflation),
                     None => Vec::new(),
                 };
+                drift_alternatives(ctx, &bank, &model, q, fit.inflation, &mut amb);
                 // A temperature form that a drift in time explains clearly better is not a
                 // finding: it competes with drift, not with the null.
                 let drift_wins = amb.iter().find_map(|(m, alts)| {
@@ -665,10 +666,7 @@ fn ambiguity(bank: &Bank, model: &[usize], grams: &Grams, infl: f64) -> Vec<(Mec
     for (k, &c) in model.iter().enumerate() {
         let mut alts = Vec::new();
         let rest: Vec<usize> = model.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, c)| *c).collect();
-        // A drift in time is the alternative of a temperature form only (a turn-on term is
-        // already a settling, since power-on).
-        let alternatives = Mech::ALTERNATIVES.into_iter().filter(|_| bank.cands[c].mech.temperature_form());
-        for m in Mech::ALL.into_iter().chain(alternatives) {
+        for m in Mech::ALL {
             if model.iter().any(|&mc| bank.cands[mc].mech == m) {
                 continue;
             }
@@ -697,6 +695,56 @@ fn ambiguity(bank: &Bank, model: &[usize], grams: &Grams, infl: f64) -> Vec<(Mec
         }
     }
     ambiguous
+}
+
+/// A drift in time ([`Mech::Drift`], θ on its grid) in place of each temperature form of
+/// `model` (a turn-on term is already a settling, since power-on): added to `amb` where its
+/// deviance is within [`AMBIGUOUS_LR`] of the model's (negative: the drift explains more).
+/// Direct GLS, only for the few members concerned, so the candidate bank stays as small as the
+/// selection needs.
+fn drift_alternatives(
+    ctx: &Context,
+    bank: &Bank,
+    model: &[usize],
+    q: f64,
+    infl: f64,
+    amb: &mut Vec<(Mech, Vec<(Mech, f64)>)>,
+) {
+    if !model.iter().any(|&c| bank.cands[c].mech.temperature_form()) || !ctx.available(Mech::Drift) {
+        return;
+    }
+    let p = ctx.p;
+    let (t, r, y) = (&p.t, &p.r_white[ctx.axis], &p.r[ctx.axis]);
+    let filt = Filter::new(t, r, q, |_| true);
+    let Some((_, _, sse_full, _)) = gls(&filt, y, &bank.slices_of(model)) else { return };
+    let n = filt.n_used as f64;
+    let grid = ctx.grid(Mech::Drift);
+    for (k, &c) in model.iter().enumerate() {
+        let m = bank.cands[c].mech;
+        if !m.temperature_form() {
+            continue;
+        }
+        let rest: Vec<usize> = model.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, c)| *c).collect();
+        let best = grid
+            .iter()
+            .filter_map(|&th| {
+                let extra = ctx.columns(Mech::Drift, th);
+                let mut cols = bank.slices_of(&rest);
+                cols.extend(extra.iter().map(|v| v.as_slice()));
+                gls(&filt, y, &cols).map(|g| g.2)
+            })
+            .fold(f64::INFINITY, f64::min);
+        if !best.is_finite() {
+            continue;
+        }
+        let d = n * (best / sse_full.max(1e-300)).ln() / infl;
+        if d < AMBIGUOUS_LR {
+            match amb.iter_mut().find(|(a, _)| *a == m) {
+                Some((_, alts)) => alts.push((Mech::Drift, d)),
+                None => amb.push((m, vec![(Mech::Drift, d)])),
+            }
+        }
+    }
 }
 
 /// Least squares of a whitened `y` on fixed whitened columns plus a few that change (one
