@@ -125,7 +125,6 @@ pub fn diagnose_with(
 fn fit_with_steps(ctx: &mut mech::Context, opt: &Options) -> (fit::AxisFit, Vec<steps::BiasStep>) {
     let p = ctx.p;
     let (t, r, y) = (&p.t, &p.r_white[ctx.axis], &p.r[ctx.axis]);
-    let z_min = steps::threshold(fit::ALPHA, y.len(), 3);
     let n_sim = ctx.nuisance.len();
     let mut rows: Vec<usize> = Vec::new();
     let mut fit = fit::fit_axis(ctx, 3, opt.random_walk_g2_per_s());
@@ -137,7 +136,7 @@ fn fit_with_steps(ctx: &mut mech::Context, opt: &Options) -> (fit::AxisFit, Vec<
             .chain(fit.terms.iter().flat_map(|term| term.columns.iter()))
             .map(Vec::as_slice)
             .collect();
-        found = steps::locate(t, r, y, &model, None, z_min);
+        found = steps::locate(t, r, y, &model, None, fit::ALPHA, 3);
         let now: Vec<usize> = found.iter().map(|s| s.0).collect();
         rounds += 1;
         if now == rows || rounds == 3 {

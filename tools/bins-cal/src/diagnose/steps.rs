@@ -38,6 +38,8 @@ use super::stats::{chi2_sf, chol_solve, dot, median};
 pub const MAX_STEPS: usize = 8;
 /// Two steps are at least this many rows apart, and this many rows from either end.
 pub const MIN_GAP_ROWS: usize = 10;
+/// Rows either side of a step in its local test ([`level_shift_t`]).
+pub const LOCAL_ROWS: usize = 60;
 
 /// One located bias step.
 #[derive(Clone, Debug, PartialEq)]
@@ -172,55 +174,130 @@ fn inflation(f: &Filter, w: &[f64]) -> f64 {
 }
 
 /// The scan with the model `cols` and the steps at `rows` in: the filter at random-walk
-/// intensity `q` (estimated with everything in when `None`), the robustly standardised `z`.
-fn scan_with(t: &[f64], r: &[f64], y: &[f64], cols: &[&[f64]], rows: &[usize], q: Option<f64>) -> Vec<f64> {
+/// intensity `q` (estimated with everything in when `None`), the robustly standardised `z`, and
+/// the raw residual of that fit (what the model and those steps leave).
+fn scan_with(t: &[f64], r: &[f64], y: &[f64], cols: &[&[f64]], rows: &[usize], q: Option<f64>) -> (Vec<f64>, Vec<f64>) {
     let hs: Vec<Vec<f64>> = rows.iter().map(|&k| heaviside(y.len(), k)).collect();
     let all: Vec<&[f64]> = cols.iter().copied().chain(hs.iter().map(Vec::as_slice)).collect();
     let q = q.unwrap_or_else(|| estimate_q(t, r, y, &all));
     let f = Filter::new(t, r, q, |_| true);
-    let (_, _, w) = gls(&f, y, &all);
+    let (beta, _, w) = gls(&f, y, &all);
     let z = scan(&f, &w);
     let s = robust_scale(&f, &z);
-    z.into_iter().map(|v| v / s).collect()
+    let mut e = y.to_vec();
+    for (c, b) in all.iter().zip(&beta) {
+        for (v, x) in e.iter_mut().zip(c.iter()) {
+            *v -= b * x;
+        }
+    }
+    (z.into_iter().map(|v| v / s).collect(), e)
+}
+
+/// The level shift at `row` against a change of slope there: least squares of `e` over the
+/// rows `lo..hi` on `1, u, H, u·H` (`u = t − t_row`, `H` the step), the shift's `t` statistic
+/// with the variance of the local fit's residual. A turn of a ramp or the start of a slow
+/// transient is a change of slope and leaves the shift near 0; a step is a shift.
+pub fn level_shift_t(t: &[f64], e: &[f64], row: usize, lo: usize, hi: usize) -> f64 {
+    if hi < lo + 8 || row <= lo || row >= hi {
+        return 0.0;
+    }
+    let x = |i: usize| {
+        let (u, h) = (t[i] - t[row], if i >= row { 1.0 } else { 0.0 });
+        [1.0, u, h, u * h]
+    };
+    let (mut a, mut b, mut yy) = ([0.0; 16], [0.0; 4], 0.0);
+    for i in lo..hi {
+        let xi = x(i);
+        for u in 0..4 {
+            b[u] += xi[u] * e[i];
+            for v in 0..4 {
+                a[u * 4 + v] += xi[u] * xi[v];
+            }
+        }
+        yy += e[i] * e[i];
+    }
+    let d: Vec<f64> = (0..4).map(|u| a[u * 4 + u].sqrt()).collect();
+    if d.iter().any(|v| !(*v > 0.0)) {
+        return 0.0;
+    }
+    let an: Vec<f64> = (0..16).map(|k| a[k] / (d[k / 4] * d[k % 4])).collect();
+    let bn: Vec<f64> = (0..4).map(|u| b[u] / d[u]).collect();
+    let Some((sol, diag)) = chol_solve(&an, &bn, 4, 1e-12) else { return 0.0 };
+    let sse = (yy - sol.iter().zip(&bn).map(|(s, b)| s * b).sum::<f64>()).max(0.0);
+    let sigma2 = sse / (hi - lo - 4) as f64;
+    let se = (sigma2 * diag[2]).sqrt() / d[2];
+    if se > 0.0 { sol[2] / d[2] / se } else { 0.0 }
+}
+
+/// The window of the local test of a step at `row`: [`LOCAL_ROWS`] rows either side, cut at
+/// the neighbouring steps `others` and the ends of the record.
+fn window(row: usize, others: &[usize], n: usize) -> (usize, usize) {
+    let lo = others.iter().copied().filter(|&s| s < row).max().unwrap_or(0).max(row.saturating_sub(LOCAL_ROWS));
+    let hi = others.iter().copied().filter(|&s| s > row).min().unwrap_or(n).min(row + LOCAL_ROWS);
+    (lo, hi)
 }
 
 /// Locates the bias steps of `y` (times `t`, white variances `r`) against the noise model with
 /// the columns `cols` fitted jointly (module docs): rows of the accepted steps, in time order,
-/// with their final statistics. `q`: the random-walk intensity [g²/s], or `None` to estimate it
-/// (maximum likelihood) with the model and the steps found so far in. `z_min`: [`threshold`].
-pub fn locate(t: &[f64], r: &[f64], y: &[f64], cols: &[&[f64]], q: Option<f64>, z_min: f64) -> Vec<(usize, f64)> {
+/// with their scan statistics. `q`: the random-walk intensity [g²/s], or `None` to estimate it
+/// (maximum likelihood) with the model and the steps found so far in. `alpha` over `axes`
+/// accelerometers: the scan's threshold is [`threshold`] over the rows, the local test's over
+/// the [`MAX_STEPS`] candidates an accelerometer can have.
+pub fn locate(
+    t: &[f64],
+    r: &[f64],
+    y: &[f64],
+    cols: &[&[f64]],
+    q: Option<f64>,
+    alpha: f64,
+    axes: usize,
+) -> Vec<(usize, f64)> {
     let n = y.len();
     if n < 3 * MIN_GAP_ROWS {
         return Vec::new();
     }
+    let (z_min, t_min) = (threshold(alpha, n, axes), threshold(alpha, MAX_STEPS, axes));
     let mut rows: Vec<usize> = Vec::new();
-    while rows.len() < MAX_STEPS {
-        let z = scan_with(t, r, y, cols, &rows, q);
-        let free = |k: usize| rows.iter().all(|&s| s.abs_diff(k) >= MIN_GAP_ROWS);
+    let mut rejected: Vec<usize> = Vec::new();
+    for _ in 0..2 * MAX_STEPS {
+        if rows.len() == MAX_STEPS {
+            break;
+        }
+        let (z, e) = scan_with(t, r, y, cols, &rows, q);
+        let free = |k: usize| rows.iter().chain(&rejected).all(|&s| s.abs_diff(k) >= MIN_GAP_ROWS);
         let best =
             (MIN_GAP_ROWS..n - MIN_GAP_ROWS).filter(|&k| free(k)).max_by(|&a, &b| z[a].abs().total_cmp(&z[b].abs()));
         match best {
-            Some(k) if z[k].abs() > z_min => rows.push(k),
+            Some(k) if z[k].abs() > z_min => {
+                let (lo, hi) = window(k, &rows, n);
+                if level_shift_t(t, &e, k, lo, hi).abs() > t_min {
+                    rows.push(k);
+                } else {
+                    rejected.push(k);
+                }
+            }
             _ => break,
         }
     }
     // Every step again with all the others in: drop the weakest failing one until all pass.
     loop {
-        let stats: Vec<f64> = (0..rows.len())
+        let stats: Vec<(f64, f64)> = (0..rows.len())
             .map(|j| {
                 let others: Vec<usize> = rows.iter().enumerate().filter(|(i, _)| *i != j).map(|(_, k)| *k).collect();
-                scan_with(t, r, y, cols, &others, q)[rows[j]]
+                let (z, e) = scan_with(t, r, y, cols, &others, q);
+                let (lo, hi) = window(rows[j], &others, n);
+                (z[rows[j]], level_shift_t(t, &e, rows[j], lo, hi))
             })
             .collect();
-        let weakest = (0..rows.len())
-            .filter(|&j| stats[j].abs() <= z_min)
-            .min_by(|&a, &b| stats[a].abs().total_cmp(&stats[b].abs()));
+        let fails = |j: usize| stats[j].0.abs() <= z_min || stats[j].1.abs() <= t_min;
+        let weakest =
+            (0..rows.len()).filter(|&j| fails(j)).min_by(|&a, &b| stats[a].0.abs().total_cmp(&stats[b].0.abs()));
         match weakest {
             Some(j) => {
                 rows.remove(j);
             }
             None => {
-                let mut out: Vec<(usize, f64)> = rows.into_iter().zip(stats).collect();
+                let mut out: Vec<(usize, f64)> = rows.into_iter().zip(stats.into_iter().map(|s| s.0)).collect();
                 out.sort_by_key(|s| s.0);
                 return out;
             }
