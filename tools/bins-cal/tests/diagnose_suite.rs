@@ -23,6 +23,7 @@ fn concealed_effect_suite() {
         let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
         let secs = t0.elapsed().as_secs_f64();
         let s = cases::score(&case, &d.report);
+        assert!(d.report.steps.is_empty(), "{}: no case has a bias step, found {:?}", case.name, d.report.steps);
         if std::env::var("DIAG_VERBOSE").is_ok() {
             eprintln!("{}", serde_json::to_string_pretty(&d.report.effects).unwrap_or_default());
             eprintln!("{}", serde_json::to_string_pretty(&d.report.ambiguous).unwrap_or_default());
