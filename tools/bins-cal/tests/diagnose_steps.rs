@@ -133,3 +133,39 @@ fn steps_on_many_draws() {
     assert_eq!(nulls, 200);
     assert!(extra + null_alarms <= 3, "{extra} false steps on draws with steps, {null_alarms} on nulls");
 }
+
+/// The command on the real sweep: the report's `steps` key and one printed line per step, with
+/// REAL's line of the first sample at the new level (line 2 026 holds `t_s` 1 022.05 s).
+#[test]
+fn the_command_reports_the_steps_with_their_lines() {
+    let data = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data/real");
+    let dir = std::env::temp_dir().join(format!("bins-cal-steps-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let report = dir.join("r.json");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_bins-cal"))
+        .args(["diagnose", "--sim"])
+        .arg(data.join("tofupilot-sweep-sim.csv"))
+        .arg("--real")
+        .arg(data.join("tofupilot-sweep-real.csv"))
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .expect("runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let printed: Vec<&str> = text.lines().filter(|l| l.starts_with("bias step on ")).collect();
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).expect("report")).expect("JSON");
+    let steps = json["steps"].as_array().expect("steps array");
+    assert_eq!(printed.len(), steps.len(), "{text}");
+    assert!(printed.iter().any(|l| l.starts_with("bias step on z at t = 1022.1 s (line 2026): -3.")), "{text}");
+    let csv = std::fs::read_to_string(data.join("tofupilot-sweep-real.csv")).expect("csv");
+    for s in steps {
+        let line = s["line"].as_u64().expect("line") as usize;
+        let t_s: f64 = csv.lines().nth(line - 1).and_then(|l| l.split(',').next()).expect("row").parse().expect("t_s");
+        assert!((t_s - s["time_s"].as_f64().expect("time_s")).abs() < 1e-6, "{s}: line {line} has t_s {t_s}");
+        for key in ["axis", "size_mg", "se_mg", "z"] {
+            assert!(!s[key].is_null(), "{s}: {key}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
