@@ -88,7 +88,9 @@ pub struct StepReport {
     pub size_mg: f64,
     /// Its standard error \[mg\].
     pub se_mg: f64,
-    /// The scan statistic (robustly standardised) with the other steps in the model.
+    /// The scan statistic (robustly standardised) with the other steps in the model; NaN
+    /// (`null` in the JSON) when the steps located against the final model still differed
+    /// from those fitted after three rounds (the fitted ones are reported).
     pub z: f64,
 }
 
