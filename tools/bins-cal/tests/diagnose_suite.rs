@@ -93,6 +93,9 @@ fn concealed_effect_suite_other_seeds() {
             let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
             let s = cases::score(&c, &d.report);
             total += 1;
+            if !d.report.steps.is_empty() {
+                failures.push(format!("{} seed {}: bias steps {:?}", c.name, c.seed, d.report.steps));
+            }
             if !(s.exact && (s.params.is_empty() || s.worst_param_error <= 0.2) && s.rms_ok) {
                 failures.push(format!(
                     "{} seed {}: missing {:?} extra {:?} param error {:.3}",
