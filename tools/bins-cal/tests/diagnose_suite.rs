@@ -23,6 +23,7 @@ fn concealed_effect_suite() {
         let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
         let secs = t0.elapsed().as_secs_f64();
         let s = cases::score(&case, &d.report);
+        assert!(d.report.steps.is_empty(), "{}: no case has a bias step, found {:?}", case.name, d.report.steps);
         if std::env::var("DIAG_VERBOSE").is_ok() {
             eprintln!("{}", serde_json::to_string_pretty(&d.report.effects).unwrap_or_default());
             eprintln!("{}", serde_json::to_string_pretty(&d.report.ambiguous).unwrap_or_default());
@@ -92,6 +93,9 @@ fn concealed_effect_suite_other_seeds() {
             let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
             let s = cases::score(&c, &d.report);
             total += 1;
+            if !d.report.steps.is_empty() {
+                failures.push(format!("{} seed {}: bias steps {:?}", c.name, c.seed, d.report.steps));
+            }
             if !(s.exact && (s.params.is_empty() || s.worst_param_error <= 0.2) && s.rms_ok) {
                 failures.push(format!(
                     "{} seed {}: missing {:?} extra {:?} param error {:.3}",

@@ -127,6 +127,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             a.separating_test
         );
     }
+    for s in &r.steps {
+        println!(
+            "bias step on {} at t = {:.1} s (line {}): {:+.3} ± {:.3} mg (z = {:.1}), fitted with the model",
+            s.axis,
+            s.time_s,
+            s.line,
+            s.size_mg,
+            1.96 * s.se_mg,
+            s.z
+        );
+    }
     let rw_from = if r.random_walk_source == "given" { "given" } else { "estimated with the whole library in" };
     for ax in ["x", "y", "z"] {
         let g = |m: &std::collections::BTreeMap<String, f64>| m.get(ax).copied().unwrap_or(f64::NAN);

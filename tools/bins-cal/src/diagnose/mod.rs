@@ -8,7 +8,9 @@
 //! 4. [`mech`] + [`fit`]: the mechanism library, forward selection scored on held-out blocks
 //!    with a significance test against the autocorrelated noise, ambiguity between
 //!    mechanisms the data cannot separate.
-//! 5. [`report`]: the JSON report and the augmented model; [`plot`]: PNGs.
+//! 5. [`steps`]: bias steps located by an innovation-outlier test, fitted jointly with the
+//!    selected mechanisms (the selection re-run with their columns in).
+//! 6. [`report`]: the JSON report and the augmented model; [`plot`]: PNGs.
 //!
 //! [`follow`] predicts SIM for a real recording from a calibration. [`cases`] generates the
 //! concealed-effect cases of the proof suite. The method is described
@@ -24,6 +26,7 @@ pub mod plot;
 pub mod prep;
 pub mod report;
 pub mod stats;
+pub mod steps;
 
 use crate::recording::{Row, read_all};
 use std::fmt;
@@ -115,17 +118,63 @@ pub fn diagnose_with(
     let mut axes = Vec::new();
     let mut sensitivity = Vec::new();
     let mut nuisance = Vec::new();
+    let mut bias_steps = Vec::new();
     for (axis, q) in qs.into_iter().enumerate() {
-        let ctx = mech::Context::new(&p, axis);
-        axes.push(fit::fit_axis(&ctx, 3, q));
+        let mut ctx = mech::Context::new(&p, axis);
+        let (fit, found) = fit_with_steps(&mut ctx, q);
+        bias_steps.push(found);
+        axes.push(fit);
         sensitivity.push(ctx.s.clone());
         nuisance.push(ctx.nuisance_names.clone());
     }
     let located = locate::locate(&p, &axes, false);
     let unexplained_located = locate::locate(&p, &axes, true);
     let input = report::Inputs { sim: sim_name, real: real_name, opt, nuisance: &nuisance };
-    let report = report::build(&p, &axes, &sensitivity, floor, located, unexplained_located, &input);
+    let mut report = report::build(&p, &axes, &sensitivity, floor, located, unexplained_located, &input);
+    let pr = &p;
+    report.steps = bias_steps
+        .iter()
+        .enumerate()
+        .flat_map(|(axis, found)| found.iter().map(move |s| report::StepReport::new(pr, axis, s)))
+        .collect();
     Ok(Diagnosis { prepared: p, sensitivity, axes, report })
+}
+
+/// Selection and fit of one accelerometer with its bias steps ([`steps`]): the selection, the
+/// steps located against what it leaves, the selection again with the steps' Heaviside columns
+/// in every model (so no mechanism and no drift takes a step's share), until the steps located
+/// against the selected model are those in it (at most three rounds). The steps' sizes come from
+/// the joint fit with the final model.
+fn fit_with_steps(ctx: &mut mech::Context, q: Option<f64>) -> (fit::AxisFit, Vec<steps::BiasStep>) {
+    let p = ctx.p;
+    let (t, r, y) = (&p.t, &p.r_white[ctx.axis], &p.r[ctx.axis]);
+    let n_sim = ctx.nuisance.len();
+    let mut rows: Vec<usize> = Vec::new();
+    let mut fit = fit::fit_axis(ctx, 3, q);
+    let mut found;
+    let mut rounds = 0;
+    loop {
+        let model: Vec<&[f64]> = ctx.nuisance[..n_sim]
+            .iter()
+            .chain(fit.terms.iter().flat_map(|term| term.columns.iter()))
+            .map(Vec::as_slice)
+            .collect();
+        found = steps::locate(t, r, y, &model, None, fit::ALPHA, 3);
+        let now: Vec<usize> = found.iter().map(|s| s.0).collect();
+        rounds += 1;
+        if now == rows || rounds == 3 {
+            if now != rows {
+                // Not settled: report the steps the final model carries.
+                found = rows.iter().map(|&k| (k, f64::NAN)).collect();
+            }
+            let sizes = steps::fit_sizes(t, r, y, &model, fit.q, &found);
+            return (fit, sizes);
+        }
+        rows = now;
+        ctx.nuisance.truncate(n_sim);
+        ctx.nuisance.extend(rows.iter().map(|&k| steps::heaviside(y.len(), k)));
+        fit = fit::fit_axis(ctx, 3, q);
+    }
 }
 
 /// Reads REAL and diagnoses it against what the calibration `calib` predicts for it

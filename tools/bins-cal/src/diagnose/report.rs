@@ -102,6 +102,39 @@ pub struct SearchStep {
     pub accepted: bool,
 }
 
+/// One located bias step.
+#[derive(Clone, Debug, Serialize)]
+pub struct StepReport {
+    /// Accelerometer.
+    pub axis: String,
+    /// Time of the first sample at the new level \[s\].
+    pub time_s: f64,
+    /// REAL's line of that sample.
+    pub line: u64,
+    /// Size (new level − old level) \[mg\].
+    pub size_mg: f64,
+    /// Its standard error \[mg\].
+    pub se_mg: f64,
+    /// The scan statistic (robustly standardised) with the other steps in the model; NaN
+    /// (`null` in the JSON) when the steps located against the final model still differed
+    /// from those fitted after three rounds (the fitted ones are reported).
+    pub z: f64,
+}
+
+impl StepReport {
+    /// The report's entry for `step` on accelerometer `axis`.
+    pub fn new(p: &Prepared, axis: usize, step: &super::steps::BiasStep) -> Self {
+        StepReport {
+            axis: AXES[axis].into(),
+            time_s: step.time_s,
+            line: p.line[step.row],
+            size_mg: step.size_g * 1e3,
+            se_mg: step.se_g * 1e3,
+            z: step.z,
+        }
+    }
+}
+
 /// A term of the augmented model.
 #[derive(Clone, Debug, Serialize)]
 pub struct ModelTerm {
@@ -249,6 +282,9 @@ pub struct Report {
     pub heldout_rms_before_mg: PerAxis<f64>,
     /// Held-out after \[mg\].
     pub heldout_rms_after_mg: PerAxis<f64>,
+    /// Bias steps located in the residual (a jump of its level at one time), fitted jointly
+    /// with the named mechanisms ([`super::steps`]).
+    pub steps: Vec<StepReport>,
     /// The forward search per accelerometer.
     pub search: PerAxis<Vec<SearchStep>>,
     /// The augmented model.
@@ -632,6 +668,7 @@ pub fn build(
         rms_after_mg: per_axis(|i| axes[i].rms.1 * 1e3),
         heldout_rms_before_mg: per_axis(|i| axes[i].heldout_rms.0 * 1e3),
         heldout_rms_after_mg: per_axis(|i| axes[i].heldout_rms.1 * 1e3),
+        steps: Vec::new(),
         search,
         model: AugmentedModel {
             t0_c: super::mech::T0_C,
