@@ -357,7 +357,10 @@ pub fn centred_rms(v: &[f64], mask: Option<&[bool]>) -> f64 {
     ((0..v.len()).filter(|&i| inc(i)).map(|i| (v[i] - m).powi(2)).sum::<f64>() / c as f64).sqrt()
 }
 
-fn inflation(w: &[f64], used: &[bool]) -> f64 {
+/// Variance inflation of a sum of the innovations `w` (over the rows where `used`) for their
+/// remaining autocorrelation: `1 + 2Σ_k (1 − k/(l+1)) ρ_k`, k ≤ l = min(20, n/10) (Bartlett
+/// weights), at least 1; 1 with fewer than 50 rows.
+pub(crate) fn inflation(w: &[f64], used: &[bool]) -> f64 {
     let v: Vec<f64> = w.iter().zip(used).filter(|(_, u)| **u).map(|(x, _)| *x).collect();
     let n = v.len();
     if n < 50 {

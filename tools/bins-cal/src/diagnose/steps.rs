@@ -154,25 +154,6 @@ fn gls(f: &Filter, y: &[f64], cols: &[&[f64]]) -> (Vec<f64>, Vec<f64>, Vec<f64>)
     (beta, se, res)
 }
 
-/// Variance inflation of a local sum of the innovations `w` for their remaining
-/// autocorrelation: `1 + 2Σ_k (1 − k/21) ρ_k`, k ≤ 20 (Bartlett weights), at least 1.
-fn inflation(f: &Filter, w: &[f64]) -> f64 {
-    let v: Vec<f64> = w.iter().zip(&f.step).filter(|(_, s)| **s == Step::Update).map(|(x, _)| *x).collect();
-    let n = v.len();
-    if n < 50 {
-        return 1.0;
-    }
-    let mean = v.iter().sum::<f64>() / n as f64;
-    let c: Vec<f64> = v.iter().map(|x| x - mean).collect();
-    let c0 = dot(&c, &c);
-    if !(c0 > 0.0) {
-        return 1.0;
-    }
-    let l = 20usize.min(n / 10);
-    let s: f64 = (1..=l).map(|k| 2.0 * (1.0 - k as f64 / (l as f64 + 1.0)) * dot(&c[k..], &c[..n - k]) / c0).sum();
-    (1.0 + s).max(1.0)
-}
-
 /// The scan with the model `cols` and the steps at `rows` in: the filter at random-walk
 /// intensity `q` (estimated with everything in when `None`), the robustly standardised `z`, and
 /// the raw residual of that fit (what the model and those steps leave).
@@ -318,7 +299,8 @@ pub fn fit_sizes(t: &[f64], r: &[f64], y: &[f64], cols: &[&[f64]], q: f64, found
     let f = Filter::new(t, r, q, |_| true);
     let (beta, se, w) = gls(&f, y, &all);
     let dof = (f.n_used as f64 - all.len() as f64).max(1.0);
-    let sigma2 = dot(&w, &w) / dof * inflation(&f, &w);
+    let used: Vec<bool> = f.step.iter().map(|s| *s == Step::Update).collect();
+    let sigma2 = dot(&w, &w) / dof * super::fit::inflation(&w, &used);
     let off = cols.len();
     found
         .iter()
