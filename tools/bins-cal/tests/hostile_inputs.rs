@@ -6,6 +6,8 @@
 #![allow(unsafe_code, reason = "libc: signals sent to the child and its SIGINT disposition before exec")]
 
 mod common;
+mod hostile;
+use hostile::{run_in, s, text};
 
 use std::os::unix::fs::symlink;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
@@ -33,35 +35,12 @@ fn fixture() -> &'static Fixture {
     static F: OnceLock<Fixture> = OnceLock::new();
     F.get_or_init(|| {
         let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hostile-inputs");
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        let f = Fixture {
-            rec: dir.join("t.csv"),
-            cal_toml: dir.join("cal.toml"),
-            cal_bin: dir.join("cal.bin"),
-            long: dir.join("long.toml"),
-            tiny: dir.join("tiny.toml"),
-        };
+        let (rec, cal_toml, cal_bin) = hostile::campaign(&dir);
+        let f = Fixture { rec, cal_toml, cal_bin, long: dir.join("long.toml"), tiny: dir.join("tiny.toml") };
         std::fs::write(&f.long, LONG).unwrap();
         std::fs::write(&f.tiny, TINY).unwrap();
-        let scen = common::repo("scenarios/test-tilter-3t.toml");
-        common::ok(&["simulate", s(&scen), "-o", s(&f.rec), "--quiet"]);
-        common::ok(&["calibrate", "--tilter", s(&f.rec), "--model", "poly:2", "-o", s(&f.cal_toml)]);
-        common::ok(&["blob", "encode", s(&f.cal_toml), "-o", s(&f.cal_bin)]);
         f
     })
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
-
-fn run_in(dir: &Path, args: &[&str]) -> Output {
-    common::bin().args(args).current_dir(dir).output().expect("bins-cal runs")
 }
 
 /// No panic: not exit 101 (panic) nor 134/SIGABRT (abort), no "panicked" on stderr.

@@ -8,6 +8,8 @@
 
 #[allow(dead_code)] // the helpers other test files use
 mod common;
+mod hostile;
+use hostile::{run_in, s, text};
 
 use std::os::unix::fs::{FileTypeExt, PermissionsExt, symlink};
 use std::path::{Path, PathBuf};
@@ -24,28 +26,10 @@ struct Fixture {
 fn fixture() -> &'static Fixture {
     static F: OnceLock<Fixture> = OnceLock::new();
     F.get_or_init(|| {
-        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hostile-outputs");
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        let f = Fixture { rec: dir.join("t.csv"), cal_toml: dir.join("cal.toml"), cal_bin: dir.join("cal.bin") };
-        let scen = common::repo("scenarios/test-tilter-3t.toml");
-        common::ok(&["simulate", s(&scen), "-o", s(&f.rec), "--quiet"]);
-        common::ok(&["calibrate", "--tilter", s(&f.rec), "--model", "poly:2", "-o", s(&f.cal_toml)]);
-        common::ok(&["blob", "encode", s(&f.cal_toml), "-o", s(&f.cal_bin)]);
-        f
+        let (rec, cal_toml, cal_bin) =
+            hostile::campaign(&Path::new(env!("CARGO_TARGET_TMPDIR")).join("hostile-outputs"));
+        Fixture { rec, cal_toml, cal_bin }
     })
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
-
-fn run_in(dir: &Path, args: &[&str]) -> Output {
-    common::bin().args(args).current_dir(dir).output().expect("bins-cal runs")
 }
 
 /// Runs `bins-cal args` in `dir` through `sh`, after `setup` (shell commands in which `$$` is
