@@ -94,7 +94,7 @@ impl Bank {
 }
 
 /// The fold of each row (`None`: in no fold).
-fn folds_of(n: usize) -> Vec<usize> {
+pub(crate) fn folds_of(n: usize) -> Vec<usize> {
     (0..n).map(|i| (i * BLOCKS / n.max(1)) % FOLDS).collect()
 }
 
@@ -325,15 +325,29 @@ pub fn raw_heldout(t: &[f64], r: &[f64], q: f64, y: &[f64], refs: &[&[f64]], fol
     let mut resid = vec![0.0; n];
     let mut fold_ss = [(0.0, 0usize); FOLDS];
     for (k, fs) in fold_ss.iter_mut().enumerate() {
-        let bk = if refs.is_empty() {
+        // A column the other folds hold (almost) nothing of is not determined by them: it
+        // takes no part in predicting this fold (its coefficient would be noise over ~0).
+        let held: Vec<&[f64]> = refs
+            .iter()
+            .copied()
+            .filter(|c| {
+                let (all, train) = c
+                    .iter()
+                    .zip(fold)
+                    .fold((0.0, 0.0), |(a, tr), (v, &f)| (a + v * v, if f != k { tr + v * v } else { tr }));
+                train > 1e-6 * all
+            })
+            .collect();
+        let bk = if held.is_empty() {
             Vec::new()
         } else {
             let fk = Filter::new(t, r, q, |i| fold[i] != k);
-            match gls(&fk, y, refs) {
+            match gls(&fk, y, &held) {
                 Some(g) => g.0,
-                None => gls(&Filter::new(t, r, q, |_| true), y, refs).map_or_else(|| vec![0.0; refs.len()], |g| g.0),
+                None => gls(&Filter::new(t, r, q, |_| true), y, &held).map_or_else(|| vec![0.0; held.len()], |g| g.0),
             }
         };
+        let refs = &held;
         let ek: Vec<f64> = (0..n).map(|i| y[i] - refs.iter().zip(&bk).map(|(c, b)| c[i] * b).sum::<f64>()).collect();
         let (s, c) = (0..n).filter(|&i| fold[i] != k).fold((0.0, 0usize), |(s, c), i| (s + ek[i], c + 1));
         let off = s / c.max(1) as f64;
@@ -639,12 +653,14 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                     Some(g) => ambiguity(&bank, &model, g, fit.inflation),
                     None => Vec::new(),
                 };
-                drift_alternatives(ctx, &bank, &model, q, fit.inflation, &mut amb);
-                // A temperature form that a drift in time explains clearly better is not a
-                // finding: it competes with drift, not with the null.
+                let beyond = drift_alternatives(ctx, &bank, &model, q, fit.inflation, &mut amb);
+                // A temperature form that a drift in time explains clearly better, and that
+                // adds nothing once that drift is in, is not a finding: it competes with
+                // drift, not with the null. (One that still adds beside the drift stays: the
+                // drift then explains something else the model lacks.)
                 let drift_wins = amb.iter().find_map(|(m, alts)| {
-                    alts.iter()
-                        .any(|(a, d)| Mech::ALTERNATIVES.contains(a) && *d <= -AMBIGUOUS_LR)
+                    let adds = beyond.iter().any(|(b, d)| b == m && *d >= AMBIGUOUS_LR);
+                    (!adds && alts.iter().any(|(a, d)| Mech::ALTERNATIVES.contains(a) && *d <= -AMBIGUOUS_LR))
                         .then(|| fit.terms.iter().position(|t| t.mech == *m))
                         .flatten()
                 });
@@ -715,33 +731,40 @@ fn drift_alternatives(
     q: f64,
     infl: f64,
     amb: &mut Vec<(Mech, Vec<(Mech, f64)>)>,
-) {
+) -> Vec<(Mech, f64)> {
+    let mut beyond = Vec::new();
     if !model.iter().any(|&c| bank.cands[c].mech.temperature_form()) || !ctx.available(Mech::Drift) {
-        return;
+        return beyond;
     }
     let p = ctx.p;
     let (t, r, y) = (&p.t, &p.r_white[ctx.axis], &p.r[ctx.axis]);
     let filt = Filter::new(t, r, q, |_| true);
-    let Some((_, _, sse_full, _)) = gls(&filt, y, &bank.slices_of(model)) else { return };
+    let Some((_, _, sse_full, _)) = gls(&filt, y, &bank.slices_of(model)) else { return beyond };
     let n = filt.n_used as f64;
     let grid = ctx.grid(Mech::Drift);
+    let with_drift = |members: &[usize]| {
+        grid.iter()
+            .filter_map(|&th| {
+                let extra = ctx.columns(Mech::Drift, th);
+                let mut cols = bank.slices_of(members);
+                cols.extend(extra.iter().map(|v| v.as_slice()));
+                gls(&filt, y, &cols).map(|g| g.2)
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let sse_model_drift = with_drift(model);
     for (k, &c) in model.iter().enumerate() {
         let m = bank.cands[c].mech;
         if !m.temperature_form() {
             continue;
         }
         let rest: Vec<usize> = model.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, c)| *c).collect();
-        let best = grid
-            .iter()
-            .filter_map(|&th| {
-                let extra = ctx.columns(Mech::Drift, th);
-                let mut cols = bank.slices_of(&rest);
-                cols.extend(extra.iter().map(|v| v.as_slice()));
-                gls(&filt, y, &cols).map(|g| g.2)
-            })
-            .fold(f64::INFINITY, f64::min);
+        let best = with_drift(&rest);
         if !best.is_finite() {
             continue;
+        }
+        if sse_model_drift.is_finite() {
+            beyond.push((m, n * (best / sse_model_drift.max(1e-300)).ln() / infl));
         }
         let d = n * (best / sse_full.max(1e-300)).ln() / infl;
         if d < AMBIGUOUS_LR {
@@ -751,6 +774,7 @@ fn drift_alternatives(
             }
         }
     }
+    beyond
 }
 
 /// Least squares of a whitened `y` on fixed whitened columns plus a few that change (one
@@ -844,7 +868,11 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
             let mut rest = members.clone();
             rest.remove(k);
             let part = PartialLs::new(&filt, y, &cols_of(&rest));
-            let eval = |lt: f64| part.sse_plus(&filt, &ctx.columns(m, lt.exp()));
+            // Refined only where the mechanism is offered (a turn-on τ whose signature lives
+            // in one held-out fold is not: see `Context::offered`).
+            let eval = |lt: f64| {
+                if ctx.offered(m, lt.exp()) { part.sse_plus(&filt, &ctx.columns(m, lt.exp())) } else { f64::INFINITY }
+            };
             let (mut c, mut d) = (b - phi * (b - a), a + phi * (b - a));
             let (mut fc, mut fd) = (eval(c), eval(d));
             for _ in 0..16 {
@@ -981,5 +1009,54 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
         heldout_rms: (hb.rms(), ha.rms()),
         heldout_resid: (hb.resid, ha.resid),
         heldout_gain,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::mech::max_fold_share;
+
+    /// A pseudo-random white sequence (xorshift), unit variance about.
+    fn white(n: usize, seed: u64) -> Vec<f64> {
+        let mut s = seed | 1;
+        (0..n)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                ((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 12f64.sqrt()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_column_the_other_folds_do_not_hold_takes_no_part_in_a_folds_prediction() {
+        // 3 h at 1 Hz; a turn-on of τ = 1 s lives in the first seconds (fold 0 only) and is
+        // ~1e-160 elsewhere: fitted from the other folds its coefficient would be noise over
+        // nothing (it was 1e135 mg on a 3-hour recording).
+        let n = 10_800;
+        let t: Vec<f64> = (0..n).map(|i| i as f64).collect();
+        let y: Vec<f64> = white(n, 7).iter().map(|v| 1e-5 * v).collect();
+        let r = vec![1e-10; n];
+        let spike: Vec<f64> = t.iter().map(|p| (-p / 1.0).exp()).collect();
+        let fold = folds_of(n);
+        let with = raw_heldout(&t, &r, 0.0, &y, &[&spike], &fold);
+        let without = raw_heldout(&t, &r, 0.0, &y, &[], &fold);
+        assert!(with.resid.iter().all(|v| v.is_finite()));
+        assert!((with.rms() - without.rms()).abs() < 1e-3 * without.rms(), "{} vs {}", with.rms(), without.rms());
+    }
+
+    #[test]
+    fn a_turn_on_signature_in_one_fold_is_told_from_one_spread_over_the_folds() {
+        let n = 10_800;
+        let fold = folds_of(n);
+        let power_s: Vec<f64> = (0..n).map(|i| i as f64).collect();
+        let share = |tau: f64| max_fold_share(power_s.iter().map(|p| (-p / tau).exp()), &fold);
+        // A block is 270 s: τ = 1 s lives in block 0; τ = 600 s spreads over the first blocks
+        // of every fold.
+        assert!(share(1.0) > 0.999, "{}", share(1.0));
+        assert!(share(600.0) < 0.8, "{}", share(600.0));
+        assert_eq!(max_fold_share(std::iter::repeat_n(1.0, n), &fold), 1.0);
     }
 }

@@ -29,6 +29,12 @@ pub const T0_C: f64 = 20.0;
 /// rows near power-on on the scale of τ.
 pub const TURN_ON_MIN_RANGE: f64 = 0.25;
 
+/// A turn-on term is offered at τ only when at most this share of the centred energy of
+/// `e^(−P/τ)` falls in one held-out fold ([`super::fit::FOLDS`]): a signature that lives
+/// in one fold (a τ of seconds after power-on in an hour-long record) cannot be checked on
+/// data left out of its fit, and fitted from the other folds it is not determined at all.
+pub const TURN_ON_MAX_FOLD_SHARE: f64 = 0.98;
+
 /// A mechanism.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Mech {
@@ -362,6 +368,22 @@ pub fn play(temp: &[f64], h: f64) -> Vec<f64> {
         .collect()
 }
 
+/// The largest share of the centred energy of the column `c` (one value per row) that falls
+/// in one held-out fold (`fold[i]`: row `i`'s fold); 1 for a constant column.
+pub fn max_fold_share(c: impl Iterator<Item = f64> + Clone, fold: &[usize]) -> f64 {
+    let (s, n) = c.clone().fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    let mean = s / n.max(1) as f64;
+    let mut e = [0.0; super::fit::FOLDS];
+    for (v, &k) in c.zip(fold) {
+        e[k] += (v - mean) * (v - mean);
+    }
+    let total: f64 = e.iter().sum();
+    if !(total > 0.0) {
+        return 1.0;
+    }
+    e.iter().fold(0.0, |a: f64, &b| a.max(b)) / total
+}
+
 /// What the columns of a mechanism are built from, per accelerometer.
 pub struct Context<'a> {
     /// The data.
@@ -496,14 +518,24 @@ impl<'a> Context<'a> {
     pub fn grid(&self, m: Mech) -> Vec<f64> {
         let g = self.grid_span(m);
         match m {
-            Mech::SelfHeating | Mech::Warmup => {
-                let pw = self.p.power.as_deref().unwrap_or(&[]);
-                let (pmin, pmax) =
-                    pw.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-                g.into_iter().filter(|&tau| (-pmin / tau).exp() - (-pmax / tau).exp() >= TURN_ON_MIN_RANGE).collect()
-            }
+            Mech::SelfHeating | Mech::Warmup => g.into_iter().filter(|&tau| self.offered(m, tau)).collect(),
             _ => g,
         }
+    }
+
+    /// Whether mechanism `m` is offered at `theta`: a turn-on term (`warmup`, `self_heating`)
+    /// only where `e^(−P/τ)` changes by at least [`TURN_ON_MIN_RANGE`] over the recording and
+    /// at most [`TURN_ON_MAX_FOLD_SHARE`] of its centred energy lies in one held-out fold;
+    /// every other mechanism at every θ.
+    pub fn offered(&self, m: Mech, theta: f64) -> bool {
+        if !matches!(m, Mech::SelfHeating | Mech::Warmup) {
+            return true;
+        }
+        let pw = self.p.power.as_deref().unwrap_or(&[]);
+        let (pmin, pmax) = pw.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        (-pmin / theta).exp() - (-pmax / theta).exp() >= TURN_ON_MIN_RANGE
+            && max_fold_share(pw.iter().map(|p| (-p / theta).exp()), &super::fit::folds_of(pw.len()))
+                <= TURN_ON_MAX_FOLD_SHARE
     }
 
     fn grid_span(&self, m: Mech) -> Vec<f64> {
