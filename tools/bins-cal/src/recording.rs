@@ -1266,6 +1266,23 @@ impl Table {
 
     /// Reads a table from `src`; `name` is the file named in errors.
     pub fn from_reader(src: impl BufRead, name: impl AsRef<Path>) -> Result<Table, Error> {
+        let mut rows = Vec::new();
+        let mut t = Table::for_each_row(src, name, |_, line, cells| {
+            rows.push((line, cells.iter().map(|c| c.to_string()).collect()));
+            Ok::<(), Error>(())
+        })?;
+        t.rows = rows;
+        Ok(t)
+    }
+
+    /// Reads a table from `src` one row at a time (for tables too long to hold as strings):
+    /// `each(table, line, cells)` is called for every row with the table's header (and no
+    /// rows); returns the table without rows. `name` is the file named in errors.
+    pub fn for_each_row<E: From<Error>>(
+        src: impl BufRead,
+        name: impl AsRef<Path>,
+        mut each: impl FnMut(&Table, u64, &[&str]) -> Result<(), E>,
+    ) -> Result<Table, E> {
         let mut t = Table { file: name.as_ref().to_path_buf(), header: Vec::new(), rows: Vec::new() };
         let mut csv = csv_reader(Lines::new(src, Blank::Skip));
         let mut record = csv::ByteRecord::new();
@@ -1283,19 +1300,19 @@ impl Table {
             // The `csv` crate is given one line at a time: the line the source read last is
             // the row's.
             let line_no = csv.get_ref().line_no;
-            let row: Vec<String> = (0..record.len()).map(|i| cell_text(&record, i).to_string()).collect();
+            let cells: Vec<&str> = (0..record.len()).map(|i| cell_text(&record, i)).collect();
             if header {
-                t.header = row;
+                t.header = cells.iter().map(|c| c.to_string()).collect();
                 header = false;
-            } else if row.len() != t.header.len() {
-                let kind = ErrorKind::CellCount { expected: t.header.len(), got: row.len() };
-                return Err(Error { file: t.file, line: line_no, column: None, kind });
+            } else if cells.len() != t.header.len() {
+                let kind = ErrorKind::CellCount { expected: t.header.len(), got: cells.len() };
+                return Err(Error { file: t.file, line: line_no, column: None, kind }.into());
             } else {
-                t.rows.push((line_no, row));
+                each(&t, line_no, &cells)?;
             }
         }
         if header {
-            return Err(Error { file: t.file, line: 0, column: None, kind: ErrorKind::NoHeader });
+            return Err(Error { file: t.file, line: 0, column: None, kind: ErrorKind::NoHeader }.into());
         }
         Ok(t)
     }
