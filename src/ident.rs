@@ -56,8 +56,8 @@ impl core::error::Error for FitError {}
 /// T(10): the 12 constants from the mean signals in TP1…TP6 (`u_v[k]` = signals in TP(k+1)),
 /// with g = 1 in g units. Exact for ideal positions.
 pub fn six_position<F: Float>(u_v: &[Vec3<F>; 6]) -> Constants<F> {
-    let half = F::of(0.5);
-    let quarter = F::of(0.25);
+    let half = F::from_f64(0.5);
+    let quarter = F::from_f64(0.25);
     let [u1, u2, u3, u4, u5, u6] = u_v;
     let mut k = [[F::ZERO; 3]; 3];
     for i in 0..3 {
@@ -84,7 +84,7 @@ pub fn fit_constants<F: Float>(f_g: &[Vec3<F>], u_v: &[Vec3<F>]) -> Result<Const
     if n < 4 {
         return Err(FitError::TooFewPoints { needed: 4, got: n });
     }
-    let inv_n = F::ONE / F::of(n as f64);
+    let inv_n = F::ONE / F::from_f64(n as f64);
     let mut f_mean = [F::ZERO; 3];
     let mut u_mean = [F::ZERO; 3];
     for (f, u) in f_g.iter().zip(u_v) {

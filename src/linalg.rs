@@ -135,7 +135,7 @@ pub fn cast_mat<A: Float, B: Float>(m: &Mat3<A>) -> Mat3<B> {
     let mut out = [[B::ZERO; 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
-            out[i][j] = B::of(m[i][j].to_f64());
+            out[i][j] = B::from_f64(m[i][j].to_f64());
         }
     }
     out
@@ -144,7 +144,7 @@ pub fn cast_mat<A: Float, B: Float>(m: &Mat3<A>) -> Mat3<B> {
 /// Converts every element between float types (through `f64`).
 #[cfg_attr(unstable_target, optimize(size))]
 pub fn cast_vec<A: Float, B: Float>(v: &Vec3<A>) -> Vec3<B> {
-    [B::of(v[0].to_f64()), B::of(v[1].to_f64()), B::of(v[2].to_f64())]
+    [B::from_f64(v[0].to_f64()), B::from_f64(v[1].to_f64()), B::from_f64(v[2].to_f64())]
 }
 
 /// Solves the small dense system `a·x = b` (n ≤ 5) by Gaussian elimination with partial
@@ -162,7 +162,7 @@ pub fn solve<F: Float, const N: usize>(mut a: [[F; N]; N], mut b: [F; N], n: usi
     if !(scale > F::ZERO) || !scale.is_finite() {
         return None;
     }
-    let tiny = scale * F::EPSILON * F::of(16.0);
+    let tiny = scale * F::EPSILON * F::from_f64(16.0);
     for col in 0..n {
         let mut piv = col;
         for r in col + 1..n {
