@@ -490,19 +490,11 @@ fn read_line(src: &mut impl BufRead, raw: &mut Vec<u8>) -> Result<(), ErrorKind>
 /// Brings one line into the form the `csv` crate reads as this format means it: spaces and
 /// tabs around a cell are not part of it (unless quoted), nothing after a quoted cell's closing
 /// quote is (up to the next comma), a quoted cell ends on its own line. Writes the line to
-/// `out` (without a line break) and returns its number of cells; more than [`MAX_COLUMNS`] is
-/// an error. The `csv` crate then splits the cells and unquotes them.
-fn clean_line(line: &[u8], out: &mut Vec<u8>) -> Result<usize, ErrorKind> {
+/// `out` (without a line break); more than [`MAX_COLUMNS`] cells is an error. The `csv` crate
+/// then splits the cells and unquotes them. For lines with a quote, a space or a tab; the
+/// others need no cleaning.
+fn clean_line(line: &[u8], out: &mut Vec<u8>) -> Result<(), ErrorKind> {
     out.clear();
-    if memchr::memchr3(b'"', b' ', b'\t', line).is_none() {
-        // The common case: no quote, no padding; the cells are the commas plus one.
-        let cells = memchr::memchr_iter(b',', line).count() + 1;
-        if cells > MAX_COLUMNS {
-            return Err(ErrorKind::TooManyCells);
-        }
-        out.extend_from_slice(line);
-        return Ok(cells);
-    }
     let pad = |b: &u8| *b == b' ' || *b == b'\t';
     let (mut i, mut cells) = (0, 0);
     loop {
@@ -535,7 +527,7 @@ fn clean_line(line: &[u8], out: &mut Vec<u8>) -> Result<usize, ErrorKind> {
             i = end;
         }
         if i >= line.len() {
-            return Ok(cells);
+            return Ok(());
         }
         out.push(b',');
         i += 1;
@@ -615,7 +607,16 @@ impl<R: BufRead> Lines<R> {
 
     /// Makes the last line read the next one handed to the `csv` crate.
     fn hand_on(&mut self) -> Result<(), (u64, ErrorKind)> {
-        clean_line(&self.raw, &mut self.out).map_err(|k| (self.line_no, k))?;
+        if memchr::memchr3(b'"', b' ', b'\t', &self.raw).is_none() {
+            // The common case: no quote, no padding, nothing to clean; the cells are the commas
+            // plus one (fewer than the bytes).
+            if self.raw.len() >= MAX_COLUMNS && memchr::memchr_iter(b',', &self.raw).count() >= MAX_COLUMNS {
+                return Err((self.line_no, ErrorKind::TooManyCells));
+            }
+            std::mem::swap(&mut self.raw, &mut self.out);
+        } else {
+            clean_line(&self.raw, &mut self.out).map_err(|k| (self.line_no, k))?;
+        }
         if self.out.is_empty() && self.blank == Blank::Row {
             self.out.extend_from_slice(b"\"\"");
         }
