@@ -227,19 +227,19 @@ impl CalibrationParams {
         if !(lo.is_finite() && hi.is_finite() && p.t0_c.is_finite() && lo < hi && lo <= p.t0_c && p.t0_c <= hi) {
             return Err(CalibrationError::BadRange);
         }
-        let (model, t0_c) = (p.model.cast::<f32>(), f32::of(p.t0_c));
+        let (model, t0_c) = (p.model.cast::<f32>(), f32::from_f64(p.t0_c));
         // The fraction i/64 as a running sum of 1/64 (exact), not a conversion of i: the
         // target then needs no integer-to-f64 conversion.
         let mut frac = 0.0;
         for _ in 0..=RANGE_CHECK_POINTS {
             let t = lo + (hi - lo) * frac;
-            check_k_at(&c, &model, t0_c, f32::of(t))?;
+            check_k_at(&c, &model, t0_c, f32::from_f64(t))?;
             frac += 1.0 / RANGE_CHECK_POINTS as f64;
         }
         if let TempModel::Pwl { n_knots, knots_c, .. } = &p.model {
             for &kn in knots_c.iter().take(*n_knots as usize) {
                 if kn > lo && kn < hi {
-                    check_k_at(&c, &model, t0_c, f32::of(kn))?;
+                    check_k_at(&c, &model, t0_c, f32::from_f64(kn))?;
                 }
             }
         }
@@ -259,7 +259,7 @@ impl CalibrationParams {
 fn check_k_at<F: Float>(c: &Constants<F>, model: &TempModel<F>, t0_c: F, temp_c: F) -> Result<(), CalibrationError> {
     let kt = apply_delta(c, &model.delta(temp_c, t0_c));
     let k = &c.k_v_per_g;
-    let ratio = F::of(MAX_SCALE_RATIO);
+    let ratio = F::from_f64(MAX_SCALE_RATIO);
     let plausible = (0..3).all(|i| (F::ONE / ratio..=ratio).contains(&(kt.k_v_per_g[i][i] / k[i][i])));
     if kt.inverse().is_none() || !plausible { Err(CalibrationError::SingularInRange) } else { Ok(()) }
 }
@@ -381,20 +381,20 @@ impl<F: Float> Calibration<F> {
         let k = &constants.k_v_per_g;
         let (lo, hi) = p.temp_range_c;
         let n_f: Mat3<F> = linalg::cast_mat(&n);
-        let lo_at = |i: usize| F::of(n[i][i] - n_f[i][i].to_f64());
+        let lo_at = |i: usize| F::from_f64(n[i][i] - n_f[i][i].to_f64());
         let n_diag_lo = [lo_at(0), lo_at(1), lo_at(2)];
         Ok(Calibration {
             params: *p,
-            t0_c: F::of(p.t0_c),
+            t0_c: F::from_f64(p.t0_c),
             constants: constants.cast(),
             n_g_per_v: n_f,
             n_diag_split: [float::split(n_f[0][0]), float::split(n_f[1][1]), float::split(n_f[2][2])],
             n_diag_lo,
-            inv_diag: [0, 1, 2].map(|i| F::of(float::recip(k[i][i]))),
+            inv_diag: [0, 1, 2].map(|i| F::from_f64(float::recip(k[i][i]))),
             model: p.model.cast(),
             method: p.method,
-            temp_min_c: F::of(lo),
-            temp_max_c: F::of(hi),
+            temp_min_c: F::from_f64(lo),
+            temp_max_c: F::from_f64(hi),
             valid: true,
             fingerprint: fingerprint(p),
         })
@@ -422,8 +422,8 @@ impl<F: Float> Calibration<F> {
             inv_diag: [F::ONE; 3],
             model: TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] },
             method: Method::Uncorrected,
-            temp_min_c: F::of(-1.0e30),
-            temp_max_c: F::of(1.0e30),
+            temp_min_c: F::from_f64(-1.0e30),
+            temp_max_c: F::from_f64(1.0e30),
             valid: false,
             fingerprint: 0,
         }
@@ -503,7 +503,7 @@ impl<F: Float> Calibration<F> {
         for (i, row) in y.iter_mut().enumerate() {
             row[i] += F::ONE;
         }
-        let inv = linalg::inverse_checked(&y, F::of(linalg::MIN_HADAMARD_RATIO))?;
+        let inv = linalg::inverse_checked(&y, F::from_f64(linalg::MIN_HADAMARD_RATIO))?;
         let mut m = linalg::mat_mul(&inv, &x);
         for row in m.iter_mut() {
             for v in row.iter_mut() {

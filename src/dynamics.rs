@@ -37,7 +37,7 @@
 //! from the first finite reading), held in between: within `|ΔT_sh|·(N − 1)·Δt/τ_sh` of the
 //! closed form at the sample's own time (7.5·10⁻⁵ °C for 1.5 °C, τ_sh = 300 s at 1 kHz), with
 //! no exponential per sample. The sampling interrupt uses [`FixedRate`];
-//! [`FixedRate::unheld`] advances the term on every sample (the tests' reference).
+//! [`FixedRate::heating_every_sample`] advances the term on every sample (the tests' reference).
 //!
 //! Precision: the lagged temperature is kept as a double-word (hi + lo, compensated
 //! summation). Its increment per sample is small (1.7·10⁻⁵ of the gap at Δt = 1 ms, τ = 60
@@ -180,7 +180,7 @@ impl<F: Float> DynamicsState<F> {
 
     /// The outputs of the hysteresis play and of the bias play [°C] (0 before the first finite
     /// reading).
-    pub fn plays_c(&self) -> (F, F) {
+    pub fn play_outputs_c(&self) -> (F, F) {
         (self.play, self.bias_play)
     }
 
@@ -213,25 +213,25 @@ pub fn one_minus_exp_neg<F: Float>(x: F) -> F {
     if !(x > F::ZERO) {
         return F::ZERO;
     }
-    if x >= F::of(40.0) {
+    if x >= F::from_f64(40.0) {
         return F::ONE;
     }
     let (mut y, mut k) = (x, 0u32);
-    while y >= F::of(0.01) && k < 16 {
-        y *= F::of(0.5);
+    while y >= F::from_f64(0.01) && k < 16 {
+        y *= F::from_f64(0.5);
         k += 1;
     }
     // y·(1 − y/2·(1 − y/3·(1 − y/4·(1 − y/5·(1 − y/6)))))
     // Written out: a loop over the divisors would convert each from `f64` at run time (a
     // soft-float call on the target); as literals they are FPU immediates.
-    let mut acc = F::ONE - y / F::of(6.0);
-    acc = F::ONE - y / F::of(5.0) * acc;
-    acc = F::ONE - y / F::of(4.0) * acc;
-    acc = F::ONE - y / F::of(3.0) * acc;
-    acc = F::ONE - y / F::of(2.0) * acc;
+    let mut acc = F::ONE - y / F::from_f64(6.0);
+    acc = F::ONE - y / F::from_f64(5.0) * acc;
+    acc = F::ONE - y / F::from_f64(4.0) * acc;
+    acc = F::ONE - y / F::from_f64(3.0) * acc;
+    acc = F::ONE - y / F::from_f64(2.0) * acc;
     let mut g = y * acc;
     for _ in 0..k {
-        g = g * (F::of(2.0) - g);
+        g = g * (F::from_f64(2.0) - g);
     }
     if g > F::ONE { F::ONE } else { g }
 }
@@ -289,7 +289,7 @@ impl<F: Float> ThermalDynamics<F> {
     pub fn validate(&self) -> Result<(), DynamicsError> {
         for (n, &x) in self.to_array().iter().enumerate() {
             let (lo, hi) = limits(n as u8);
-            if !(x.is_finite() && x >= F::of(lo) && x <= F::of(hi)) {
+            if !(x.is_finite() && x >= F::from_f64(lo) && x <= F::from_f64(hi)) {
                 return Err(match n {
                     0 => DynamicsError::LagTau,
                     1 => DynamicsError::HysteresisWidth,
@@ -339,7 +339,7 @@ impl<F: Float> ThermalDynamics<F> {
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
     pub fn cast<G: Float>(&self) -> ThermalDynamics<G> {
-        ThermalDynamics::from_array(&self.to_array().map(|x| G::of(x.to_f64())))
+        ThermalDynamics::from_array(&self.to_array().map(|x| G::from_f64(x.to_f64())))
     }
 
     /// The self-heating term `ΔT_sh·(1 − e^(−t_on/τ_sh))` at `t_on_s` seconds after power-on
@@ -349,7 +349,7 @@ impl<F: Float> ThermalDynamics<F> {
         if dt == F::ZERO {
             return F::ZERO;
         }
-        if tau <= F::ZERO || t_on_s > F::of(40.0) * tau {
+        if tau <= F::ZERO || t_on_s > F::from_f64(40.0) * tau {
             return dt;
         }
         dt * one_minus_exp_neg(t_on_s.max(F::ZERO) / tau)
@@ -366,8 +366,8 @@ impl<F: Float> ThermalDynamics<F> {
         let t_on = if t_on_s.is_finite() { t_on_s } else { F::ZERO };
         let k = Constants {
             lag_gain: lag_gain(dt, self.lag_tau_s),
-            half_width_c: self.hysteresis_width_c * F::of(0.5),
-            bias_half_width_c: self.bias_play_width_c * F::of(0.5),
+            half_width_c: self.hysteresis_width_c * F::from_f64(0.5),
+            bias_half_width_c: self.bias_play_width_c * F::from_f64(0.5),
             inv_bias_half_width: inv_half(self.bias_play_width_c),
         };
         let heating = self.self_heating_at(t_on);
@@ -397,12 +397,12 @@ impl<F: Float> ThermalDynamics<F> {
         Ok(FixedRate {
             k: Constants {
                 lag_gain: lag,
-                half_width_c: self.hysteresis_width_c * F::of(0.5),
-                bias_half_width_c: self.bias_play_width_c * F::of(0.5),
+                half_width_c: self.hysteresis_width_c * F::from_f64(0.5),
+                bias_half_width_c: self.bias_play_width_c * F::from_f64(0.5),
                 inv_bias_half_width: inv_half(self.bias_play_width_c),
             },
             lag: (lag < F::ONE) as u32,
-            heating_gain: lag_gain(F::of(HEATING_EVERY as f64) * dt_s, self.self_heating_tau_s),
+            heating_gain: lag_gain(F::from_f64(HEATING_EVERY as f64) * dt_s, self.self_heating_tau_s),
             every: HEATING_EVERY,
             params: *self,
             dt_s,
@@ -436,7 +436,7 @@ fn follow<F: Float>(x: &mut (F, F), target: F, gain: F) {
 
 /// `2/h` (0 for h = 0).
 fn inv_half<F: Float>(h: F) -> F {
-    if h > F::ZERO { F::of(2.0) / h } else { F::ZERO }
+    if h > F::ZERO { F::from_f64(2.0) / h } else { F::ZERO }
 }
 
 /// The per-sample constants of the lag and the two plays.
@@ -459,7 +459,7 @@ impl<F: Float> Constants<F> {
     fn advance(&self, st: &mut DynamicsState<F>, temp_c: F, heating_c: F, lag: bool) -> Effective<F> {
         // Not a temperature (NaN, ±∞, beyond ±1000 °C): passed through, the state untouched.
         // One comparison, false for NaN too.
-        if !(temp_c.abs() <= F::of(MAX_READING_C)) {
+        if !(temp_c.abs() <= F::from_f64(MAX_READING_C)) {
             return Effective { temp_eff_c: temp_c, bias_play: F::ZERO };
         }
         let u = temp_c;
@@ -527,7 +527,7 @@ impl<F: Float> FixedRate<F> {
 
     /// The same stages with the self-heating term advanced on every sample (N = 1): the
     /// recursion without the hold, the reference the held one is tested against.
-    pub fn unheld(mut self) -> Self {
+    pub fn heating_every_sample(mut self) -> Self {
         self.every = 1;
         self.heating_gain = lag_gain(self.dt_s, self.params.self_heating_tau_s);
         self
@@ -550,7 +550,7 @@ impl<F: Float> FixedRate<F> {
         let u = temp_c;
         // Not a temperature (NaN, ±∞, beyond ±1000 °C): passed through, the state untouched.
         // One comparison, false for NaN too.
-        let good = u.abs() <= F::of(MAX_READING_C);
+        let good = u.abs() <= F::from_f64(MAX_READING_C);
         // The high part: within half its spacing of hi + lo.
         let heating = st.heating.0;
         if st.countdown == 0 {

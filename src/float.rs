@@ -33,8 +33,9 @@ pub trait Float:
     const EPSILON: Self;
     /// Veltkamp's splitting constant `2^⌈p/2⌉ + 1` (p = mantissa bits), see [`split`].
     const SPLITTER: Self;
-    /// Converts a constant (rounding to nearest for `f32`).
-    fn of(x: f64) -> Self;
+    /// Converts an `f64` (a constant, or a value computed in `f64`) to this type, rounding to
+    /// nearest for `f32`; the inverse of [`to_f64`](Self::to_f64) where that is exact.
+    fn from_f64(x: f64) -> Self;
     /// Widens to `f64` (exact).
     fn to_f64(self) -> f64;
     /// Absolute value.
@@ -62,7 +63,7 @@ impl Float for f32 {
     const EPSILON: Self = f32::EPSILON;
     const SPLITTER: Self = 4097.0; // 2^12 + 1
     #[inline(always)]
-    fn of(x: f64) -> Self {
+    fn from_f64(x: f64) -> Self {
         x as f32
     }
     #[inline(always)]
@@ -114,7 +115,7 @@ impl Float for f64 {
     const EPSILON: Self = f64::EPSILON;
     const SPLITTER: Self = 134_217_729.0; // 2^27 + 1
     #[inline(always)]
-    fn of(x: f64) -> Self {
+    fn from_f64(x: f64) -> Self {
         x
     }
     #[inline(always)]
@@ -164,7 +165,7 @@ impl Float for f64 {
 #[inline(never)]
 #[cfg_attr(unstable_target, optimize(size))]
 pub fn recip<F: Float>(x: F) -> F {
-    let r0 = F::of((1.0f32 / x.to_f64() as f32) as f64);
+    let r0 = F::from_f64((1.0f32 / x.to_f64() as f32) as f64);
     let r1 = r0 + r0 * (F::ONE - x * r0);
     r1 + r1 * (F::ONE - x * r1)
 }

@@ -56,8 +56,8 @@ impl core::error::Error for FitError {}
 /// T(10): the 12 constants from the mean signals in TP1…TP6 (`u_v[k]` = signals in TP(k+1)),
 /// with g = 1 in g units. Exact for ideal positions.
 pub fn six_position<F: Float>(u_v: &[Vec3<F>; 6]) -> Constants<F> {
-    let half = F::of(0.5);
-    let quarter = F::of(0.25);
+    let half = F::from_f64(0.5);
+    let quarter = F::from_f64(0.25);
     let [u1, u2, u3, u4, u5, u6] = u_v;
     let mut k = [[F::ZERO; 3]; 3];
     for i in 0..3 {
@@ -84,7 +84,7 @@ pub fn fit_constants<F: Float>(f_g: &[Vec3<F>], u_v: &[Vec3<F>]) -> Result<Const
     if n < 4 {
         return Err(FitError::TooFewPoints { needed: 4, got: n });
     }
-    let inv_n = F::ONE / F::of(n as f64);
+    let inv_n = F::ONE / F::from_f64(n as f64);
     let mut f_mean = [F::ZERO; 3];
     let mut u_mean = [F::ZERO; 3];
     for (f, u) in f_g.iter().zip(u_v) {
@@ -114,7 +114,7 @@ pub fn fit_constants<F: Float>(f_g: &[Vec3<F>], u_v: &[Vec3<F>]) -> Result<Const
     let mut u0 = [F::ZERO; 3];
     for i in 0..3 {
         let rhs = [atb[0][i], atb[1][i], atb[2][i]];
-        let row = linalg::solve::<F, 3>(ata, rhs, 3).ok_or(FitError::Singular)?;
+        let row = linalg::solve(ata, rhs).ok_or(FitError::Singular)?;
         k[i] = row;
         u0[i] = u_mean[i] - (row[0] * f_mean[0] + row[1] * f_mean[1] + row[2] * f_mean[2]);
     }
@@ -269,6 +269,12 @@ pub fn poly_from_constants<F: Float>(
             }
         }
     }
+    // The order×order system solved in the MAX_POLY_ORDER arrays: an identity in the unused
+    // corner (`linalg::solve`; the tolerance is unchanged, as ata[0][0] = Σ s² ≥ 1: the
+    // farthest point has |s| = 1).
+    for r in order..MAX_POLY_ORDER {
+        ata[r][r] = F::ONE;
+    }
     let mut coef = [CoefDelta::zero(); MAX_POLY_ORDER];
     let mut arrays = [[F::ZERO; 12]; MAX_POLY_ORDER];
     for k in 0..12 {
@@ -276,7 +282,7 @@ pub fn poly_from_constants<F: Float>(
         for r in 0..order {
             rhs[r] = atb[r][k];
         }
-        let sol = linalg::solve::<F, MAX_POLY_ORDER>(ata, rhs, order).ok_or(FitError::Singular)?;
+        let sol = linalg::solve(ata, rhs).ok_or(FitError::Singular)?;
         // Undo the scaling: c_n = ĉ_n / scaleⁿ.
         let mut p = F::ONE;
         for n in 0..order {

@@ -135,7 +135,7 @@ pub fn cast_mat<A: Float, B: Float>(m: &Mat3<A>) -> Mat3<B> {
     let mut out = [[B::ZERO; 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
-            out[i][j] = B::of(m[i][j].to_f64());
+            out[i][j] = B::from_f64(m[i][j].to_f64());
         }
     }
     out
@@ -144,25 +144,45 @@ pub fn cast_mat<A: Float, B: Float>(m: &Mat3<A>) -> Mat3<B> {
 /// Converts every element between float types (through `f64`).
 #[cfg_attr(unstable_target, optimize(size))]
 pub fn cast_vec<A: Float, B: Float>(v: &Vec3<A>) -> Vec3<B> {
-    [B::of(v[0].to_f64()), B::of(v[1].to_f64()), B::of(v[2].to_f64())]
+    [B::from_f64(v[0].to_f64()), B::from_f64(v[1].to_f64()), B::from_f64(v[2].to_f64())]
 }
 
-/// Solves the small dense system `a·x = b` (n ≤ 5) by Gaussian elimination with partial
-/// pivoting; `None` when a pivot vanishes relative to the column scale.
-pub fn solve<F: Float, const N: usize>(mut a: [[F; N]; N], mut b: [F; N], n: usize) -> Option<[F; N]> {
-    if n == 0 || n > N {
+/// Solves the small dense `N`×`N` system `a·x = b` by Gaussian elimination with partial
+/// pivoting; `None` when a pivot vanishes relative to the largest element of `a` (or `N` is 0).
+///
+/// A system smaller than the arrays at hand is solved by putting it in the top-left corner and
+/// an identity below and to the right of it (zeros elsewhere, zeros in `b`): its unknowns come
+/// out exactly as if it were solved alone (the identity's rows are never chosen as pivots and
+/// never change), the others as 0; the tolerance is the same as long as the system's largest
+/// element is at least 1.
+///
+/// ```
+/// use bins_comp::linalg::solve;
+/// // 2x + y = 3, x + 3y = 5: x = 0.8, y = 1.4.
+/// let alone: [f64; 2] = solve([[2.0, 1.0], [1.0, 3.0]], [3.0, 5.0]).unwrap();
+/// assert!((alone[0] - 0.8).abs() < 1e-15 && (alone[1] - 1.4).abs() < 1e-15);
+/// // The same system in 4×4 arrays, an identity in the unused corner: the same bits.
+/// let a = [[2.0, 1.0, 0.0, 0.0], [1.0, 3.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+/// let embedded = solve(a, [3.0, 5.0, 0.0, 0.0]).unwrap();
+/// assert_eq!(embedded, [alone[0], alone[1], 0.0, 0.0]);
+/// // A singular system has no solution.
+/// assert_eq!(solve([[1.0, 2.0], [2.0, 4.0]], [1.0, 2.0]), None);
+/// ```
+pub fn solve<F: Float, const N: usize>(mut a: [[F; N]; N], mut b: [F; N]) -> Option<[F; N]> {
+    let n = N;
+    if n == 0 {
         return None;
     }
     let mut scale = F::ZERO;
-    for row in a.iter().take(n) {
-        for &x in row.iter().take(n) {
+    for row in a.iter() {
+        for &x in row.iter() {
             scale = scale.max(x.abs());
         }
     }
     if !(scale > F::ZERO) || !scale.is_finite() {
         return None;
     }
-    let tiny = scale * F::EPSILON * F::of(16.0);
+    let tiny = scale * F::EPSILON * F::from_f64(16.0);
     for col in 0..n {
         let mut piv = col;
         for r in col + 1..n {
@@ -193,5 +213,5 @@ pub fn solve<F: Float, const N: usize>(mut a: [[F; N]; N], mut b: [F; N], n: usi
         }
         x[col] = s / a[col][col];
     }
-    if x.iter().take(n).all(|v| v.is_finite()) { Some(x) } else { None }
+    if x.iter().all(|v| v.is_finite()) { Some(x) } else { None }
 }

@@ -26,7 +26,7 @@ impl<F: Float> Constants<F> {
     /// `N = K⁻¹`, or `None` when K is singular or ill-conditioned
     /// (see [`linalg::MIN_HADAMARD_RATIO`]).
     pub fn inverse(&self) -> Option<Mat3<F>> {
-        linalg::inverse_checked(&self.k_v_per_g, F::of(linalg::MIN_HADAMARD_RATIO))
+        linalg::inverse_checked(&self.k_v_per_g, F::from_f64(linalg::MIN_HADAMARD_RATIO))
     }
 
     /// True when all 12 numbers are finite.

@@ -206,17 +206,17 @@ impl<F: Float> Pipeline<F> {
             self.round_c = F::ZERO;
         } else {
             self.dynamics = Some(dynamics);
-            self.round_c = F::of(1.5) / F::EPSILON * F::of(TEMP_EFF_STEP_C);
+            self.round_c = F::from_f64(1.5) / F::EPSILON * F::from_f64(TEMP_EFF_STEP_C);
         }
         self
     }
 
     /// The same pipeline evaluating the temperature model at the exact effective temperature
     /// on every sample (no rounding to [`TEMP_EFF_STEP_C`], the self-heating term advanced on
-    /// every sample, [`FixedRate::unheld`]): the reference the rounded one is tested against.
+    /// every sample, [`FixedRate::heating_every_sample`]): the reference the rounded one is tested against.
     pub fn exact_effective_temperature(mut self) -> Self {
         self.round_c = F::ZERO;
-        self.dynamics = self.dynamics.map(|d| d.unheld());
+        self.dynamics = self.dynamics.map(|d| d.heating_every_sample());
         self
     }
 
@@ -287,7 +287,7 @@ impl<F: Float> Pipeline<F> {
     fn block_ve_start<const W: usize>(&self, window: &MomentWindow<F, W>) -> Option<NextVe<F>> {
         window.moments().map(|mut m| {
             m.unscale(&self.vib.output_gains(&m));
-            let clamped = m.clamp_sigma(F::of(MAX_LEVEL_G));
+            let clamped = m.clamp_sigma(F::from_f64(MAX_LEVEL_G));
             NextVe { moments: m, done: 0, ve_g: [F::ZERO; 3], clamped }
         })
     }

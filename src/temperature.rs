@@ -75,7 +75,7 @@ impl<F: Float> CoefDelta<F> {
         let a = self.to_array();
         let mut b = [G::ZERO; 12];
         for (y, x) in b.iter_mut().zip(a.iter()) {
-            *y = G::of(x.to_f64());
+            *y = G::from_f64(x.to_f64());
         }
         CoefDelta::from_array(&b)
     }
@@ -197,7 +197,7 @@ impl<F: Float> TempModel<F> {
                 let mut k = [G::ZERO; MAX_KNOTS];
                 let mut a = [CoefDelta::zero(); MAX_KNOTS];
                 for i in 0..MAX_KNOTS {
-                    k[i] = G::of(knots_c[i].to_f64());
+                    k[i] = G::from_f64(knots_c[i].to_f64());
                     a[i] = at_knot[i].cast();
                 }
                 TempModel::Pwl { n_knots: *n_knots, knots_c: k, at_knot: a }

@@ -184,29 +184,33 @@ impl<F: Float> ConversionFunction<F> {
     /// Converts between float types.
     #[cfg_attr(unstable_target, optimize(size))]
     pub fn cast<G: Float>(&self) -> ConversionFunction<G> {
-        ConversionFunction::from_array(&self.to_array().map(|x| G::of(x.to_f64())))
+        ConversionFunction::from_array(&self.to_array().map(|x| G::from_f64(x.to_f64())))
     }
 
-    /// The first three derivatives of V(2) with respect to `a3` at `a`, without the
+    /// The first three derivatives of the conversion function V(2) with respect to the
+    /// input-axis acceleration `a3` (`a.ia`) at `a`, without the
     /// asymmetry's jump at zero (at most `δ_1A/2`): slope
     /// `1 + 2k2 a3 + 3k3 a3² + 4k4 a3³ + 5k5 a3⁴ + m31 a1 + m32 a2`, curvature
     /// `2k2 + 6k3 a3 + 12k4 a3² + 20k5 a3³`, third derivative `6k3 + 24k4 a3 + 60k5 a3²`.
-    pub fn ia_derivatives(&self, a: AccelAxes<F>) -> (F, F, F) {
+    pub fn input_axis_derivatives(&self, a: AccelAxes<F>) -> (F, F, F) {
         let a3 = a.ia;
         let (k2, k3, k4, k5) = (self.k2_g_per_g2, self.k3_g_per_g3, self.k4_g_per_g4, self.k5_g_per_g5);
         let slope = F::ONE
-            + (((F::of(5.0) * k5 * a3 + F::of(4.0) * k4) * a3 + F::of(3.0) * k3) * a3 + F::of(2.0) * k2) * a3
+            + (((F::from_f64(5.0) * k5 * a3 + F::from_f64(4.0) * k4) * a3 + F::from_f64(3.0) * k3) * a3
+                + F::from_f64(2.0) * k2)
+                * a3
             + self.m31_g_per_g2 * a.oa
             + self.m32_g_per_g2 * a.pa;
-        let curvature = ((F::of(20.0) * k5 * a3 + F::of(12.0) * k4) * a3 + F::of(6.0) * k3) * a3 + F::of(2.0) * k2;
-        let third = (F::of(60.0) * k5 * a3 + F::of(24.0) * k4) * a3 + F::of(6.0) * k3;
+        let curvature = ((F::from_f64(20.0) * k5 * a3 + F::from_f64(12.0) * k4) * a3 + F::from_f64(6.0) * k3) * a3
+            + F::from_f64(2.0) * k2;
+        let third = (F::from_f64(60.0) * k5 * a3 + F::from_f64(24.0) * k4) * a3 + F::from_f64(6.0) * k3;
         (slope, curvature, third)
     }
 
     /// V(2): the accelerometer's output \[g\] for the projections `a` \[g\] on its axes.
     pub fn eval_g(&self, a: AccelAxes<F>) -> F {
         let a3 = a.ia;
-        let half = F::of(0.5);
+        let half = F::from_f64(0.5);
         let poly = ((((self.k5_g_per_g5 * a3 + self.k4_g_per_g4) * a3 + self.k3_g_per_g3) * a3 + self.k2_g_per_g2)
             * a3
             + F::ONE)
@@ -328,15 +332,15 @@ impl<F: Float> Vibration<F> {
     /// Converts between float types.
     #[cfg_attr(unstable_target, optimize(size))]
     pub fn cast<G: Float>(&self) -> Vibration<G> {
-        let c = |v: &Vec3<F>| v.map(|x| G::of(x.to_f64()));
+        let c = |v: &Vec3<F>| v.map(|x| G::from_f64(x.to_f64()));
         match self {
             Vibration::None => Vibration::None,
             Vibration::Harmonic { amp_g, freq_hz } => {
-                Vibration::Harmonic { amp_g: c(amp_g), freq_hz: G::of(freq_hz.to_f64()) }
+                Vibration::Harmonic { amp_g: c(amp_g), freq_hz: G::from_f64(freq_hz.to_f64()) }
             }
             Vibration::Random { sigma_g, band_hz } => Vibration::Random {
                 sigma_g: c(sigma_g),
-                band_hz: (G::of(band_hz.0.to_f64()), G::of(band_hz.1.to_f64())),
+                band_hz: (G::from_f64(band_hz.0.to_f64()), G::from_f64(band_hz.1.to_f64())),
             },
         }
     }
@@ -346,7 +350,7 @@ impl<F: Float> Vibration<F> {
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
     pub fn is_valid(&self) -> bool {
-        let lim = F::of(MAX_LEVEL_G);
+        let lim = F::from_f64(MAX_LEVEL_G);
         let ok3 = |v: &Vec3<F>| v.iter().all(|x| x.is_finite() && !(x.abs() > lim));
         match self {
             Vibration::None => true,
@@ -395,12 +399,12 @@ impl<F: Float> VibMoments<F> {
     /// Harmonic, in phase: `⟨sin²⟩ = 1/2`, `⟨sin⁴⟩ = 3/8`, so `m2 = a_B3²/2`,
     /// `m4 = 3a_B3⁴/8`, `⟨ã3 ã1⟩ = a_B3 a_B1 / 2`.
     pub fn harmonic(amp: AccelAxes<F>) -> Self {
-        let half = F::of(0.5);
+        let half = F::from_f64(0.5);
         let a2 = amp.ia * amp.ia;
         VibMoments {
             m2_g2: half * a2,
             m3_g3: F::ZERO,
-            m4_g4: F::of(0.375) * a2 * a2,
+            m4_g4: F::from_f64(0.375) * a2 * a2,
             cov_oa_g2: half * amp.ia * amp.oa,
             cov_pa_g2: half * amp.ia * amp.pa,
         }
@@ -412,7 +416,7 @@ impl<F: Float> VibMoments<F> {
         VibMoments {
             m2_g2: s2,
             m3_g3: F::ZERO,
-            m4_g4: F::of(3.0) * s2 * s2,
+            m4_g4: F::from_f64(3.0) * s2 * s2,
             cov_oa_g2: sigma.ia * sigma.oa,
             cov_pa_g2: sigma.ia * sigma.pa,
         }
@@ -432,7 +436,7 @@ pub fn harmonic_abs_excess_g<F: Float>(a_p_g: F, amp_g: F) -> F {
     }
     let r = p / b;
     let root = ((F::ONE - r) * (F::ONE + r)).sqrt();
-    let v = F::of(core::f64::consts::FRAC_2_PI) * b * (root - r * r.acos());
+    let v = F::from_f64(core::f64::consts::FRAC_2_PI) * b * (root - r * r.acos());
     v.max(F::ZERO)
 }
 
@@ -445,8 +449,8 @@ pub fn gaussian_abs_excess_g<F: Float>(a_p_g: F, sigma_g: F) -> F {
         return F::ZERO;
     }
     let p = a_p_g.abs();
-    let z = p / (s * F::of(core::f64::consts::SQRT_2));
-    let sqrt_2_over_pi = F::of(0.797_884_560_802_865_4);
+    let z = p / (s * F::from_f64(core::f64::consts::SQRT_2));
+    let sqrt_2_over_pi = F::from_f64(0.797_884_560_802_865_4);
     let v = s * sqrt_2_over_pi * (-(z * z)).exp() - p * z.erfc();
     v.max(F::ZERO)
 }
@@ -466,12 +470,14 @@ pub fn gaussian_abs_excess_g<F: Float>(a_p_g: F, sigma_g: F) -> F {
 pub fn exact_terms<F: Float>(cf: &ConversionFunction<F>, m: &VibMoments<F>, abs_excess_g: F) -> VeTerms<F> {
     let (k2, k3, k4, k5) = (cf.k2_g_per_g2, cf.k3_g_per_g3, cf.k4_g_per_g4, cf.k5_g_per_g5);
     VeTerms {
-        d0_1_g: F::of(0.5) * cf.delta_1a * abs_excess_g + k2 * m.m2_g2 + k3 * m.m3_g3 + k4 * m.m4_g4,
+        d0_1_g: F::from_f64(0.5) * cf.delta_1a * abs_excess_g + k2 * m.m2_g2 + k3 * m.m3_g3 + k4 * m.m4_g4,
         d0_2_g: cf.m31_g_per_g2 * m.cov_oa_g2,
         d0_3_g: cf.m32_g_per_g2 * m.cov_pa_g2,
-        delta1_g_per_g: F::of(3.0) * k3 * m.m2_g2 + F::of(4.0) * k4 * m.m3_g3 + F::of(5.0) * k5 * m.m4_g4,
-        delta2_g_per_g2: F::of(6.0) * k4 * m.m2_g2 + F::of(10.0) * k5 * m.m3_g3,
-        delta3_g_per_g3: F::of(10.0) * k5 * m.m2_g2,
+        delta1_g_per_g: F::from_f64(3.0) * k3 * m.m2_g2
+            + F::from_f64(4.0) * k4 * m.m3_g3
+            + F::from_f64(5.0) * k5 * m.m4_g4,
+        delta2_g_per_g2: F::from_f64(6.0) * k4 * m.m2_g2 + F::from_f64(10.0) * k5 * m.m3_g3,
+        delta3_g_per_g3: F::from_f64(10.0) * k5 * m.m2_g2,
     }
 }
 
@@ -479,18 +485,18 @@ pub fn exact_terms<F: Float>(cf: &ConversionFunction<F>, m: &VibMoments<F>, abs_
 /// Δ0(2) = 0.5 m31 a_B3 a_B1, Δ0(3) = 0.5 m32 a_B3 a_B2, δ(1) = 1.5 k3 a_B3² + 1.875 k5 a_B3⁴,
 /// δ(2) = 3 k4 a_B3², δ(3) = 5 k5 a_B3² (V(15)/V(16)).
 pub fn paper_harmonic_terms<F: Float>(cf: &ConversionFunction<F>, amp: AccelAxes<F>) -> VeTerms<F> {
-    let half = F::of(0.5);
+    let half = F::from_f64(0.5);
     let a = amp.ia;
     let a2 = a * a;
     VeTerms {
-        d0_1_g: F::of(PAPER_HARMONIC_ASYMMETRY) * cf.delta_1a * a.abs()
+        d0_1_g: F::from_f64(PAPER_HARMONIC_ASYMMETRY) * cf.delta_1a * a.abs()
             + half * cf.k2_g_per_g2 * a2
-            + F::of(0.375) * cf.k4_g_per_g4 * a2 * a2,
+            + F::from_f64(0.375) * cf.k4_g_per_g4 * a2 * a2,
         d0_2_g: half * cf.m31_g_per_g2 * a * amp.oa,
         d0_3_g: half * cf.m32_g_per_g2 * a * amp.pa,
-        delta1_g_per_g: F::of(1.5) * cf.k3_g_per_g3 * a2 + F::of(1.875) * cf.k5_g_per_g5 * a2 * a2,
-        delta2_g_per_g2: F::of(3.0) * cf.k4_g_per_g4 * a2,
-        delta3_g_per_g3: F::of(5.0) * cf.k5_g_per_g5 * a2,
+        delta1_g_per_g: F::from_f64(1.5) * cf.k3_g_per_g3 * a2 + F::from_f64(1.875) * cf.k5_g_per_g5 * a2 * a2,
+        delta2_g_per_g2: F::from_f64(3.0) * cf.k4_g_per_g4 * a2,
+        delta3_g_per_g3: F::from_f64(5.0) * cf.k5_g_per_g5 * a2,
     }
 }
 
@@ -501,12 +507,14 @@ pub fn paper_random_terms<F: Float>(cf: &ConversionFunction<F>, sigma: AccelAxes
     let s = sigma.ia;
     let s2 = s * s;
     VeTerms {
-        d0_1_g: F::of(PAPER_RANDOM_ASYMMETRY) * cf.delta_1a * s.abs() + cf.k2_g_per_g2 * s2 + cf.k4_g_per_g4 * s2 * s2,
+        d0_1_g: F::from_f64(PAPER_RANDOM_ASYMMETRY) * cf.delta_1a * s.abs()
+            + cf.k2_g_per_g2 * s2
+            + cf.k4_g_per_g4 * s2 * s2,
         d0_2_g: cf.m31_g_per_g2 * s * sigma.oa,
         d0_3_g: cf.m32_g_per_g2 * s * sigma.pa,
-        delta1_g_per_g: F::of(3.0) * cf.k3_g_per_g3 * s2 + F::of(5.0) * cf.k5_g_per_g5 * s2 * s2,
-        delta2_g_per_g2: F::of(6.0) * cf.k4_g_per_g4 * s2,
-        delta3_g_per_g3: F::of(10.0) * cf.k5_g_per_g5 * s2,
+        delta1_g_per_g: F::from_f64(3.0) * cf.k3_g_per_g3 * s2 + F::from_f64(5.0) * cf.k5_g_per_g5 * s2 * s2,
+        delta2_g_per_g2: F::from_f64(6.0) * cf.k4_g_per_g4 * s2,
+        delta3_g_per_g3: F::from_f64(10.0) * cf.k5_g_per_g5 * s2,
     }
 }
 
@@ -703,17 +711,17 @@ impl<F: Float> VibrationConfig<F> {
     pub fn output_gains(&self, m: &window::WindowMoments<F>) -> Vec3<F> {
         let mut out = [F::ONE; 3];
         for ((o, cf), axis) in out.iter_mut().zip(self.cf.iter()).zip(Axis::ALL) {
-            let (s, c, d) = cf.ia_derivatives(AccelAxes::from_unit(&m.mean_g, axis));
+            let (s, c, d) = cf.input_axis_derivatives(AccelAxes::from_unit(&m.mean_g, axis));
             let (mom, _) = m.on_accel(axis);
             let mut g = s;
-            if s > F::of(0.5) && mom.m2_g2 > F::ZERO {
+            if s > F::from_f64(0.5) && mom.m2_g2 > F::ZERO {
                 let r = F::ONE / s;
                 let m2 = mom.m2_g2 * r * r;
                 let m3 = mom.m3_g3 * r * r * r;
                 let m4 = mom.m4_g4 * r * r * r * r;
-                g = s + (F::of(0.5) * c * m3 + F::of(1.0 / 6.0) * d * m4) / m2;
+                g = s + (F::from_f64(0.5) * c * m3 + F::from_f64(1.0 / 6.0) * d * m4) / m2;
             }
-            *o = if g > F::of(0.5) && g < F::of(2.0) { g } else { F::ONE };
+            *o = if g > F::from_f64(0.5) && g < F::from_f64(2.0) { g } else { F::ONE };
         }
         out
     }
@@ -763,17 +771,18 @@ pub fn solve_static_g<F: Float>(y_g: F, terms: impl Fn(F) -> VeTerms<F>) -> (F, 
     if !y_g.is_finite() {
         return (F::ZERO, false);
     }
-    let lim = F::of(MAX_STATIC_G);
+    let lim = F::from_f64(MAX_STATIC_G);
     let clamp = |a: F| a.max(-lim).min(lim);
     let mut a = clamp(y_g);
     let mut t = terms(a);
     for _ in 0..NEWTON_STEPS {
         let f = a + t.total_g(a) - y_g;
-        let three = F::of(3.0);
-        let slope = F::ONE + t.delta1_g_per_g + (F::of(2.0) * t.delta2_g_per_g2 + three * t.delta3_g_per_g3 * a) * a;
+        let three = F::from_f64(3.0);
+        let slope =
+            F::ONE + t.delta1_g_per_g + (F::from_f64(2.0) * t.delta2_g_per_g2 + three * t.delta3_g_per_g3 * a) * a;
         // A model that is not monotone here (never for a real accelerometer) falls back to a
         // fixed-point step.
-        let slope = if slope > F::of(0.5) { slope } else { F::ONE };
+        let slope = if slope > F::from_f64(0.5) { slope } else { F::ONE };
         a = clamp(a - f / slope);
         t = terms(a);
     }

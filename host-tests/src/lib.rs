@@ -8,25 +8,56 @@ pub fn shared_data(name: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data").join(name)
 }
 
+/// A numeric table of `data/` (the papers' tables), read by the `csv` crate: `#` lines are
+/// comments, the first other line is the header, columns are found by name.
+pub struct CsvTable {
+    /// The header names.
+    pub header: Vec<String>,
+    /// The rows' numbers.
+    pub rows: Vec<Vec<f64>>,
+}
+
+impl CsvTable {
+    /// Reads the table `data/name`; panics naming the file, line and cell on a cell that is
+    /// not a number.
+    pub fn read(name: &str) -> CsvTable {
+        let path = shared_data(name);
+        let mut r = csv::ReaderBuilder::new()
+            .comment(Some(b'#'))
+            .trim(csv::Trim::All)
+            .from_path(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let header =
+            r.headers().unwrap_or_else(|e| panic!("{}: {e}", path.display())).iter().map(String::from).collect();
+        let rows = r
+            .records()
+            .map(|rec| {
+                let rec = rec.unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                let line = rec.position().map_or(0, csv::Position::line);
+                rec.iter()
+                    .map(|c| c.parse().unwrap_or_else(|_| panic!("{}:{line}: `{c}` is not a number", path.display())))
+                    .collect()
+            })
+            .collect();
+        CsvTable { header, rows }
+    }
+
+    /// The number in column `name` of `row`.
+    pub fn get(&self, row: &[f64], name: &str) -> f64 {
+        row[self.header.iter().position(|h| h == name).unwrap_or_else(|| panic!("column {name}"))]
+    }
+}
+
 /// Reads `paper-constants.csv`: (temperature, constants) per row.
 pub fn read_paper_constants_csv() -> Vec<(f64, Constants<f64>)> {
-    let path = shared_data("paper-constants.csv");
-    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("column {name}"));
+    let t = CsvTable::read("paper-constants.csv");
     let names = [["Kxx", "Kxy", "Kxz"], ["Kyx", "Kyy", "Kyz"], ["Kzx", "Kzy", "Kzz"]];
-    lines
-        .map(|l| {
-            let cells: Vec<f64> = l.split(',').map(|c| c.trim().parse().expect("number")).collect();
-            let mut k = [[0.0; 3]; 3];
-            for i in 0..3 {
-                for j in 0..3 {
-                    k[i][j] = cells[col(names[i][j])];
-                }
-            }
-            let u0 = [cells[col("U0x")], cells[col("U0y")], cells[col("U0z")]];
-            (cells[col("temp_C")], Constants { k_v_per_g: k, u0_v: u0 })
+    t.rows
+        .iter()
+        .map(|r| {
+            let k = names.map(|row| row.map(|n| t.get(r, n)));
+            let u0 = ["U0x", "U0y", "U0z"].map(|n| t.get(r, n));
+            (t.get(r, "temp_C"), Constants { k_v_per_g: k, u0_v: u0 })
         })
         .collect()
 }

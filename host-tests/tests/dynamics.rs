@@ -82,7 +82,7 @@ fn self_heating_recursion_equals_its_closed_form() {
     let every = fixed.heating_every() as usize;
     assert_eq!(every, bins_comp::dynamics::HEATING_EVERY as usize);
     // Advanced on every sample (the reference of the hold).
-    let (unheld, unheld32) = (fixed.unheld(), fixed32.unheld());
+    let (every_sample, every_sample32) = (fixed.heating_every_sample(), fixed32.heating_every_sample());
     let (mut st, mut st32, mut su, mut su32) =
         (DynamicsState::new(), DynamicsState::new(), DynamicsState::new(), DynamicsState::new());
     let (mut worst, mut worst32, mut worst_u, mut worst_u32, mut worst_hold) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
@@ -90,8 +90,8 @@ fn self_heating_recursion_equals_its_closed_form() {
         let want = closed(n as f64 * DT);
         let general = d.step(&mut DynamicsState::new(), 25.0, DT, n as f64 * DT).temp_eff_c;
         assert!((general - want).abs() < 1e-13, "n = {n}: {general} != {want}");
-        worst_u = worst_u.max((unheld.step(&mut su, 25.0).temp_eff_c - want).abs());
-        worst_u32 = worst_u32.max((unheld32.step(&mut su32, 25.0).temp_eff_c as f64 - want).abs());
+        worst_u = worst_u.max((every_sample.step(&mut su, 25.0).temp_eff_c - want).abs());
+        worst_u32 = worst_u32.max((every_sample32.step(&mut su32, 25.0).temp_eff_c as f64 - want).abs());
         // Held: step n uses the closed form at the first multiple of N from n on.
         let held = closed(n.div_ceil(every) as f64 * every as f64 * DT);
         let t = fixed.step(&mut st, 25.0).temp_eff_c;
@@ -136,7 +136,7 @@ fn non_finite_readings_leave_the_state_and_pass_through() {
         assert!(!e.temp_eff_c.is_finite());
         assert_eq!(e.bias_play, 0.0);
         // The lag and the plays untouched (the self-heating's clock runs on).
-        assert_eq!((st.lagged_c(), st.plays_c()), (before.lagged_c(), before.plays_c()));
+        assert_eq!((st.lagged_c(), st.play_outputs_c()), (before.lagged_c(), before.play_outputs_c()));
     }
     // A finite reading beyond ±1000 °C is not a temperature either: passed through, the
     // state untouched.
@@ -286,7 +286,7 @@ fn the_effective_temperature_drives_the_model_and_the_bias_play_is_subtracted() 
     let p = Pipeline::new(cal, VibrationConfig::none())
         .with_dynamics(dynamics.at_rate(DT).unwrap())
         .exact_effective_temperature();
-    let stage = dynamics.at_rate(DT).unwrap().unheld();
+    let stage = dynamics.at_rate(DT).unwrap().heating_every_sample();
     let mut st: PipelineState<f64, 64> = PipelineState::new();
     let mut ds = DynamicsState::new();
     let mut saw_play = false;

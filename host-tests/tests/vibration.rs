@@ -14,7 +14,7 @@ use bins_comp::{
     Calibration, ConversionFunction, Method, Pipeline, PipelineState, Status, Variant, Vibration, VibrationConfig,
     VibrationParams, VibrationSource, paper,
 };
-use host_tests::{shared_data, truth_constants};
+use host_tests::{CsvTable, truth_constants};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -26,12 +26,8 @@ use rand_distr::{Distribution, Normal};
 /// The AL-15 coefficients read from `al15-coefficients.csv`, converted to g units, in the
 /// order a0, δ, k2, k3, k4, k5, m1, m2, m31, m32; and K1 [V/g].
 fn al15_csv() -> ([f64; 10], f64) {
-    let path = shared_data("al15-coefficients.csv");
-    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let row: Vec<f64> = lines.next().unwrap().split(',').map(|c| c.trim().parse().unwrap()).collect();
-    let get = |name: &str| row[header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("{name}"))];
+    let table = CsvTable::read("al15-coefficients.csv");
+    let get = |name: &str| table.get(&table.rows[0], name);
     (
         [
             get("a0_mg") * 1e-3,

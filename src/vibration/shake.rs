@@ -65,7 +65,7 @@ impl core::error::Error for VibFitError {}
 /// φ_k = (k−1)·45° from the vertical with vibration `a_b` along IA; TP9 (TP10) vibrate along
 /// the IA–OA (IA–PA) diagonal with amplitude `√2·a_b`, IA horizontal, so both axes see `a_b`.
 pub fn ten_position_plan<F: Float>(a_b_g: F) -> [(F, AccelAxes<F>); 10] {
-    let s = F::of(core::f64::consts::FRAC_1_SQRT_2);
+    let s = F::from_f64(core::f64::consts::FRAC_1_SQRT_2);
     let z = F::ZERO;
     let cos_phi = [F::ONE, s, z, -s, -F::ONE, -s, z, s];
     let along_ia = AccelAxes { ia: a_b_g, pa: z, oa: z };
@@ -122,7 +122,7 @@ impl<F: Float, const N: usize> Givens<F, N> {
         for k in 0..N {
             dmax = dmax.max(self.r[k][k].abs());
         }
-        let tol = dmax * F::EPSILON * F::of(1024.0);
+        let tol = dmax * F::EPSILON * F::from_f64(1024.0);
         let mut x = [F::ZERO; N];
         for k in (0..N).rev() {
             let d = self.r[k][k];
@@ -208,7 +208,7 @@ fn fit_columns<F: Float, const N: usize>(
     }
     // The residual's degrees of freedom count only the active columns.
     let dof = ls.rows.saturating_sub(n_active);
-    let sigma = if dof > 0 { (ls.ss_resid / F::of(dof as f64)).sqrt() } else { F::ZERO };
+    let sigma = if dof > 0 { (ls.ss_resid / F::from_f64(dof as f64)).sqrt() } else { F::ZERO };
     Ok((theta, active, sigma))
 }
 
@@ -254,7 +254,7 @@ pub fn fit_ve_terms<F: Float>(positions: &[ShakePosition<F>], k1_v_per_g: F) -> 
         if !a.is_finite() || !amp.is_finite() {
             return Err(VibFitError::NonFinite);
         }
-        if !(a.abs() > F::ZERO) || !((a - amp).abs() <= F::of(0.01) * amp.abs()) {
+        if !(a.abs() > F::ZERO) || !((a - amp).abs() <= F::from_f64(0.01) * amp.abs()) {
             return Err(VibFitError::MixedAmplitudes);
         }
         sum_amp += a;
@@ -277,7 +277,7 @@ pub fn fit_ve_terms<F: Float>(positions: &[ShakePosition<F>], k1_v_per_g: F) -> 
             delta2_g_per_g2: th[2],
             delta3_g_per_g3: th[3],
         },
-        amp_g: sum_amp / F::of(positions.len() as f64),
+        amp_g: sum_amp / F::from_f64(positions.len() as f64),
         cross_determined: [active[4], active[5]],
         residual_sigma_g: sigma,
     })

@@ -235,7 +235,7 @@ impl<F: Float, const W: usize> MomentWindow<F, W> {
         // its mean.
         self.done = self.acc;
         self.c_done = self.c_acc;
-        let inv_n = F::ONE / F::of(W as f64);
+        let inv_n = F::ONE / F::from_f64(W as f64);
         for i in 0..3 {
             self.c_acc[i] = self.c_done[i] + self.done.s1[i] * inv_n;
         }
@@ -250,7 +250,7 @@ impl<F: Float, const W: usize> MomentWindow<F, W> {
         if !self.is_full() {
             return None;
         }
-        let inv_n = F::ONE / F::of(W as f64);
+        let inv_n = F::ONE / F::from_f64(W as f64);
         let s = &self.done;
         let c = &self.c_done;
         let mut m = WindowMoments::default();
@@ -266,8 +266,9 @@ impl<F: Float, const W: usize> MomentWindow<F, W> {
             let mean = c[i] + u;
             m.mean_g[i] = mean;
             m.var_g2[i] = (r2 - u2).max(F::ZERO);
-            m.m3_g3[i] = r3 - F::of(3.0) * u * r2 + F::of(2.0) * u2 * u;
-            m.m4_g4[i] = (r4 - F::of(4.0) * u * r3 + F::of(6.0) * u2 * r2 - F::of(3.0) * u2 * u2).max(F::ZERO);
+            m.m3_g3[i] = r3 - F::from_f64(3.0) * u * r2 + F::from_f64(2.0) * u2 * u;
+            m.m4_g4[i] =
+                (r4 - F::from_f64(4.0) * u * r3 + F::from_f64(6.0) * u2 * r2 - F::from_f64(3.0) * u2 * u2).max(F::ZERO);
             // ⟨|x|⟩ − |mean| = Σ(|x| − |c|)/n + |c| − |mean| ≥ 0 (Jensen).
             m.abs_excess_g[i] = (s.abs[i] * inv_n + (c[i].abs() - mean.abs())).max(F::ZERO);
         }

@@ -1,5 +1,5 @@
-//! `bins-cal verify`'s `verify.csv`, read by its header: the columns are found by name, so a
-//! column added or moved by `verify` does not shift what the demo reads.
+//! `bins-cal verify`'s `verify.csv`, read by the `csv` crate and its header: the columns are
+//! found by name, so a column added or moved by `verify` does not shift what the demo reads.
 
 use std::path::Path;
 
@@ -31,27 +31,30 @@ pub(crate) fn read(path: &Path) -> Result<Vec<Row>> {
 }
 
 fn parse(text: &str) -> Result<Vec<Row>> {
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').map(str::trim).collect();
+    let mut csv = csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(text.as_bytes());
+    let header = csv.headers().map_err(|e| format!("line 1: {e}"))?.clone();
     let mut at = [0usize; COLUMNS.len()];
     for (slot, name) in at.iter_mut().zip(COLUMNS) {
-        *slot = header.iter().position(|h| *h == name).ok_or(format!("line 1: no column `{name}` in the header"))?;
+        *slot = header.iter().position(|h| h == name).ok_or(format!("line 1: no column `{name}` in the header"))?;
     }
     let [t, p, m, d, ph] = at;
     let mut rows = Vec::new();
-    for (n, line) in lines.enumerate().filter(|(_, l)| !l.trim().is_empty()) {
-        let f: Vec<&str> = line.split(',').collect();
-        let field = |i: usize| f.get(i).copied().ok_or(format!("line {}: only {} fields", n + 2, f.len()));
+    for record in csv.records() {
+        let f = record.map_err(|e| match e.position() {
+            Some(pos) => format!("line {}: {e}", pos.line()),
+            None => e.to_string(),
+        })?;
+        let line = f.position().map_or(0, csv::Position::line);
         let number = |i: usize| -> Result<f64> {
-            let s = field(i)?;
-            s.trim().parse().map_err(|_| format!("line {}: `{}` = `{s}` is not a number", n + 2, header[i]))
+            let s = &f[i];
+            s.parse().map_err(|_| format!("line {line}: `{}` = `{s}` is not a number", &header[i]))
         };
         rows.push(Row {
             temp_c: number(t)?,
-            pos: field(p)?.to_string(),
-            method: field(m)?.to_string(),
+            pos: f[p].to_string(),
+            method: f[m].to_string(),
             dg_mg: number(d)?,
-            phase: field(ph)?.to_string(),
+            phase: f[ph].to_string(),
         });
     }
     Ok(rows)
@@ -70,6 +73,9 @@ mod tests {
             a[0],
             Row { temp_c: -9.6, pos: "CP1".into(), method: "method 1".into(), dg_mg: 0.034, phase: "hold".into() }
         );
+        // A quoted label with a comma is one field.
+        let c = parse("temp_C,pos,method,dg_mg,phase\n-9.6,CP1,\"poly:2, method 1\",0.034,hold\n").unwrap();
+        assert_eq!((c[0].method.as_str(), c[0].dg_mg), ("poly:2, method 1", 0.034));
     }
 
     #[test]
@@ -78,5 +84,7 @@ mod tests {
         assert!(e.contains("line 1") && e.contains("`dg_mg`"), "{e}");
         let e = parse("temp_C,pos,method,dg_mg,phase\n20,CP1,method 1,abc,hold\n").unwrap_err();
         assert!(e.contains("line 2") && e.contains("dg_mg") && e.contains("abc"), "{e}");
+        let e = parse("temp_C,pos,method,dg_mg,phase\n20,CP1,method 1,0.1,hold\n20,CP2,method 1\n").unwrap_err();
+        assert!(e.contains("line 3"), "{e}");
     }
 }

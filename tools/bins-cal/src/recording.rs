@@ -8,6 +8,13 @@
 //! mark is skipped; a last line cut off (no line break, fewer cells than the header) is an
 //! error; [`Reader::require_rows`] refuses a file with a header and no row.
 //!
+//! The cells are split and unquoted by the `csv` crate (RFC 4180 quoting, `""` for a quote),
+//! fed one physical line at a time by `Lines`, which holds what this format says beyond
+//! plain CSV: the caps ([`MAX_LINE_BYTES`], [`MAX_COLUMNS`]) refused before a line is held
+//! whole or split, UTF-8 checked per line, spaces and tabs around an unquoted cell dropped, a
+//! quoted cell ending on its own line, the line number of every row and error. Recordings
+//! ([`Reader`]) and the host's small tables ([`Table`]) are read by this one path.
+//!
 //! The reader holds one line in memory at a time: [`Reader::read_row`] refills a caller-owned
 //! [`Row`] without allocating (the fast path for the 8.6-million-row day file), and the reader
 //! is also an [`Iterator`] of owned rows. Every error names the file, the line (1-based) and,
@@ -24,7 +31,7 @@
 use bins_comp::vibration::Vibration;
 use std::fmt;
 use std::fs::File;
-use std::io::{self, BufRead, BufReader, Write};
+use std::io::{self, BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 
 /// Longest line the reader accepts \[B\], line break excluded. A recording's row is a few
@@ -451,53 +458,6 @@ enum Slot {
     Extra(usize),
 }
 
-/// Splits one CSV line into cells (RFC 4180 quoting within the line; a quoted cell cannot
-/// span lines). Cells are trimmed of surrounding spaces and tabs. Reuses `cells`' storage
-/// through `buf` (the unquoted text of all cells) and `bounds` (their ranges in it).
-fn split_line(line: &str, buf: &mut String, bounds: &mut Vec<(usize, usize)>) -> Result<(), ErrorKind> {
-    buf.clear();
-    bounds.clear();
-    let bytes = line.as_bytes();
-    let mut i = 0;
-    loop {
-        // One cell starting at i.
-        while i < bytes.len() && (bytes[i] == b' ' || bytes[i] == b'\t') {
-            i += 1;
-        }
-        let start = buf.len();
-        if i < bytes.len() && bytes[i] == b'"' {
-            i += 1;
-            loop {
-                let Some(q) = line[i..].find('"') else { return Err(ErrorKind::UnterminatedQuote) };
-                buf.push_str(&line[i..i + q]);
-                i += q + 1;
-                if i < bytes.len() && bytes[i] == b'"' {
-                    buf.push('"');
-                    i += 1;
-                } else {
-                    break;
-                }
-            }
-            while i < bytes.len() && bytes[i] != b',' {
-                i += 1;
-            }
-            bounds.push((start, buf.len()));
-        } else {
-            let end = line[i..].find(',').map_or(bytes.len(), |c| i + c);
-            buf.push_str(line[i..end].trim_end_matches([' ', '\t']));
-            bounds.push((start, buf.len()));
-            i = end;
-        }
-        if i >= bytes.len() {
-            return Ok(());
-        }
-        if bounds.len() == MAX_COLUMNS {
-            return Err(ErrorKind::TooManyCells);
-        }
-        i += 1; // the comma
-    }
-}
-
 /// Reads the next physical line of `src` into `raw`, line break included (empty at the end of
 /// `src`). A line longer than [`MAX_LINE_BYTES`] is an error as soon as that many bytes are read.
 fn read_line(src: &mut impl BufRead, raw: &mut Vec<u8>) -> Result<(), ErrorKind> {
@@ -527,10 +487,225 @@ fn read_line(src: &mut impl BufRead, raw: &mut Vec<u8>) -> Result<(), ErrorKind>
     }
 }
 
+/// Brings one line into the form the `csv` crate reads as this format means it: spaces and
+/// tabs around a cell are not part of it (unless quoted), nothing after a quoted cell's closing
+/// quote is (up to the next comma), a quoted cell ends on its own line. Writes the line to
+/// `out` (without a line break); more than [`MAX_COLUMNS`] cells is an error. The `csv` crate
+/// then splits the cells and unquotes them. For lines with a quote, a space or a tab; the
+/// others need no cleaning.
+fn clean_line(line: &[u8], out: &mut Vec<u8>) -> Result<(), ErrorKind> {
+    out.clear();
+    let pad = |b: &u8| *b == b' ' || *b == b'\t';
+    let (mut i, mut cells) = (0, 0);
+    loop {
+        cells += 1;
+        if cells > MAX_COLUMNS {
+            return Err(ErrorKind::TooManyCells);
+        }
+        while i < line.len() && pad(&line[i]) {
+            i += 1;
+        }
+        if line.get(i) == Some(&b'"') {
+            // The closing quote is the first one not doubled.
+            let mut q = i + 1;
+            loop {
+                let Some(at) = memchr::memchr(b'"', &line[q..]) else { return Err(ErrorKind::UnterminatedQuote) };
+                q += at + 1;
+                if line.get(q) == Some(&b'"') {
+                    q += 1;
+                } else {
+                    break;
+                }
+            }
+            out.extend_from_slice(&line[i..q]);
+            i = memchr::memchr(b',', &line[q..]).map_or(line.len(), |c| q + c);
+        } else {
+            let end = memchr::memchr(b',', &line[i..]).map_or(line.len(), |c| i + c);
+            let cell = &line[i..end];
+            let kept = cell.len() - cell.iter().rev().take_while(|b| pad(b)).count();
+            out.extend_from_slice(&cell[..kept]);
+            i = end;
+        }
+        if i >= line.len() {
+            return Ok(());
+        }
+        out.push(b',');
+        i += 1;
+    }
+}
+
+/// What a line that is blank, or a comment, means to a [`Lines`] source.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Blank {
+    /// A recording's data: a blank line is a row of one empty cell (an error of its cell
+    /// count), a `#` line a row like any other.
+    Row,
+    /// A table: blank lines and lines starting with `#` are skipped.
+    Skip,
+}
+
+/// The physical lines of a CSV source, handed to the `csv` crate one at a time (each
+/// [`Read::read`] gives at most one line, so that the line being parsed is the one this source
+/// read last and errors name it). Enforces the caps ([`MAX_LINE_BYTES`], [`MAX_COLUMNS`]) before
+/// a line is buffered whole or split, checks UTF-8, skips a byte order mark on line 1, takes
+/// `\r\n` as a line break and cleans each line ([`clean_line`]). An error is kept with its line
+/// for the reader and given to the `csv` crate as an I/O error that ends its reading.
+struct Lines<R> {
+    src: R,
+    blank: Blank,
+    /// Number of the last line read (1-based).
+    line_no: u64,
+    /// The last line read ended with a line break.
+    ended: bool,
+    raw: Vec<u8>,
+    out: Vec<u8>,
+    /// Bytes of `out` already handed to the `csv` crate.
+    at: usize,
+    error: Option<(u64, ErrorKind)>,
+    /// No line handed to the `csv` crate yet.
+    first: bool,
+}
+
+impl<R: BufRead> Lines<R> {
+    fn new(src: R, blank: Blank) -> Self {
+        Lines { src, blank, line_no: 0, ended: true, raw: Vec::new(), out: Vec::new(), at: 0, error: None, first: true }
+    }
+
+    /// Reads the next physical line into `raw` without its line break; false at the end.
+    fn next_raw(&mut self) -> Result<bool, (u64, ErrorKind)> {
+        read_line(&mut self.src, &mut self.raw).map_err(|k| (self.line_no + 1, k))?;
+        if self.raw.is_empty() {
+            return Ok(false);
+        }
+        self.line_no += 1;
+        // A UTF-8 byte order mark (spreadsheet exports) is not part of the first cell (a
+        // table's lines may each start with one: tables are pasted together).
+        if (self.line_no == 1 || self.blank == Blank::Skip) && self.raw.starts_with(b"\xEF\xBB\xBF") {
+            self.raw.drain(..3);
+        }
+        self.ended = self.raw.last() == Some(&b'\n');
+        if self.ended {
+            self.raw.pop();
+        }
+        // A recording's line loses one carriage return, a table's every one at its end.
+        while self.raw.last() == Some(&b'\r') {
+            self.raw.pop();
+            if self.blank == Blank::Row {
+                break;
+            }
+        }
+        if std::str::from_utf8(&self.raw).is_err() {
+            return Err((self.line_no, ErrorKind::NotUtf8));
+        }
+        Ok(true)
+    }
+
+    /// The last line read, as text (checked by [`next_raw`](Self::next_raw)).
+    fn text(&self) -> &str {
+        std::str::from_utf8(&self.raw).unwrap_or_default()
+    }
+
+    /// Makes the last line read the next one handed to the `csv` crate.
+    fn hand_on(&mut self) -> Result<(), (u64, ErrorKind)> {
+        if memchr::memchr3(b'"', b' ', b'\t', &self.raw).is_none() {
+            // The common case: no quote, no padding, nothing to clean; the cells are the commas
+            // plus one (fewer than the bytes).
+            if self.raw.len() >= MAX_COLUMNS && memchr::memchr_iter(b',', &self.raw).count() >= MAX_COLUMNS {
+                return Err((self.line_no, ErrorKind::TooManyCells));
+            }
+            std::mem::swap(&mut self.raw, &mut self.out);
+        } else {
+            clean_line(&self.raw, &mut self.out).map_err(|k| (self.line_no, k))?;
+        }
+        if self.out.is_empty() && self.blank == Blank::Row {
+            self.out.extend_from_slice(b"\"\"");
+        }
+        if self.ended {
+            self.out.push(b'\n');
+        }
+        // The `csv` crate drops a byte order mark at the start of its input; one left here (not
+        // at the start of the file) is part of the cell: a blank line first keeps it.
+        if self.first && self.out.starts_with(b"\xEF\xBB\xBF") {
+            self.out.insert(0, b'\n');
+        }
+        self.first = false;
+        self.at = 0;
+        Ok(())
+    }
+
+    /// The next line for the `csv` crate; false at the end.
+    fn next_line(&mut self) -> Result<bool, (u64, ErrorKind)> {
+        loop {
+            if !self.next_raw()? {
+                return Ok(false);
+            }
+            if self.blank == Blank::Skip {
+                let text = self.text();
+                if text.trim_start().starts_with('#') || text.trim().is_empty() {
+                    continue;
+                }
+            }
+            self.hand_on()?;
+            return Ok(true);
+        }
+    }
+}
+
+impl<R: BufRead> Read for Lines<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        if self.at == self.out.len() {
+            if self.error.is_some() {
+                return Err(io::Error::other("error in a line"));
+            }
+            match self.next_line() {
+                Ok(true) => {}
+                Ok(false) => return Ok(0),
+                Err(e) => {
+                    self.error = Some(e);
+                    return Err(io::Error::other("error in a line"));
+                }
+            }
+        }
+        let n = buf.len().min(self.out.len() - self.at);
+        buf[..n].copy_from_slice(&self.out[self.at..self.at + n]);
+        self.at += n;
+        Ok(n)
+    }
+}
+
+/// A `csv` crate reader over `lines`: comma-separated, `"` quotes with `""` for a quote, a
+/// line break ends a row, rows of any length (the caller checks the count).
+fn csv_reader<R: BufRead>(lines: Lines<R>) -> csv::Reader<Lines<R>> {
+    csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .terminator(csv::Terminator::Any(b'\n'))
+        .buffer_capacity(1 << 16)
+        .from_reader(lines)
+}
+
+/// Reads the next row of `csv` into `record`; false at the end. An error names the line.
+fn read_record<R: BufRead>(
+    csv: &mut csv::Reader<Lines<R>>,
+    record: &mut csv::ByteRecord,
+) -> Result<bool, (u64, ErrorKind)> {
+    csv.read_byte_record(record).map_err(|e| {
+        let lines = csv.get_ref();
+        lines.error.clone().unwrap_or_else(|| (lines.line_no, ErrorKind::Io(e.to_string())))
+    })
+}
+
+/// Cell `i` of `record` as text (every line was checked to be UTF-8).
+fn cell_text(record: &csv::ByteRecord, i: usize) -> &str {
+    record.get(i).and_then(|c| std::str::from_utf8(c).ok()).unwrap_or_default()
+}
+
 /// A streaming reader of recording format v1.
 pub struct Reader<R> {
-    src: R,
+    csv: csv::Reader<Lines<R>>,
+    record: csv::ByteRecord,
     file: PathBuf,
+    /// Number of the line being read (1-based).
     line_no: u64,
     comments: Vec<String>,
     header: Vec<String>,
@@ -538,13 +713,8 @@ pub struct Reader<R> {
     extra: Vec<String>,
     /// Which of [`COLUMNS`] the header has.
     present: [bool; COLUMNS.len()],
-    raw: Vec<u8>,
-    cells: String,
-    bounds: Vec<(usize, usize)>,
     prev_t: Option<f64>,
     failed: bool,
-    /// The last line read ended with a line break.
-    line_ended: bool,
     /// Data rows read without an error.
     rows: u64,
 }
@@ -565,31 +735,19 @@ impl Reader<BufReader<File>> {
 impl<R: BufRead> Reader<R> {
     /// Reads the comment lines and the header from `src`; `name` is the file named in errors.
     pub fn new(src: R, name: impl AsRef<Path>) -> Result<Self, Error> {
-        let mut r = Reader {
-            src,
-            file: name.as_ref().to_path_buf(),
-            line_no: 0,
-            comments: Vec::new(),
-            header: Vec::new(),
-            slots: Vec::new(),
-            extra: Vec::new(),
-            present: [false; COLUMNS.len()],
-            raw: Vec::new(),
-            cells: String::new(),
-            bounds: Vec::new(),
-            prev_t: None,
-            failed: false,
-            line_ended: true,
-            rows: 0,
-        };
+        let file = name.as_ref().to_path_buf();
+        let at = |(line, kind)| Error { file: file.clone(), line, column: None, kind };
+        // The comments and blank lines before the header are read here; the header and the
+        // rows by the `csv` crate.
+        let mut lines = Lines::new(src, Blank::Row);
+        let mut comments = Vec::new();
         loop {
-            if !r.next_line()? {
-                return Err(r.err(None, ErrorKind::NoHeader));
+            if !lines.next_raw().map_err(at)? {
+                return Err(at((lines.line_no, ErrorKind::NoHeader)));
             }
-            let line = r.line_str()?;
+            let line = lines.text();
             if let Some(c) = line.strip_prefix('#') {
-                let c = c.strip_prefix(' ').unwrap_or(c).to_string();
-                r.comments.push(c);
+                comments.push(c.strip_prefix(' ').unwrap_or(c).to_string());
                 continue;
             }
             if line.trim().is_empty() {
@@ -597,10 +755,27 @@ impl<R: BufRead> Reader<R> {
             }
             break;
         }
-        let line = r.line_str()?.to_string();
-        split_line(&line, &mut r.cells, &mut r.bounds).map_err(|k| r.err(None, k))?;
-        for (pos, &(a, b)) in r.bounds.iter().enumerate() {
-            let name = r.cells[a..b].to_string();
+        lines.hand_on().map_err(at)?;
+        let line_no = lines.line_no;
+        let mut r = Reader {
+            csv: csv_reader(lines),
+            record: csv::ByteRecord::new(),
+            file,
+            line_no,
+            comments,
+            header: Vec::new(),
+            slots: Vec::new(),
+            extra: Vec::new(),
+            present: [false; COLUMNS.len()],
+            prev_t: None,
+            failed: false,
+            rows: 0,
+        };
+        if !read_record(&mut r.csv, &mut r.record).map_err(|e| r.at(e))? {
+            return Err(r.err(None, ErrorKind::NoHeader));
+        }
+        for pos in 0..r.record.len() {
+            let name = cell_text(&r.record, pos).to_string();
             if name.is_empty() {
                 return Err(r.err(Some(pos), ErrorKind::EmptyColumnName));
             }
@@ -671,33 +846,9 @@ impl<R: BufRead> Reader<R> {
         }
     }
 
-    /// Reads the next physical line into `raw` without its line ending; false at the end. A
-    /// line longer than [`MAX_LINE_BYTES`] is an error as soon as that many bytes are read.
-    fn next_line(&mut self) -> Result<bool, Error> {
-        if let Err(kind) = read_line(&mut self.src, &mut self.raw) {
-            self.line_no += 1;
-            return Err(self.err(None, kind));
-        }
-        if self.raw.is_empty() {
-            return Ok(false);
-        }
-        self.line_no += 1;
-        // A UTF-8 byte order mark (spreadsheet exports) is not part of the first cell.
-        if self.line_no == 1 && self.raw.starts_with(b"\xEF\xBB\xBF") {
-            self.raw.drain(..3);
-        }
-        self.line_ended = self.raw.last() == Some(&b'\n');
-        if self.line_ended {
-            self.raw.pop();
-        }
-        if self.raw.last() == Some(&b'\r') {
-            self.raw.pop();
-        }
-        Ok(true)
-    }
-
-    fn line_str(&self) -> Result<&str, Error> {
-        std::str::from_utf8(&self.raw).map_err(|_| self.err(None, ErrorKind::NotUtf8))
+    /// An error of the line source, at its line.
+    fn at(&self, (line, kind): (u64, ErrorKind)) -> Error {
+        Error { file: self.file.clone(), line, column: None, kind }
     }
 
     /// Reads the next data row into `row` (reusing its storage); `Ok(false)` at the end of the
@@ -714,20 +865,17 @@ impl<R: BufRead> Reader<R> {
     }
 
     fn read_row_inner(&mut self, row: &mut Row) -> Result<bool, Error> {
-        if !self.next_line()? {
+        if !read_record(&mut self.csv, &mut self.record).map_err(|e| self.at(e))? {
             return Ok(false);
         }
-        let line = std::str::from_utf8(&self.raw).map_err(|_| self.err(None, ErrorKind::NotUtf8))?;
-        // Splitting borrows `raw` and fills `cells`/`bounds`: move them out for the borrow.
-        let mut cells = std::mem::take(&mut self.cells);
-        let mut bounds = std::mem::take(&mut self.bounds);
-        let split = split_line(line, &mut cells, &mut bounds);
-        let result = match split {
-            Err(k) => Err(self.err(None, k)),
-            Ok(()) => self.fill(row, &cells, &bounds),
-        };
-        self.cells = cells;
-        self.bounds = bounds;
+        // The `csv` crate is given one line at a time: the line the source read last is the
+        // row's.
+        self.line_no = self.csv.get_ref().line_no;
+        let line_ended = self.csv.get_ref().ended;
+        // `fill` borrows the reader: move the record out for the call.
+        let record = std::mem::take(&mut self.record);
+        let result = self.fill(row, &record, line_ended);
+        self.record = record;
         result?;
         self.rows += 1;
         Ok(true)
@@ -747,18 +895,18 @@ impl<R: BufRead> Reader<R> {
         Ok(())
     }
 
-    fn fill(&mut self, row: &mut Row, cells: &str, bounds: &[(usize, usize)]) -> Result<(), Error> {
+    fn fill(&mut self, row: &mut Row, record: &csv::ByteRecord, line_ended: bool) -> Result<(), Error> {
         // Trailing empty cells of optional columns may be left out (CSV writers drop them;
         // the real recording in `data/real/` does): they read as empty. Anything else with a
         // cell count other than the header's is an error.
-        let expected = self.slots.len();
-        if bounds.len() < expected && !self.line_ended {
-            return Err(self.err(None, ErrorKind::CutOff { expected, got: bounds.len() }));
+        let (expected, got) = (self.slots.len(), record.len());
+        if got < expected && !line_ended {
+            return Err(self.err(None, ErrorKind::CutOff { expected, got }));
         }
         let required = |s: &Slot| matches!(s, Slot::Defined(c) if COLUMNS[*c].group == Group::Required);
-        let short_ok = bounds.len() < expected && !self.slots[bounds.len()..].iter().any(required);
-        if bounds.len() != expected && !short_ok {
-            return Err(self.err(None, ErrorKind::CellCount { expected, got: bounds.len() }));
+        let short_ok = got < expected && !self.slots[got..].iter().any(required);
+        if got != expected && !short_ok {
+            return Err(self.err(None, ErrorKind::CellCount { expected, got }));
         }
         row.line = self.line_no;
         row.clear_reference();
@@ -766,14 +914,14 @@ impl<R: BufRead> Reader<R> {
         row.power_s = None;
         let mut pos_buf = row.pos.take();
         row.extra.resize(self.extra.len(), String::new());
-        for slot in &self.slots[bounds.len().min(expected)..] {
+        for slot in &self.slots[got.min(expected)..] {
             if let Slot::Extra(i) = slot {
                 row.extra[*i].clear();
             }
         }
         let mut pos_set = false;
-        for (p, (&(a, b), &slot)) in bounds.iter().zip(&self.slots).enumerate() {
-            let cell = &cells[a..b];
+        for (p, &slot) in self.slots.iter().enumerate().take(got) {
+            let cell = cell_text(record, p);
             let c = match slot {
                 Slot::Defined(c) => &COLUMNS[c],
                 Slot::Extra(i) => {
@@ -1096,10 +1244,10 @@ fn push_text(line: &mut Vec<u8>, s: &str) {
 }
 
 /// A small CSV table that is not a recording (a constants table, a coefficient table, a
-/// replay's output), read by the same line reader, tokenizer and caps as recordings: `#`
-/// comment lines and blank lines are skipped, the first other line is the header, every
-/// further line a row with as many cells as the header. Columns are found by header name;
-/// errors name the file, the line and the column.
+/// replay's output), read by the same path as recordings (the `csv` crate fed line by line,
+/// the same caps): `#` comment lines and blank lines are skipped, the first other line is the
+/// header, every further line a row with as many cells as the header. Columns are found by
+/// header name; errors name the file, the line and the column.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Table {
     /// The file named in errors.
@@ -1118,36 +1266,54 @@ impl Table {
     }
 
     /// Reads a table from `src`; `name` is the file named in errors.
-    pub fn from_reader(mut src: impl BufRead, name: impl AsRef<Path>) -> Result<Table, Error> {
+    pub fn from_reader(src: impl BufRead, name: impl AsRef<Path>) -> Result<Table, Error> {
+        let mut rows = Vec::new();
+        let mut t = Table::for_each_row(src, name, |_, line, cells| {
+            rows.push((line, cells.iter().map(|c| c.to_string()).collect()));
+            Ok::<(), Error>(())
+        })?;
+        t.rows = rows;
+        Ok(t)
+    }
+
+    /// Reads a table from `src` one row at a time (for tables too long to hold as strings):
+    /// `each(table, line, cells)` is called for every row with the table's header (and no
+    /// rows); returns the table without rows. `name` is the file named in errors.
+    pub fn for_each_row<E: From<Error>>(
+        src: impl BufRead,
+        name: impl AsRef<Path>,
+        mut each: impl FnMut(&Table, u64, &[&str]) -> Result<(), E>,
+    ) -> Result<Table, E> {
         let mut t = Table { file: name.as_ref().to_path_buf(), header: Vec::new(), rows: Vec::new() };
-        let (mut raw, mut cells, mut bounds) = (Vec::new(), String::new(), Vec::new());
-        let mut line_no = 0;
+        let mut csv = csv_reader(Lines::new(src, Blank::Skip));
+        let mut record = csv::ByteRecord::new();
         let mut header = true;
         loop {
-            line_no += 1;
-            let at = |kind| Error { file: t.file.clone(), line: line_no, column: None, kind };
-            read_line(&mut src, &mut raw).map_err(at)?;
-            if raw.is_empty() {
+            let more = read_record(&mut csv, &mut record).map_err(|(line, kind)| Error {
+                file: t.file.clone(),
+                line,
+                column: None,
+                kind,
+            })?;
+            if !more {
                 break;
             }
-            let text = std::str::from_utf8(&raw).map_err(|_| at(ErrorKind::NotUtf8))?;
-            let text = text.strip_prefix('\u{feff}').unwrap_or(text).trim_end_matches(['\n', '\r']);
-            if text.trim_start().starts_with('#') || text.trim().is_empty() {
-                continue;
-            }
-            split_line(text, &mut cells, &mut bounds).map_err(at)?;
-            let row: Vec<String> = bounds.iter().map(|&(a, b)| cells[a..b].to_string()).collect();
+            // The `csv` crate is given one line at a time: the line the source read last is
+            // the row's.
+            let line_no = csv.get_ref().line_no;
+            let cells: Vec<&str> = (0..record.len()).map(|i| cell_text(&record, i)).collect();
             if header {
-                t.header = row;
+                t.header = cells.iter().map(|c| c.to_string()).collect();
                 header = false;
-            } else if row.len() != t.header.len() {
-                return Err(at(ErrorKind::CellCount { expected: t.header.len(), got: row.len() }));
+            } else if cells.len() != t.header.len() {
+                let kind = ErrorKind::CellCount { expected: t.header.len(), got: cells.len() };
+                return Err(Error { file: t.file, line: line_no, column: None, kind }.into());
             } else {
-                t.rows.push((line_no, row));
+                each(&t, line_no, &cells)?;
             }
         }
         if header {
-            return Err(Error { file: t.file, line: 0, column: None, kind: ErrorKind::NoHeader });
+            return Err(Error { file: t.file, line: 0, column: None, kind: ErrorKind::NoHeader }.into());
         }
         Ok(t)
     }

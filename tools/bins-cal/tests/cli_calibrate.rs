@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 mod common;
+use common::csv_text::Csv;
 use common::{err, ok, repo, without_column};
 
 /// The simulated campaign, made once (the directory lives for the test process).
@@ -30,14 +31,11 @@ fn s(p: &Path) -> &str {
 
 /// Max |Δg| \[mg\] per (temperature rounded to °C, method) from verify.csv.
 fn max_dg(csv: &Path, temp: f64, method: &str) -> f64 {
-    let text = std::fs::read_to_string(csv).unwrap();
-    text.lines()
-        .skip(1)
-        .filter_map(|l| {
-            let c: Vec<&str> = l.split(',').collect();
-            let t: f64 = c[0].parse().ok()?;
-            ((t - temp).abs() < 2.0 && c[2] == method).then(|| c[3].parse::<f64>().unwrap().abs())
-        })
+    let v = Csv::read(csv);
+    v.rows
+        .iter()
+        .filter(|r| (v.num(r, "temp_C") - temp).abs() < 2.0 && v.cell(r, "method") == method)
+        .map(|r| v.num(r, "dg_mg").abs())
         .fold(f64::NAN, f64::max)
 }
 
@@ -125,17 +123,15 @@ fn bad_inputs_give_one_line_errors_and_no_output() {
     let e = err(&["calibrate", "--tilter", s(&nopos), "-o", s(&out)]);
     assert!(e.contains("nopos.csv") && e.contains("missing column `pos`"), "{e}");
     // Only TP1..TP3 labelled: fewer than 4 positions.
-    let header = full.lines().find(|l| l.starts_with("t_s")).unwrap();
-    let pos_col = header.split(',').position(|c| c == "pos").unwrap();
-    let few = dir.path().join("few.csv");
-    let keep = |l: &str| {
-        if ["TP4", "TP5", "TP6"].iter().any(|p| l.contains(&format!(",{p},"))) {
-            l.replace(&format!(",{},", l.split(',').nth(pos_col).unwrap()), ",,")
-        } else {
-            l.to_string()
+    let mut t3 = Csv::parse(&full);
+    let pos_col = t3.col("pos");
+    for r in &mut t3.rows {
+        if ["TP4", "TP5", "TP6"].contains(&r[pos_col].as_str()) {
+            r[pos_col].clear();
         }
-    };
-    std::fs::write(&few, full.lines().map(keep).collect::<Vec<_>>().join("\n") + "\n").unwrap();
+    }
+    let few = dir.path().join("few.csv");
+    t3.write(&few);
     let e = err(&["calibrate", "--tilter", s(&few), "-o", s(&out)]);
     assert!(e.contains("few.csv") && e.contains("at least 4 positions") && e.contains("TP4"), "{e}");
     // No dwell at T0.
@@ -167,13 +163,11 @@ fn bad_inputs_give_one_line_errors_and_no_output() {
 
 /// The `(temp_C, pos) → dg_mg` rows of one method in verify.csv.
 fn dg_rows(csv: &Path, method: &str) -> Vec<(String, String, f64)> {
-    let text = std::fs::read_to_string(csv).unwrap();
-    text.lines()
-        .skip(1)
-        .filter_map(|l| {
-            let c: Vec<&str> = l.split(',').collect();
-            (c[2] == method).then(|| (c[0].to_string(), c[1].to_string(), c[3].parse().unwrap()))
-        })
+    let v = Csv::read(csv);
+    v.rows
+        .iter()
+        .filter(|r| v.cell(r, "method") == method)
+        .map(|r| (v.cell(r, "temp_C").to_string(), v.cell(r, "pos").to_string(), v.num(r, "dg_mg")))
         .collect()
 }
 
@@ -198,19 +192,26 @@ fn verify_replayed_reads_the_replay_output_in_the_same_dwells() {
     }
     let png = std::fs::read(v.join("verify.png")).unwrap();
     assert_eq!(&png[1..4], b"PNG");
+    // The replay output's columns are found by name: in another order, the same figures.
+    let mut moved = Csv::read(&out);
+    for r in std::iter::once(&mut moved.header).chain(moved.rows.iter_mut()) {
+        r.rotate_left(2);
+    }
+    let (reordered, v2) = (dir.join("r-replay-reordered.csv"), dir.join("verify-reordered"));
+    moved.write(&reordered);
+    ok(&["verify", "--check", s(&rec), "--calib", s(&cal), "--replayed", s(&reordered), "-o", s(&v2)]);
+    assert_eq!(dg_rows(&v2.join("verify.csv"), "replayed"), replayed);
 
     // The VE source: this blob has no VE model, so no source subtracts anything; `none` is
     // never waiting for an online estimate, the default (`online`) is until its first block.
     let none = dir.join("r-replay-none.csv");
     ok(&["replay", "--rec", s(&rec), "--calib", s(&blob), "--ve", "none", "-o", s(&none)]);
     let rows = |p: &Path| -> Vec<([String; 3], u32)> {
-        let text = std::fs::read_to_string(p).unwrap();
-        text.lines()
-            .skip(1)
-            .map(|l| {
-                let c: Vec<&str> = l.split(',').collect();
-                ([c[1].to_string(), c[2].to_string(), c[3].to_string()], c[4].parse().unwrap())
-            })
+        let r = Csv::read(p);
+        let a = ["ax_g", "ay_g", "az_g"];
+        r.rows
+            .iter()
+            .map(|row| (a.map(|c| r.cell(row, c).to_string()), r.cell(row, "status").parse().unwrap()))
             .collect()
     };
     let (online_rows, none_rows) = (rows(&out), rows(&none));
@@ -235,7 +236,9 @@ fn verify_replayed_reads_the_replay_output_in_the_same_dwells() {
         err(&args)
     };
     let short = tmp.path().join("short.csv");
-    std::fs::write(&short, text.lines().take(text.lines().count() / 2).collect::<Vec<_>>().join("\n") + "\n").unwrap();
+    let mut half = Csv::parse(&text);
+    half.rows.truncate(half.rows.len() / 2);
+    half.write(&short);
     let e = verify(&[&short]);
     assert!(e.contains("short.csv") && e.contains("not the replay of that recording"), "{e}");
     let header = tmp.path().join("header.csv");
@@ -243,18 +246,18 @@ fn verify_replayed_reads_the_replay_output_in_the_same_dwells() {
     let e = verify(&[&header]);
     assert!(e.contains("header.csv") && e.contains("line 1"), "{e}");
     let field = tmp.path().join("field.csv");
-    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
-    lines[3] = lines[3].replacen(',', ",x", 1);
-    std::fs::write(&field, lines.join("\n") + "\n").unwrap();
+    let mut replay = Csv::parse(&text);
+    replay.rows[2][1].insert(0, 'x');
+    replay.write(&field);
     let e = verify(&[&field]);
     assert!(e.contains("field.csv") && e.contains("line 4") && e.contains("not a number"), "{e}");
     let flagged = tmp.path().join("flagged.csv");
-    let uncal: Vec<String> = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| if i == 0 { l.to_string() } else { format!("{},4", l.rsplit_once(',').unwrap().0) })
-        .collect();
-    std::fs::write(&flagged, uncal.join("\n") + "\n").unwrap();
+    let mut uncal = Csv::parse(&text);
+    let status = uncal.col("status");
+    for r in &mut uncal.rows {
+        r[status] = "4".into();
+    }
+    uncal.write(&flagged);
     let e = verify(&[&flagged]);
     assert!(e.contains("flagged.csv") && e.contains("INVALID_CALIBRATION"), "{e}");
     let e = verify(&[&out, &out]);

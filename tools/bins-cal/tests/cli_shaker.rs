@@ -15,6 +15,7 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 mod common;
+use common::csv_text::Csv;
 use common::{err, ok, repo, without_column};
 
 fn s(p: &Path) -> &str {
@@ -165,21 +166,15 @@ fn shaker_calibration_recovers_the_al15_conversion_function() {
     }
 }
 
-/// The shaker recording with a line filter (comments and header kept).
-fn filtered(name: &str, keep: impl Fn(&[&str], &str) -> bool) -> PathBuf {
-    let full = std::fs::read_to_string(campaign().join("shaker.csv")).unwrap();
-    let header: Vec<&str> = full.lines().find(|l| l.starts_with("t_s")).unwrap().split(',').collect();
-    let text: Vec<&str> =
-        full.lines().filter(|l| l.starts_with('#') || l.starts_with("t_s") || keep(&header, l)).collect();
+/// The shaker recording with a row filter (comments and header kept).
+fn filtered(name: &str, keep: impl Fn(&Csv, &[String]) -> bool) -> PathBuf {
+    let mut rec = Csv::read(&campaign().join("shaker.csv"));
+    let rows = std::mem::take(&mut rec.rows);
+    rec.rows = rows.into_iter().filter(|r| keep(&rec, r)).collect();
     let dir = tempfile::tempdir().unwrap().keep();
     let p = dir.join(name);
-    std::fs::write(&p, text.join("\n") + "\n").unwrap();
+    rec.write(&p);
     p
-}
-
-fn cell<'a>(header: &[&str], line: &'a str, name: &str) -> &'a str {
-    let i = header.iter().position(|c| *c == name).unwrap();
-    line.split(',').nth(i).unwrap_or("")
 }
 
 #[test]
@@ -202,13 +197,13 @@ fn bad_shaker_inputs_give_one_line_errors_and_no_output() {
     let e = calibrate(&nokind);
     assert!(e.contains("nokind.csv") && e.contains("missing column `vib_kind`"), "{e}");
     // Sine at one level only (the 2 and 4 g holds removed): too few amplitudes.
-    let one = filtered("one-level.csv", |h, l| {
-        cell(h, l, "vib_kind") != "sine" || cell(h, l, "vib_x_g").parse::<f64>().is_ok_and(|a| a == 1.0)
+    let one = filtered("one-level.csv", |c, r| {
+        c.cell(r, "vib_kind") != "sine" || c.cell(r, "vib_x_g").parse::<f64>().is_ok_and(|a| a == 1.0)
     });
     let e = calibrate(&one);
     assert!(e.contains("one-level.csv") && e.contains("one level only") && e.contains("at least 2 levels"), "{e}");
     // Only TP1…TP3: three static accelerations, not a plan.
-    let few = filtered("three-positions.csv", |h, l| ["TP1", "TP2", "TP3"].contains(&cell(h, l, "pos")));
+    let few = filtered("three-positions.csv", |c, r| ["TP1", "TP2", "TP3"].contains(&c.cell(r, "pos")));
     let e = calibrate(&few);
     assert!(e.contains("three-positions.csv") && e.contains("4 or more distinct static accelerations"), "{e}");
     assert!(!out.exists() && !blob.exists(), "nothing written");

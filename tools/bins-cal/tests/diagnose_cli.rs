@@ -8,6 +8,10 @@ use proptest::prelude::*;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+#[allow(dead_code)] // the CLI helpers other test files use
+mod common;
+use common::csv_text::Csv;
+
 fn write(path: &Path, rows: &[Row]) {
     let f = std::fs::File::create(path).unwrap();
     let mut w =
@@ -129,13 +133,12 @@ fn unusable_inputs_are_one_line_errors() {
     assert!(e.contains("moved.csv:") && e.contains("`fy_g`"), "{e}");
     // Missing reference columns.
     let bare = dir.path().join("bare.csv");
-    let text: String = std::fs::read_to_string(&sp)
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#'))
-        .map(|l| l.split(',').take(5).collect::<Vec<_>>().join(",") + "\n")
-        .collect();
-    std::fs::write(&bare, &text).unwrap();
+    let mut rec = Csv::read(&sp);
+    rec.comments.clear();
+    for r in std::iter::once(&mut rec.header).chain(rec.rows.iter_mut()) {
+        r.truncate(5);
+    }
+    rec.write(&bare);
     let e = run_err(&bare, &bare, dir.path());
     assert!(e.contains("no row has a known reference"), "{e}");
     // A constant (dead) channel.
@@ -173,15 +176,15 @@ proptest! {
         let dir = tempfile::tempdir().unwrap();
         let (sp, rp) = pair(dir.path(), "asymmetry_vs_k2_level", 60);
         let src = std::fs::read_to_string(&rp).unwrap();
+        let mut rec = Csv::parse(&src);
+        let ri = line % rec.rows.len();
+        let ci = cell % rec.rows[ri].len();
+        rec.rows[ri][ci] = text.clone();
+        let replaced = rec.to_text();
         let mut lines: Vec<String> = src.lines().map(String::from).collect();
         let li = line % lines.len();
         match what {
-            0 => {
-                let mut cells: Vec<String> = lines[li].split(',').map(String::from).collect();
-                let ci = cell % cells.len();
-                cells[ci] = text.clone();
-                lines[li] = cells.join(",");
-            }
+            0 => lines = replaced.lines().map(String::from).collect(),
             1 => {
                 let cut = lines[li].len() / 2;
                 lines[li].truncate(cut);

@@ -12,25 +12,21 @@
 //!   never reported as `bias_temp_order`.
 
 use bins_cal::diagnose::diagnose_files;
-use std::path::PathBuf;
+use common::csv_text::Csv;
+use std::path::{Path, PathBuf};
+
+#[allow(dead_code)] // the CLI helpers other test files use
+mod common;
 
 fn data(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data/real").join(name)
 }
 
-/// `(ux, uy, uz)` of every data row, read with nothing but `str::split`.
-fn signals(path: &PathBuf) -> Vec<[f64; 3]> {
-    let text = std::fs::read_to_string(path).expect("recording");
-    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).expect("column");
-    let idx = [col("ux_V"), col("uy_V"), col("uz_V")];
-    lines
-        .map(|l| {
-            let cells: Vec<&str> = l.split(',').collect();
-            idx.map(|i| cells[i].parse::<f64>().expect("number"))
-        })
-        .collect()
+/// `(ux, uy, uz)` of every data row, read by the tests' CSV helper (the `csv` crate alone, not
+/// the reader under test).
+fn signals(path: &Path) -> Vec<[f64; 3]> {
+    let rec = Csv::read(path);
+    rec.rows.iter().map(|r| ["ux_V", "uy_V", "uz_V"].map(|c| rec.num(r, c))).collect()
 }
 
 #[test]
@@ -114,11 +110,7 @@ fn real_sweep_steps_on_z_are_located_and_fitted_with_the_model() {
     assert!(r.heldout_rms_after_mg["y"] <= 0.70, "y held-out after {}", r.heldout_rms_after_mg["y"]);
 }
 
-/// `t_s` of every data row, read with nothing but `str::split`.
-fn times(path: &PathBuf) -> Vec<f64> {
-    let text = std::fs::read_to_string(path).expect("recording");
-    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let i = header.iter().position(|h| *h == "t_s").expect("t_s");
-    lines.map(|l| l.split(',').nth(i).expect("cell").parse::<f64>().expect("number")).collect()
+/// `t_s` of every data row, read by the tests' CSV helper (the `csv` crate alone).
+fn times(path: &Path) -> Vec<f64> {
+    Csv::read(path).column("t_s")
 }

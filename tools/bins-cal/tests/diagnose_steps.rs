@@ -15,6 +15,10 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
+#[allow(dead_code)] // the CLI helpers other test files use
+mod common;
+use common::csv_text::Csv;
+
 /// One drawn residual: times, the white variance per row, the residual, and the true steps.
 struct Draw {
     t: Vec<f64>,
@@ -158,10 +162,11 @@ fn the_command_reports_the_steps_with_their_lines() {
     let steps = json["steps"].as_array().expect("steps array");
     assert_eq!(printed.len(), steps.len(), "{text}");
     assert!(printed.iter().any(|l| l.starts_with("bias step on z at t = 1022.1 s (line 2026): -3.")), "{text}");
-    let csv = std::fs::read_to_string(data.join("tofupilot-sweep-real.csv")).expect("csv");
+    // The file has no blank line: line n is row n − (comments + header).
+    let rec = Csv::read(&data.join("tofupilot-sweep-real.csv"));
     for s in steps {
         let line = s["line"].as_u64().expect("line") as usize;
-        let t_s: f64 = csv.lines().nth(line - 1).and_then(|l| l.split(',').next()).expect("row").parse().expect("t_s");
+        let t_s = rec.num(&rec.rows[line - 2 - rec.comments.len()], "t_s");
         assert!((t_s - s["time_s"].as_f64().expect("time_s")).abs() < 1e-6, "{s}: line {line} has t_s {t_s}");
         for key in ["axis", "size_mg", "se_mg", "z"] {
             assert!(!s[key].is_null(), "{s}: {key}");

@@ -63,18 +63,14 @@ fn run(args: &[&str]) -> String {
 
 /// max |Δg| [mg] of `method` over the ramps (heating, cooling) and the holds of a verify.csv.
 fn max_dg(csv: &Path, method: &str) -> (f64, f64) {
-    let text = std::fs::read_to_string(csv).unwrap();
+    let v = common::csv_text::Csv::read(csv);
     let (mut ramps, mut holds) = (0.0f64, 0.0f64);
-    for line in text.lines().skip(1) {
-        let c: Vec<&str> = line.split(',').collect();
-        if c.len() != 5 || c[2] != method {
-            continue;
-        }
-        let v: f64 = c[3].parse().unwrap();
-        if c[4] == "hold" {
-            holds = holds.max(v.abs());
+    for r in v.rows.iter().filter(|r| v.cell(r, "method") == method) {
+        let dg_mg = v.num(r, "dg_mg");
+        if v.cell(r, "phase") == "hold" {
+            holds = holds.max(dg_mg.abs());
         } else {
-            ramps = ramps.max(v.abs());
+            ramps = ramps.max(dg_mg.abs());
         }
     }
     (ramps, holds)

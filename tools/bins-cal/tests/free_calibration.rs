@@ -197,21 +197,12 @@ fn calibrate_reports_the_unlevel_holds_and_calibrates_empty_references_freely() 
     );
     // Empty reference columns: the free fit, automatically, with a note saying why.
     let csv = std::fs::read_to_string(common::repo("data/real/imucal-session.csv")).expect("csv");
-    let empty: String = csv
-        .lines()
-        .map(|l| {
-            if l.starts_with('#') || l.starts_with("t_s") {
-                return l.to_string();
-            }
-            let mut c: Vec<&str> = l.split(',').collect();
-            for k in 5..c.len() {
-                c[k] = "";
-            }
-            c.join(",")
-        })
-        .collect::<Vec<_>>()
-        .join("\n")
-        + "\n";
+    // Every cell after the five required columns emptied.
+    let mut rec = common::csv_text::Csv::parse(&csv);
+    for r in &mut rec.rows {
+        r.iter_mut().skip(5).for_each(String::clear);
+    }
+    let empty = rec.to_text();
     let p = dir.path().join("empty.csv");
     std::fs::write(&p, empty).expect("write");
     let out = dir.path().join("free.toml");

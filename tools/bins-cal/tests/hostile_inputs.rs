@@ -7,6 +7,7 @@
 
 mod common;
 mod hostile;
+use common::csv_text::Csv;
 use hostile::{run_in, s, text};
 
 use std::os::unix::fs::symlink;
@@ -91,13 +92,15 @@ fn edited(dir: &Path, name: &str, edit: impl FnOnce(&mut Vec<String>)) -> PathBu
     p
 }
 
-/// Sets cell `col` (by header name) of data row `k` (0-based) to `value`.
-fn set_cell(lines: &mut [String], k: usize, col: &str, value: &str) {
-    let h = lines.iter().position(|l| l.starts_with("t_s,")).unwrap();
-    let c = lines[h].split(',').position(|n| n == col).unwrap();
-    let mut cells: Vec<String> = lines[h + 1 + k].split(',').map(String::from).collect();
-    cells[c] = value.to_string();
-    lines[h + 1 + k] = cells.join(",");
+/// The recording of the fixture with cell `col` (by header name) of data row `k` (0-based)
+/// set to `value`, written to `dir/name`.
+fn with_cell(dir: &Path, name: &str, k: usize, col: &str, value: &str) -> PathBuf {
+    let mut rec = Csv::read(&fixture().rec);
+    let c = rec.col(col);
+    rec.rows[k][c] = value.to_string();
+    let p = dir.join(name);
+    rec.write(&p);
+    p
 }
 
 /// Defect 1: an output that is an input — by name, through a symbolic link, through a hard
@@ -227,7 +230,7 @@ fn a_killed_run_leaves_a_temporary_file_the_next_run_removes() {
 fn an_extreme_value_is_refused_naming_file_line_and_column() {
     let f = fixture();
     let d = tempfile::tempdir().unwrap();
-    let hot = edited(d.path(), "hot.csv", |l| set_cell(l, 100, "temp_C", "1e308"));
+    let hot = with_cell(d.path(), "hot.csv", 100, "temp_C", "1e308");
     let line = std::fs::read_to_string(&hot).unwrap().lines().position(|l| l.contains("1e308")).unwrap() + 1;
     let t0 = Instant::now();
     let args = ["diagnose", "--sim", s(&f.rec), "--real", s(&hot), "--report", "r.json"];
@@ -236,10 +239,10 @@ fn an_extreme_value_is_refused_naming_file_line_and_column() {
     assert!(t0.elapsed() < Duration::from_secs(20));
     assert!(!d.path().join("r.json").exists());
     // Saturated signals (defect 6's `verify` on 1e308 V) and a temperature just past the range.
-    let sat = edited(d.path(), "sat.csv", |l| set_cell(l, 5, "uz_V", "-1e308"));
+    let sat = with_cell(d.path(), "sat.csv", 5, "uz_V", "-1e308");
     let args = ["verify", "--check", s(&sat), "--calib", s(&f.cal_toml), "-o", "v", "--pos-prefix", "TP"];
     assert_refused(&run_in(d.path(), &args), &args, &["sat.csv:", "column 4 `uz_V`: `-1e308` is outside"]);
-    let warm = edited(d.path(), "warm.csv", |l| set_cell(l, 0, "temp_C", "200.5"));
+    let warm = with_cell(d.path(), "warm.csv", 0, "temp_C", "200.5");
     let args = ["replay", "--rec", s(&warm), "--calib", s(&f.cal_toml), "-o", "o.csv"];
     assert_refused(&run_in(d.path(), &args), &args, &["warm.csv:", "`temp_C`: `200.5` is outside"]);
     assert!(!d.path().join("v").join("verify.csv").exists() && !d.path().join("o.csv").exists());
@@ -293,7 +296,7 @@ fn a_calibration_is_checked_the_same_in_every_command() {
         }
     }
     // Random bytes of the right length as the firmware's output stream.
-    let rows = std::fs::read_to_string(&f.rec).unwrap().lines().filter(|l| !l.starts_with('#')).count() - 1;
+    let rows = Csv::read(&f.rec).rows.len();
     let mut x = 0x9E37_79B9_7F4A_7C15u64;
     let bytes: Vec<u8> = (0..rows * 16)
         .map(|_| {
@@ -390,7 +393,7 @@ fn sweep_of_hostile_inputs() {
         ("t-back.csv", "t_s", "-5"),
         ("u-text.csv", "uz_V", "0x1p3"),
     ] {
-        let p = edited(dir, name, |l| set_cell(l, 40, col, v));
+        let p = with_cell(dir, name, 40, col, v);
         recs.push((p, true));
     }
     let p = edited(dir, "long-line.csv", |l| {
@@ -613,19 +616,12 @@ fn verify_refuses_a_non_finite_or_absurd_replayed_value() {
     std::fs::remove_dir_all(dir.join("v")).unwrap();
     for bad in ["NaN", "inf", "-inf", "1e300"] {
         // Every row's ax_g: whatever the dwells, one of them holds it.
-        let text: String = good
-            .lines()
-            .enumerate()
-            .map(|(i, l)| {
-                if i == 0 {
-                    return l.to_string() + "\n";
-                }
-                let mut c: Vec<&str> = l.split(',').collect();
-                c[1] = bad;
-                c.join(",") + "\n"
-            })
-            .collect();
-        std::fs::write(dir.join("bad.csv"), text).unwrap();
+        let mut replay = Csv::parse(&good);
+        let ax = replay.col("ax_g");
+        for r in &mut replay.rows {
+            r[ax] = bad.to_string();
+        }
+        replay.write(&dir.join("bad.csv"));
         let mut a = args.to_vec();
         a.push("bad.csv");
         let o = run_bounded(dir, &a, 60);
@@ -779,21 +775,26 @@ fn ihex_is_refused_outside_the_calib_region() {
 fn tempco_and_vibration_refuse_absurd_values() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
-    let table = std::fs::read_to_string(common::repo("data/paper-constants.csv")).unwrap();
-    let row70 = table.lines().find(|l| l.starts_with("70,")).unwrap();
-    let cases = [
-        ("hot.csv", table.replace(row70, &row70.replacen("70,", "1e6,", 1)), "1000000 °C"),
-        ("zero.csv", table.replace(row70, &format!("70,0,0,0,{}", row70.splitn(5, ',').nth(4).unwrap())), "Kxx"),
-    ];
+    let table = Csv::read(&common::repo("data/paper-constants.csv"));
+    let row70 = table.rows.iter().position(|r| table.cell(r, "temp_C") == "70").unwrap();
+    let (mut hot, mut zero) = (table.clone(), table.clone());
+    let t = hot.col("temp_C");
+    hot.rows[row70][t] = "1e6".into();
+    for k in ["Kxx", "Kxy", "Kxz"] {
+        let c = zero.col(k);
+        zero.rows[row70][c] = "0".into();
+    }
+    let cases = [("hot.csv", hot.to_text(), "1000000 °C"), ("zero.csv", zero.to_text(), "Kxx")];
     for (name, text, why) in cases {
         std::fs::write(dir.join(name), text).unwrap();
         let args = ["tempco", "--constants", name];
         // `FILE:LINE, column …`: the file and the line of the row.
         assert_refused(&run_in(dir, &args), &args, &[&format!("{name}:"), ", column `", why]);
     }
-    let cf = std::fs::read_to_string(common::repo("data/al15-coefficients.csv")).unwrap();
-    let row = cf.lines().find(|l| l.starts_with("3.324,")).unwrap();
-    std::fs::write(dir.join("k0.csv"), cf.replace(row, &row.replacen("-1.6698", "0", 1))).unwrap();
+    let mut cf = Csv::read(&common::repo("data/al15-coefficients.csv"));
+    let k1 = cf.col("K1_V_per_g");
+    cf.rows[0][k1] = "0".into();
+    cf.write(&dir.join("k0.csv"));
     let env = common::repo("data/vibration-env-paper.toml");
     let args = ["vibration", "--cf", "k0.csv", "--env", s(&env)];
     assert_refused(&run_in(dir, &args), &args, &["k0.csv", "K1_V_per_g"]);

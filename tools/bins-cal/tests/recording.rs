@@ -142,6 +142,31 @@ fn wrong_cell_count_names_file_line() {
     assert_eq!((e.kind, e.line), (ErrorKind::UnterminatedQuote, 4));
 }
 
+/// The format's own rules where a plain CSV reader (the `csv` crate by itself) reads otherwise:
+/// spaces around an unquoted cell are not part of it, inside quotes they are; a quoted cell
+/// ends on its line; a blank data line is a row (of one cell); a byte order mark not at the
+/// start of the file is part of the header name; a row longer than any read buffer keeps the
+/// line numbers of the rows after it.
+#[test]
+fn cells_quotes_blank_lines_and_long_rows_as_the_format_says() {
+    let head = "t_s,ux_V,uy_V,uz_V,temp_C,pos,note\n";
+    let text = format!("{head} 0 ,\t1, 2 ,3 ,20,\" TP 1 \",  \"a \"\"b\"\"\" \n");
+    let rows: Vec<Row> = Reader::new(Cursor::new(text), "f.csv").unwrap().collect::<Result<_, _>>().unwrap();
+    assert_eq!((rows[0].t_s, rows[0].u_v, rows[0].temp_c), (0.0, [1.0, 2.0, 3.0], 20.0));
+    assert_eq!((rows[0].pos.as_deref(), rows[0].extra[0].as_str()), (Some(" TP 1 "), "a \"b\""));
+    // A quote opened and not closed on its line is refused there, even when a later line
+    // would close it.
+    let e = first_error(&format!("{head}0,1,2,3,20,\"TP1\n1,1,2,3,20,x\",y\n"));
+    assert_eq!((e.kind, e.line), (ErrorKind::UnterminatedQuote, 2));
+    let e = first_error(&format!("{head}0,1,2,3,20,TP1,\n\n1,1,2,3,20,TP1,\n"));
+    assert_eq!((e.kind, e.line), (ErrorKind::CellCount { expected: 7, got: 1 }, 3));
+    let e = first_error(&format!("# unit 7\n\u{feff}{head}"));
+    assert_eq!((e.kind, e.line), (ErrorKind::MissingColumn("t_s"), 2));
+    let long = "n".repeat(300_000);
+    let e = first_error(&format!("{head}0,1,2,3,20,TP1,{long}\n1,1,2,3,20,TP1,{long}\n1,1,2,3,20,TP1,x\n"));
+    assert_eq!((e.kind, e.line), (ErrorKind::TimeNotIncreasing { previous: 1.0, this: 1.0 }, 4));
+}
+
 #[test]
 fn reader_stops_after_an_error() {
     let text = format!("{HEAD}0,1,2,3,20,\nx,1,2,3,20,\n1,1,2,3,20,\n");

@@ -72,6 +72,24 @@ fn a_header_or_row_with_too_many_cells_is_refused() {
     assert_eq!((e.kind.clone(), e.line), (ErrorKind::TooManyCells, 2), "{e}");
 }
 
+/// Exactly [`MAX_COLUMNS`] cells are read, one more is refused, with or without padding (the
+/// reader's two ways through a line).
+#[test]
+fn the_cell_cap_is_exact() {
+    let names: Vec<String> = (0..MAX_COLUMNS - 5).map(|i| format!("c{i}")).collect();
+    for pad in ["", " "] {
+        let header = format!("{},{}\n", HEADER.trim_end(), names.join(&format!("{pad},")));
+        let row = format!("0,0,0,0,20{}\n", format!(",{pad}1").repeat(MAX_COLUMNS - 5));
+        let mut r = Reader::new(Cursor::new(format!("{header}{row}")), "cap.csv").unwrap();
+        let mut got = Row::default();
+        assert!(r.read_row(&mut got).unwrap());
+        assert_eq!(got.extra.len(), MAX_COLUMNS - 5);
+        let over = format!("{header}{}\n", row.trim_end().to_string() + ",1");
+        let e = error_of(Cursor::new(over), "cap.csv");
+        assert_eq!((e.kind, e.line), (ErrorKind::TooManyCells, 2), "padding {pad:?}");
+    }
+}
+
 /// The command reading `/dev/zero` as a recording, its address space limited to 100 MiB:
 /// one line naming the file and line 1, in under a second.
 #[test]

@@ -11,6 +11,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+#[allow(dead_code)] // the CLI helpers other test files use
+mod common;
+use common::csv_text::Csv;
+
 fn load(dir: &Path, name: &str, text: &str) -> Simulation {
     let p = dir.join(name);
     std::fs::write(&p, text).unwrap();
@@ -561,12 +565,8 @@ fn an_output_dropped_before_commit_leaves_nothing() {
 #[test]
 fn al15_preset_is_the_data_file() {
     // data/al15-coefficients.csv (Table V1) against the preset's T(1) constants and V(2).
-    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/al15-coefficients.csv"))
-        .unwrap();
-    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
-    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let vals: Vec<f64> = lines.next().unwrap().split(',').map(|v| v.parse().unwrap()).collect();
-    let get = |name: &str| vals[head.iter().position(|h| *h == name).unwrap()];
+    let table = Csv::read(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/al15-coefficients.csv"));
+    let get = |name: &str| table.num(&table.rows[0], name);
     let (a0, k1) = (get("a0_mg") * 1e-3, get("K1_V_per_g"));
     let (m1, m2) = (get("m1_mg_per_g") * 1e-3, get("m2_mg_per_g") * 1e-3);
     let c = scenario::al15_constants();

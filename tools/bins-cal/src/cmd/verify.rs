@@ -17,10 +17,12 @@ use bins_cal::calib::dynamics;
 use bins_cal::calib::segments::{self, Segment};
 use bins_cal::diagnose::plot::drawing_error;
 use bins_cal::fsio;
-use bins_cal::recording::read_all;
+use bins_cal::recording::{Table, read_all};
 use bins_comp::dynamics::Effective;
 use bins_comp::{Calibration, CalibrationParams, Form, Method, Status};
 use std::fmt::Write as _;
+use std::fs::File;
+use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `bins-cal verify`.
@@ -88,6 +90,23 @@ pub type Panel = (String, &'static str, Vec<(String, f64, Vec<f64>)>);
 /// the tool calibrates; a larger value is a corrupted file, not a reading.
 pub const MAX_REPLAYED_G: f64 = 1.0e4;
 
+/// The columns of a replayed output, as `bins-cal replay` writes them.
+const REPLAYED_COLUMNS: [&str; 5] = ["t_s", "ax_g", "ay_g", "az_g", "status"];
+
+/// The positions of [`REPLAYED_COLUMNS`] in the header of `t`, read from `path`.
+fn replayed_columns(path: &Path, t: &Table) -> anyhow::Result<[usize; 5]> {
+    let found = REPLAYED_COLUMNS.map(|name| t.header.iter().position(|h| h == name));
+    match found {
+        [Some(a), Some(b), Some(c), Some(d), Some(e)] => Ok([a, b, c, d, e]),
+        _ => bail!(
+            "{}: line 1: expected the header `{}` of a replay output, got `{}`",
+            path.display(),
+            REPLAYED_COLUMNS.join(","),
+            t.header.join(",")
+        ),
+    }
+}
+
 /// A replayed output CSV: rows `(t_s, accel \[g\], status bits)` in file order.
 pub struct Replayed {
     path: PathBuf,
@@ -95,37 +114,34 @@ pub struct Replayed {
 }
 
 impl Replayed {
-    /// Reads `t_s,ax_g,ay_g,az_g,status`; errors name the file and the line.
+    /// Reads `t_s,ax_g,ay_g,az_g,status` (columns found by name, through
+    /// [`recording::Table`]); errors name the file and the line.
     pub fn read(path: &Path) -> anyhow::Result<Replayed> {
-        let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
-        let mut lines = text.lines();
-        let header = lines.next().unwrap_or_default();
-        if header.trim_end() != "t_s,ax_g,ay_g,az_g,status" {
-            bail!(
-                "{}: line 1: expected the header `t_s,ax_g,ay_g,az_g,status` of a replay output, got `{}`",
-                path.display(),
-                header
-            );
-        }
+        let src = BufReader::new(File::open(path).with_context(|| path.display().to_string())?);
+        let mut at = None;
         let mut rows = Vec::new();
-        for (k, line) in lines.enumerate() {
-            let bad = |what: &str| anyhow!("{}: line {}: {what}: `{line}`", path.display(), k + 2);
-            let c: Vec<&str> = line.trim_end().split(',').collect();
-            if c.len() != 5 {
-                return Err(bad("expected 5 fields"));
-            }
+        let table = Table::for_each_row(src, path, |t, line, cells| {
+            let [c_t, c_x, c_y, c_z, c_status] = match at {
+                Some(at) => at,
+                None => *at.insert(replayed_columns(path, t)?),
+            };
+            let bad = |what: &str| anyhow!("{}: line {line}: {what}: `{}`", path.display(), cells.join(","));
             let num = |i: usize| {
-                let x = c[i].parse::<f64>().map_err(|_| bad("not a number"))?;
+                let x = cells[i].parse::<f64>().map_err(|_| bad("not a number"))?;
                 if !x.is_finite() {
-                    return Err(bad(&format!("`{}` is not a finite number", c[i])));
+                    return Err(bad(&format!("`{}` is not a finite number", cells[i])));
                 }
-                if i > 0 && x.abs() > MAX_REPLAYED_G {
+                if i != c_t && x.abs() > MAX_REPLAYED_G {
                     return Err(bad(&format!("{x} g is beyond ±{MAX_REPLAYED_G} g: not a replayed acceleration")));
                 }
                 Ok(x)
             };
-            let status = c[4].parse::<u32>().map_err(|_| bad("status is not an unsigned integer"))?;
-            rows.push((num(0)?, [num(1)?, num(2)?, num(3)?], status));
+            let status = cells[c_status].parse::<u32>().map_err(|_| bad("status is not an unsigned integer"))?;
+            rows.push((num(c_t)?, [num(c_x)?, num(c_y)?, num(c_z)?], status));
+            anyhow::Ok(())
+        })?;
+        if at.is_none() {
+            replayed_columns(path, &table)?;
         }
         Ok(Replayed { path: path.to_path_buf(), rows })
     }

@@ -1,4 +1,7 @@
-//! Helpers shared by the CLI tests that run the real `bins-cal` binary.
+//! Helpers shared by the CLI tests that run the real `bins-cal` binary, and the one way the
+//! tests read and rewrite CSV files ([`csv_text`]).
+
+pub mod csv_text;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -33,13 +36,7 @@ pub fn err(args: &[&str]) -> String {
 
 /// The text of a recording without its column `name` (comment lines kept as they are).
 pub fn without_column(csv: &str, name: &str) -> String {
-    let header = csv.lines().find(|l| l.starts_with("t_s")).expect("a header line");
-    let k = header.split(',').position(|c| c == name).expect("the column exists");
-    let strip = |l: &str| {
-        if l.starts_with('#') {
-            return l.to_string();
-        }
-        l.split(',').enumerate().filter(|(i, _)| *i != k).map(|(_, c)| c).collect::<Vec<_>>().join(",")
-    };
-    csv.lines().map(strip).collect::<Vec<_>>().join("\n") + "\n"
+    let mut c = csv_text::Csv::parse(csv);
+    c.remove_column(name);
+    c.to_text()
 }
