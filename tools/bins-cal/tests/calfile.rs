@@ -192,7 +192,9 @@ fn arb_model(lo: f64, hi: f64) -> impl Strategy<Value = TempModel<f64>> {
             let mut at_knot = [CoefDelta::zero(); MAX_KNOTS];
             let step = (hi - lo) / (n - 1) as f64;
             for i in 0..n {
-                knots_c[i] = lo + step * (i as f64 + jit[i]);
+                // Jittered about the even grid but inside what a blob holds ([-100, 200] °C):
+                // the first knot of a wide range jittered outward once fell at -102 °C.
+                knots_c[i] = (lo + step * (i as f64 + jit[i])).clamp(-100.0, 200.0);
                 at_knot[i] = sets[i];
             }
             TempModel::Pwl { n_knots: n as u8, knots_c, at_knot }
