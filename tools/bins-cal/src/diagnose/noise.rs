@@ -33,6 +33,19 @@ pub fn flush(x: f64) -> f64 {
     if x.abs() < TINY { 0.0 } else { x }
 }
 
+/// [`flush`] for the filter's level, which each row's update depends on: a branch the
+/// processor predicts (the zero is on a cold path), so the test is not in the chain of
+/// dependent operations from one row to the next as a branch-free select would be.
+#[inline]
+fn flush_level(x: f64) -> f64 {
+    #[cold]
+    #[inline(never)]
+    fn zero() -> f64 {
+        0.0
+    }
+    if x.abs() < TINY { zero() } else { x }
+}
+
 /// Gains of the local-level filter for one noise setting and one mask; the same for every
 /// column, so computed once.
 #[derive(Clone, Debug)]
@@ -98,7 +111,7 @@ impl Filter {
                 Step::Update => {
                     let v = x[i] - mu;
                     out[i] = flush(v * self.inv_sqrt_f[i]);
-                    mu = flush(mu + self.gain[i] * v);
+                    mu = flush_level(mu + self.gain[i] * v);
                 }
             }
         }
@@ -138,7 +151,7 @@ impl Filter {
                         for c in c0..c1 {
                             let v = xs[c][i] - level[c];
                             out[c * stride + o] = flush(v * s);
-                            level[c] = flush(level[c] + g * v);
+                            level[c] = flush_level(level[c] + g * v);
                         }
                     }
                 }
@@ -248,7 +261,7 @@ fn whitened_gram(t: &[f64], r: &[f64], q: f64, y: &[f64], xs: &[&[f64]]) -> (Vec
             for (c, x) in cols.iter().enumerate() {
                 let v = x[c0 + k] - mu[c];
                 w[c * GRAM_BLOCK + k] = flush(v * s);
-                mu[c] = flush(mu[c] + g * v);
+                mu[c] = flush_level(mu[c] + g * v);
             }
         }
         for a in 0..m {
