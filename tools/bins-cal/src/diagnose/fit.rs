@@ -455,9 +455,8 @@ fn gls(f: &Filter, y: &[f64], cols: &[&[f64]]) -> Option<Gls> {
     let xs: Vec<&[f64]> = cols.iter().copied().chain(std::iter::once(y)).collect();
     let mut flat = vec![0.0; xs.len() * n];
     f.whiten_rows(&xs, 0..n, &mut vec![0.0; xs.len()], &mut flat, n);
-    let mut wx: Vec<Vec<f64>> = flat.chunks_exact(n).map(<[f64]>::to_vec).collect();
-    drop(flat);
-    let wy = wx.pop().unwrap_or_default();
+    let (wx, wy) = flat.split_at(cols.len() * n);
+    let wx: Vec<&[f64]> = wx.chunks_exact(n).collect();
     let m = wx.len();
     let norms: Vec<f64> = wx.iter().map(|c| dot(c, c).sqrt()).collect();
     if norms.iter().any(|v| !(*v > 0.0)) {
@@ -466,17 +465,17 @@ fn gls(f: &Filter, y: &[f64], cols: &[&[f64]]) -> Option<Gls> {
     let mut a = vec![0.0; m * m];
     let mut b = vec![0.0; m];
     for u in 0..m {
-        b[u] = dot(&wx[u], &wy) / norms[u];
+        b[u] = dot(wx[u], wy) / norms[u];
         for v in 0..m {
-            a[u * m + v] = dot(&wx[u], &wx[v]) / (norms[u] * norms[v]);
+            a[u * m + v] = dot(wx[u], wx[v]) / (norms[u] * norms[v]);
         }
     }
     let (x, d) = if m > 0 { chol_solve(&a, &b, m, 1e-10)? } else { (Vec::new(), Vec::new()) };
     let beta: Vec<f64> = x.iter().zip(&norms).map(|(x, n)| x / n).collect();
     let se: Vec<f64> = d.iter().zip(&norms).map(|(d, n)| d.sqrt() / n).collect();
-    let mut res = wy;
+    let mut res = wy.to_vec();
     for (c, bt) in wx.iter().zip(&beta) {
-        for (r, v) in res.iter_mut().zip(c) {
+        for (r, v) in res.iter_mut().zip(c.iter()) {
             *r -= bt * v;
         }
     }
