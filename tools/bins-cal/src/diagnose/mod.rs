@@ -273,7 +273,7 @@ fn read_pair(sim: Source, real: &Path, sim_name: &Path, progress: bool) -> Resul
     let total = real_size + sim_reader.as_ref().map_or(0, |r| r.1);
     let bar = if progress { indicatif::ProgressBar::new(total) } else { indicatif::ProgressBar::hidden() };
     bar.set_style(
-        indicatif::ProgressStyle::with_template("reading {bar:40} {bytes}/{total_bytes}, {elapsed} (eta {eta})")
+        indicatif::ProgressStyle::with_template("reading {bar:30} {bytes}/{total_bytes}, {elapsed} (eta {eta})")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     let mut b = prep::Builder::new(sim_name, real);
