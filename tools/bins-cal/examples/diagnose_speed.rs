@@ -3,10 +3,15 @@
 //! The diagnosis runs on one thread; the budget is checked on that thread's CPU time, so other
 //! work on the machine does not count against it (the wall time is printed beside it). The pairs are the proof suite's cases (`warmup`: all four θ-mechanisms searched on
 //! three axes; `lag_plus_asymmetry`: the thermal and V(2) terms, vibration on) lengthened;
-//! generating them is not timed. Exits non-zero when a budget is missed.
+//! generating them is not timed. Beside each time: the process's peak resident memory so far
+//! (`getrusage` `ru_maxrss`: the generated pair in memory, its diagnosis and every earlier
+//! case). Exits non-zero when a budget is missed.
 //!
 //! `cargo run --release -p bins-cal --example diagnose_speed`
-#![allow(unsafe_code, reason = "libc: the thread's CPU time (`clock_gettime`), which std does not give")]
+#![allow(
+    unsafe_code,
+    reason = "libc: the thread's CPU time (`clock_gettime`) and the peak memory (`getrusage`), which std does not give"
+)]
 
 use bins_cal::diagnose::{cases, diagnose};
 use std::path::Path;
@@ -40,14 +45,28 @@ fn main() {
             missed |= !ok;
             let named: Vec<&str> = d.report.effects.iter().map(|e| e.id.as_str()).collect();
             println!(
-                "diagnosis of {rows:>7} rows ({name:<18}): {secs:6.2} s CPU, {wall_s:6.2} s wall (budget {budget_s} s: {}); named {named:?}",
-                if ok { "met" } else { "MISSED" }
+                "diagnosis of {rows:>7} rows ({name:<18}): {secs:6.2} s CPU, {wall_s:6.2} s wall (budget {budget_s} s: {}); peak RSS {:.0} MB; named {named:?}",
+                if ok { "met" } else { "MISSED" },
+                peak_rss_mb()
             );
         }
     }
     if missed {
         std::process::exit(1);
     }
+}
+
+/// Peak resident set size of the process so far [MB] (`ru_maxrss`, in KiB on Linux).
+fn peak_rss_mb() -> f64 {
+    // SAFETY: an all-zero `rusage` is a valid value of the plain C struct.
+    let mut ru: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: `ru` is a valid, writable rusage; RUSAGE_SELF needs nothing else.
+    let rc = unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut ru) };
+    if rc != 0 {
+        eprintln!("getrusage(RUSAGE_SELF) failed");
+        std::process::exit(2);
+    }
+    ru.ru_maxrss as f64 * 1024.0 / 1e6
 }
 
 /// CPU time of the calling thread [s].

@@ -43,7 +43,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         [args.sim.as_ref(), args.calib.as_ref(), Some(&args.real)].into_iter().flatten().collect();
     fsio::refuse_overwriting_inputs(inputs.iter(), [Some(&args.report), args.model.as_ref()].into_iter().flatten())?;
     let t0 = std::time::Instant::now();
-    let opt = Options { random_walk_mg_per_sqrt_h: args.random_walk };
+    let opt = Options { random_walk_mg_per_sqrt_h: args.random_walk, progress: true };
     let d = match (&args.sim, &args.calib) {
         (Some(sim), _) => diagnose_files(sim, &args.real, &opt),
         (None, Some(calib)) => diagnose_against_calibration(&args.real, calib, &opt),

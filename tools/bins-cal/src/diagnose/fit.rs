@@ -23,7 +23,7 @@
 
 use super::mech::{Context, Mech};
 use super::noise::{Filter, Step, q_upper, smooth_level};
-use super::stats::{chi2_sf, chol_solve, dot, gram_blocked};
+use super::stats::{chi2_sf, chol_solve, dot};
 
 /// Family-wise false-discovery level of the whole diagnosis.
 pub const ALPHA: f64 = 1e-3;
@@ -107,39 +107,99 @@ struct Grams {
     n_all: usize,
 }
 
-fn ranges_of(fold: &[usize], k: usize) -> Vec<(usize, usize)> {
-    let mut out = Vec::new();
-    let mut i = 0;
-    while i < fold.len() {
-        if fold[i] == k {
-            let s = i;
-            while i < fold.len() && fold[i] == k {
-                i += 1;
-            }
-            out.push((s, i));
-        } else {
-            i += 1;
+/// The pairs of columns (the bank's, then `y` at `p − 1`) whose Gram entries [`Grams::sse`]
+/// reads for a model of the nuisance and at most one candidate: the nuisance and `y` against
+/// every column, and each candidate's columns against each other; `a ≤ b`, sorted.
+fn candidate_pairs(bank: &Bank, p: usize) -> Vec<(usize, usize)> {
+    let y = p - 1;
+    let mut pairs: Vec<(usize, usize)> = Vec::new();
+    for a in bank.forced.iter().copied().chain(std::iter::once(y)) {
+        pairs.extend((0..p).map(|b| (a.min(b), a.max(b))));
+    }
+    for c in &bank.cands {
+        for (u, &a) in c.cols.iter().enumerate() {
+            pairs.extend(c.cols[u..].iter().map(|&b| (a.min(b), a.max(b))));
         }
+    }
+    pairs.sort_unstable();
+    pairs.dedup();
+    pairs
+}
+
+/// Row blocks of the Gram sums: at most [`GRAM_BLOCK`](super::stats::GRAM_BLOCK) rows, each in
+/// one fold (`fold` given) — runs of one fold cut from their first row on, as
+/// [`gram_blocked`](super::stats::gram_blocked) cuts the ranges it is given, so every sum is made in the same order.
+fn gram_chunks(n: usize, fold: Option<&[usize]>) -> Vec<(usize, usize, usize)> {
+    let mut out = Vec::new();
+    let mut s = 0;
+    while s < n {
+        let k = fold.map_or(0, |f| f[s]);
+        let mut e = s + 1;
+        while e < n && fold.is_none_or(|f| f[e] == k) {
+            e += 1;
+        }
+        let mut c0 = s;
+        while c0 < e {
+            let c1 = (c0 + super::stats::GRAM_BLOCK).min(e);
+            out.push((c0, c1, k));
+            c0 = c1;
+        }
+        s = e;
     }
     out
 }
 
 impl Grams {
-    /// The Gram matrices at random-walk intensity `q`; with `folds` false only the one of all
-    /// rows (enough for [`Grams::sse`], a sixth of the work).
+    /// The Gram matrices at random-walk intensity `q`; with `folds` false only the entries of
+    /// all rows that [`Grams::sse`] needs for the nuisance plus one candidate
+    /// ([`candidate_pairs`]: about `p` products a row instead of `p²/2`; the others are NaN, and
+    /// a model reading them finds no fit). The columns are whitened block by block of rows
+    /// beside the products ([`Filter::whiten_rows`]), so no whitened column is stored whole:
+    /// the sums are those of whitening first and multiplying after ([`gram_blocked`](super::stats::gram_blocked)), in the
+    /// same order.
     fn new(t: &[f64], r: &[f64], q: f64, y: &[f64], bank: &Bank, fold: &[usize], folds: bool) -> Self {
+        use super::stats::GRAM_BLOCK;
         let p = bank.cols.len() + 1;
         let n = y.len();
-        let mut w: Vec<Vec<f64>> = vec![vec![0.0; n]; p];
         let f0 = Filter::new(t, r, q, |_| true);
-        for (c, out) in bank.cols.iter().zip(w.iter_mut()) {
-            f0.whiten(c, out);
+        let xs: Vec<&[f64]> = bank.cols.iter().map(Vec::as_slice).chain(std::iter::once(y)).collect();
+        let mut level = vec![0.0; p];
+        let mut w = vec![0.0; p * GRAM_BLOCK];
+        let pairs = if folds { Vec::new() } else { candidate_pairs(bank, p) };
+        let mut sums = vec![0.0; pairs.len()];
+        let mut test: Vec<Vec<f64>> = if folds { vec![vec![0.0; p * p]; FOLDS] } else { Vec::new() };
+        for (c0, c1, k) in gram_chunks(n, folds.then_some(fold)) {
+            let len = c1 - c0;
+            f0.whiten_rows(&xs, c0..c1, &mut level, &mut w, GRAM_BLOCK);
+            let col = |a: usize| &w[a * GRAM_BLOCK..a * GRAM_BLOCK + len];
+            if folds {
+                let g = &mut test[k];
+                for a in 0..p {
+                    for b in a..p {
+                        g[a * p + b] += dot(col(a), col(b));
+                    }
+                }
+            } else {
+                for (s, &(a, b)) in sums.iter_mut().zip(&pairs) {
+                    *s += dot(col(a), col(b));
+                }
+            }
         }
-        f0.whiten(y, &mut w[p - 1]);
         if !folds {
-            return Grams { p, all: gram_blocked(&w, None), test: Vec::new(), train: Vec::new(), n_all: f0.n_used };
+            let mut all = vec![f64::NAN; p * p];
+            for (&(a, b), s) in pairs.iter().zip(sums) {
+                all[a * p + b] = s;
+                all[b * p + a] = s;
+            }
+            return Grams { p, all, test, train: Vec::new(), n_all: f0.n_used };
         }
-        let test: Vec<Vec<f64>> = (0..FOLDS).map(|k| gram_blocked(&w, Some(&ranges_of(fold, k)))).collect();
+        for g in test.iter_mut() {
+            for a in 0..p {
+                for b in 0..a {
+                    g[a * p + b] = g[b * p + a];
+                }
+            }
+        }
         let mut all = vec![0.0; p * p];
         for g in &test {
             for (a, b) in all.iter_mut().zip(g) {
@@ -401,8 +461,16 @@ pub(crate) fn inflation(w: &[f64], used: &[bool]) -> f64 {
 type Gls = (Vec<f64>, Vec<f64>, f64, Vec<f64>);
 
 fn gls(f: &Filter, y: &[f64], cols: &[&[f64]]) -> Option<Gls> {
-    let wy = f.whitened(y);
-    let wx: Vec<Vec<f64>> = cols.iter().map(|c| f.whitened(c)).collect();
+    // All columns whitened in one interleaved pass (the values of whitening each alone).
+    let n = cols.iter().map(|c| c.len()).fold(y.len(), usize::min).min(f.step.len());
+    if n == 0 {
+        return None;
+    }
+    let xs: Vec<&[f64]> = cols.iter().copied().chain(std::iter::once(y)).collect();
+    let mut flat = vec![0.0; xs.len() * n];
+    f.whiten_rows(&xs, 0..n, &mut vec![0.0; xs.len()], &mut flat, n);
+    let (wx, wy) = flat.split_at(cols.len() * n);
+    let wx: Vec<&[f64]> = wx.chunks_exact(n).collect();
     let m = wx.len();
     let norms: Vec<f64> = wx.iter().map(|c| dot(c, c).sqrt()).collect();
     if norms.iter().any(|v| !(*v > 0.0)) {
@@ -411,17 +479,17 @@ fn gls(f: &Filter, y: &[f64], cols: &[&[f64]]) -> Option<Gls> {
     let mut a = vec![0.0; m * m];
     let mut b = vec![0.0; m];
     for u in 0..m {
-        b[u] = dot(&wx[u], &wy) / norms[u];
+        b[u] = dot(wx[u], wy) / norms[u];
         for v in 0..m {
-            a[u * m + v] = dot(&wx[u], &wx[v]) / (norms[u] * norms[v]);
+            a[u * m + v] = dot(wx[u], wx[v]) / (norms[u] * norms[v]);
         }
     }
     let (x, d) = if m > 0 { chol_solve(&a, &b, m, 1e-10)? } else { (Vec::new(), Vec::new()) };
     let beta: Vec<f64> = x.iter().zip(&norms).map(|(x, n)| x / n).collect();
     let se: Vec<f64> = d.iter().zip(&norms).map(|(d, n)| d.sqrt() / n).collect();
-    let mut res = wy;
+    let mut res = wy.to_vec();
     for (c, bt) in wx.iter().zip(&beta) {
-        for (r, v) in res.iter_mut().zip(c) {
+        for (r, v) in res.iter_mut().zip(c.iter()) {
             *r -= bt * v;
         }
     }

@@ -16,15 +16,21 @@ use bins_comp::CalibrationParams;
 pub fn predict(real: &[Row], params: &CalibrationParams) -> Vec<Row> {
     real.iter()
         .map(|r| {
-            let mut s = r.clone();
-            if let Some(f) = r.reference_f_g()
-                && r.temp_c.is_finite()
-            {
-                s.u_v = params.constants_at(r.temp_c).signals_v(&f);
-            }
+            let mut s = Row::default();
+            predict_into(r, params, &mut s);
             s
         })
         .collect()
+}
+
+/// The prediction of one row of REAL ([`predict`]) into `out`, reusing its storage.
+pub fn predict_into(real: &Row, params: &CalibrationParams, out: &mut Row) {
+    out.clone_from(real);
+    if let Some(f) = real.reference_f_g()
+        && real.temp_c.is_finite()
+    {
+        out.u_v = params.constants_at(real.temp_c).signals_v(&f);
+    }
 }
 
 #[cfg(test)]

@@ -28,9 +28,13 @@ pub mod report;
 pub mod stats;
 pub mod steps;
 
-use crate::recording::{Row, read_all};
+use crate::recording::{self, Reader, Row};
+use std::cell::Cell;
 use std::fmt;
+use std::fs::File;
+use std::io::{BufReader, Read};
 use std::path::Path;
+use std::rc::Rc;
 
 /// An input the diagnosis cannot use: one line naming the file (and line, column).
 #[derive(Clone, Debug, PartialEq)]
@@ -62,6 +66,8 @@ pub struct Options {
     /// The sensor's random walk [mg/√h] to test mechanisms against (a specification);
     /// `None`: estimated from the data with the richest model in ([`fit::fit_axis`]).
     pub random_walk_mg_per_sqrt_h: Option<f64>,
+    /// A progress bar on stderr while the recordings are read (drawn on a terminal only).
+    pub progress: bool,
 }
 
 impl Options {
@@ -85,12 +91,27 @@ pub fn diagnose_with(
     real_name: &Path,
     opt: &Options,
 ) -> Result<Diagnosis, DiagnoseError> {
+    check_options(opt)?;
+    let p = prep::prepare(sim, real, sim_name, real_name)?;
+    diagnose_prepared(p, sim_name, real_name, opt)
+}
+
+fn check_options(opt: &Options) -> Result<(), DiagnoseError> {
     if let Some(rw) = opt.random_walk_mg_per_sqrt_h
         && !(rw.is_finite() && rw >= 0.0)
     {
         return Err(DiagnoseError(format!("--random-walk {rw}: must be a finite value ≥ 0 mg/√h")));
     }
-    let mut p = prep::prepare(sim, real, sim_name, real_name)?;
+    Ok(())
+}
+
+/// The diagnosis of a prepared pair (steps 2–6 of the module docs).
+fn diagnose_prepared(
+    mut p: prep::Prepared,
+    sim_name: &Path,
+    real_name: &Path,
+    opt: &Options,
+) -> Result<Diagnosis, DiagnoseError> {
     let floor = report::noise_floor(&p);
     // A given random walk is a floor the data may raise, never a licence to take drift for a
     // mechanism: below what the residual itself shows at averaging times up to a minute
@@ -178,19 +199,136 @@ fn fit_with_steps(ctx: &mut mech::Context, q: Option<f64>) -> (fit::AxisFit, Vec
 }
 
 /// Reads REAL and diagnoses it against what the calibration `calib` predicts for it
-/// ([`follow::predict`]); the calibration is checked as the firmware checks it.
+/// ([`follow::predict`]), row by row as REAL is read; the calibration is checked as the
+/// firmware checks it.
 pub fn diagnose_against_calibration(real: &Path, calib: &Path, opt: &Options) -> Result<Diagnosis, DiagnoseError> {
+    check_options(opt)?;
     let (file, _) = crate::calfile::CalibrationFile::read_checked(calib).map_err(|e| DiagnoseError(e.to_string()))?;
     let (params, _) = file.to_params().map_err(|e| DiagnoseError(format!("{}: {e}", calib.display())))?;
-    let (_, r) = read_all(real).map_err(|e| DiagnoseError(e.to_string()))?;
-    let s = follow::predict(&r, &params);
     let sim_name = format!("{} (predicted by {})", real.display(), calib.display());
-    diagnose_with(&s, &r, Path::new(&sim_name), real, opt)
+    let p = read_pair(Source::Predicted(&params), real, Path::new(&sim_name), opt.progress)?;
+    diagnose_prepared(p, Path::new(&sim_name), real, opt)
 }
 
-/// Reads both recordings (errors name file, line and column) and diagnoses them.
+/// Reads both recordings in lockstep, row by row (errors name file, line and column), and
+/// diagnoses them. Neither recording is held whole: each pair of rows is checked and reduced
+/// to what [`prep::Prepared`] keeps as it is read ([`prep::Builder`]).
 pub fn diagnose_files(sim: &Path, real: &Path, opt: &Options) -> Result<Diagnosis, DiagnoseError> {
-    let (_, s) = read_all(sim).map_err(|e| DiagnoseError(e.to_string()))?;
-    let (_, r) = read_all(real).map_err(|e| DiagnoseError(e.to_string()))?;
-    diagnose_with(&s, &r, sim, real, opt)
+    check_options(opt)?;
+    let p = read_pair(Source::File(sim), real, sim, opt.progress)?;
+    diagnose_prepared(p, sim, real, opt)
+}
+
+/// The prepared pair of two recordings read in lockstep ([`diagnose_files`] without the
+/// diagnosis).
+pub fn prepare_files(sim: &Path, real: &Path, progress: bool) -> Result<prep::Prepared, DiagnoseError> {
+    read_pair(Source::File(sim), real, sim, progress)
+}
+
+/// Where SIM's rows come from.
+enum Source<'a> {
+    /// A recording.
+    File(&'a Path),
+    /// What a calibration predicts for each row of REAL.
+    Predicted(&'a bins_comp::CalibrationParams),
+}
+
+/// A reader that counts the bytes read through it (the progress bar's position).
+struct Counted<R> {
+    inner: R,
+    bytes: Rc<Cell<u64>>,
+}
+
+impl<R: Read> Read for Counted<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.bytes.set(self.bytes.get() + n as u64);
+        Ok(n)
+    }
+}
+
+type CountedReader = Reader<BufReader<Counted<File>>>;
+
+/// Opens `path` as a recording whose bytes read are added to `bytes`; also returns its size.
+fn open_counted(path: &Path, bytes: &Rc<Cell<u64>>) -> Result<(CountedReader, u64), DiagnoseError> {
+    let err = |e: std::io::Error| DiagnoseError(recording::io_error(path, e).to_string());
+    let f = File::open(path).map_err(err)?;
+    let size = f.metadata().map(|m| m.len()).unwrap_or(0);
+    let src = BufReader::with_capacity(1 << 16, Counted { inner: f, bytes: Rc::clone(bytes) });
+    let r = Reader::new(src, path).map_err(|e| DiagnoseError(e.to_string()))?;
+    Ok((r, size))
+}
+
+/// SIM (from `sim`) and REAL read in lockstep into a [`prep::Builder`]: one row of each in
+/// memory at a time. A pair whose row counts differ is refused with both counts (the rest of
+/// the longer file is counted, not kept).
+fn read_pair(sim: Source, real: &Path, sim_name: &Path, progress: bool) -> Result<prep::Prepared, DiagnoseError> {
+    let rec = |e: recording::Error| DiagnoseError(e.to_string());
+    let bytes = Rc::new(Cell::new(0u64));
+    let mut sim_reader = match sim {
+        Source::File(path) => Some(open_counted(path, &bytes)?),
+        Source::Predicted(_) => None,
+    };
+    let (mut real_reader, real_size) = open_counted(real, &bytes)?;
+    let total = real_size + sim_reader.as_ref().map_or(0, |r| r.1);
+    let bar = if progress { indicatif::ProgressBar::new(total) } else { indicatif::ProgressBar::hidden() };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("reading {bar:30} {bytes}/{total_bytes}, {elapsed} (eta {eta})")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let mut b = prep::Builder::new(sim_name, real);
+    let (mut s, mut r) = (Row::default(), Row::default());
+    let (mut n_sim, mut n_real) = (0u64, 0u64);
+    loop {
+        let more_real = real_reader.read_row(&mut r).map_err(rec)?;
+        let more_sim = match (&mut sim_reader, &sim) {
+            (Some((reader, _)), _) => reader.read_row(&mut s).map_err(rec)?,
+            (None, Source::Predicted(params)) => {
+                if more_real {
+                    follow::predict_into(&r, params, &mut s);
+                }
+                more_real
+            }
+            (None, Source::File(_)) => false,
+        };
+        n_sim += u64::from(more_sim);
+        n_real += u64::from(more_real);
+        match (more_sim, more_real) {
+            (true, true) => b.push(&s, &r)?,
+            (false, false) => break,
+            _ => {
+                // Count what is left of the longer file.
+                while more_real && real_reader.read_row(&mut r).map_err(rec)? {
+                    n_real += 1;
+                }
+                if let Some((reader, _)) = &mut sim_reader {
+                    while more_sim && reader.read_row(&mut s).map_err(rec)? {
+                        n_sim += 1;
+                    }
+                }
+                bar.finish_and_clear();
+                return Err(count_mismatch(sim_name, real, n_sim, n_real));
+            }
+        }
+        if n_real.is_multiple_of(65536) {
+            bar.set_position(bytes.get());
+        }
+    }
+    bar.finish_and_clear();
+    if n_real == 0 {
+        return Err(count_mismatch(sim_name, real, n_sim, n_real));
+    }
+    b.finish()
+}
+
+/// The error of a pair whose row counts differ (or are 0), as [`prep::prepare`] words it.
+fn count_mismatch(sim_name: &Path, real: &Path, n_sim: u64, n_real: u64) -> DiagnoseError {
+    let (sn, rn) = (sim_name.display(), real.display());
+    if n_real == 0 || n_sim == 0 {
+        let which = if n_real == 0 { &rn } else { &sn };
+        return DiagnoseError(format!("{which}: no data rows"));
+    }
+    DiagnoseError(format!(
+        "{rn}: {n_real} data rows but {sn} has {n_sim}: SIM and REAL must be the same test, row for row"
+    ))
 }

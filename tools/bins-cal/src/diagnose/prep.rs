@@ -94,7 +94,8 @@ fn opt_same(a: Option<f64>, b: Option<f64>) -> bool {
     }
 }
 
-/// Aligns the pair and computes the residual. Errors name REAL's file and line.
+/// Aligns a pair held in memory and computes the residual ([`Builder`]). Errors name REAL's
+/// file and line.
 pub fn prepare(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> Result<Prepared, DiagnoseError> {
     let (sn, rn) = (sim_name.display(), real_name.display());
     if real.is_empty() || sim.is_empty() {
@@ -108,21 +109,102 @@ pub fn prepare(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> 
             sim.len()
         )));
     }
-    let any_vib = real.iter().any(|r| r.vib_kind.is_some());
-    let mut notes = Vec::new();
-    if !any_vib {
-        notes.push("no vib_kind in the recordings: every row taken as without vibration".to_string());
-    }
-    let cols = ["fx_g", "fy_g", "fz_g"];
-    let vcols = ["vib_x_g", "vib_y_g", "vib_z_g"];
-    let mut used = Vec::new();
+    let mut b = Builder::new(sim_name, real_name);
     for (s, r) in sim.iter().zip(real) {
+        b.push(s, r)?;
+    }
+    b.finish()
+}
+
+/// Builds [`Prepared`] from the pair's rows given one pair at a time (both files read in
+/// lockstep: [`super::diagnose_files`]), so neither recording is ever held whole. Each pair is
+/// checked as it comes (same time, reference and vibration cells, position); of a usable row
+/// only what [`Prepared`] keeps is stored, with SIM's and REAL's signals as the residual and
+/// SIM's departure are made of them. The scale factors, segments, smoothed temperature, rate
+/// and white-noise levels need every row and are computed by [`Builder::finish`].
+pub struct Builder {
+    sim_name: String,
+    real_name: String,
+    n_total: usize,
+    any_vib: bool,
+    line: Vec<u64>,
+    t: Vec<f64>,
+    temp: Vec<f64>,
+    f: Vec<[f64; 3]>,
+    vib: Vec<Vibration<f64>>,
+    vib_class: Vec<usize>,
+    vib_names: Vec<String>,
+    pos: Vec<Option<usize>>,
+    pos_names: Vec<String>,
+    power: Vec<f64>,
+    power_all: bool,
+    power_any: bool,
+    /// REAL − SIM signals [V] (the residual once divided by the scale factors).
+    du: [Vec<f64>; 3],
+    /// SIM's signals [V] (SIM's departure from its linear fit once that is known).
+    sim_u: [Vec<f64>; 3],
+    /// REAL's first signals, and whether each has changed since.
+    first_u: [f64; 3],
+    u_varies: [bool; 3],
+    temp_finite: bool,
+    temp_same: bool,
+}
+
+impl Builder {
+    /// An empty builder; `sim_name` and `real_name` name the files in errors.
+    pub fn new(sim_name: &Path, real_name: &Path) -> Self {
+        Builder {
+            sim_name: sim_name.display().to_string(),
+            real_name: real_name.display().to_string(),
+            n_total: 0,
+            any_vib: false,
+            line: Vec::new(),
+            t: Vec::new(),
+            temp: Vec::new(),
+            f: Vec::new(),
+            vib: Vec::new(),
+            vib_class: Vec::new(),
+            vib_names: Vec::new(),
+            pos: Vec::new(),
+            pos_names: Vec::new(),
+            power: Vec::new(),
+            power_all: true,
+            power_any: false,
+            du: Default::default(),
+            sim_u: Default::default(),
+            first_u: [0.0; 3],
+            u_varies: [false; 3],
+            temp_finite: true,
+            temp_same: true,
+        }
+    }
+
+    /// Data rows given so far.
+    pub fn rows(&self) -> usize {
+        self.n_total
+    }
+
+    /// Forgets every row kept so far (not the count of rows given).
+    fn clear_used(&mut self) {
+        let fresh = Builder::new(Path::new(""), Path::new(""));
+        let (sim_name, real_name) = (std::mem::take(&mut self.sim_name), std::mem::take(&mut self.real_name));
+        let (n_total, any_vib) = (self.n_total, self.any_vib);
+        *self = Builder { sim_name, real_name, n_total, any_vib, ..fresh };
+    }
+
+    /// Checks one pair (SIM's row `s`, REAL's row `r`) and keeps what the diagnosis needs of it
+    /// when its reference is known. Errors name REAL's file and line and SIM's line.
+    pub fn push(&mut self, s: &Row, r: &Row) -> Result<(), DiagnoseError> {
+        self.n_total += 1;
+        let (sn, rn) = (&self.sim_name, &self.real_name);
         let bad = |col: &str, what: String| {
             DiagnoseError(format!(
                 "{rn}:{}: column `{col}`: {what} (line {} of {sn}): rows do not match",
                 r.line, s.line
             ))
         };
+        let cols = ["fx_g", "fy_g", "fz_g"];
+        let vcols = ["vib_x_g", "vib_y_g", "vib_z_g"];
         if !same(s.t_s, r.t_s) {
             return Err(bad("t_s", format!("{} s here, {} s in SIM", r.t_s, s.t_s)));
         }
@@ -143,228 +225,272 @@ pub fn prepare(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> 
         if s.pos != r.pos {
             return Err(bad("pos", format!("{:?} here, {:?} in SIM", r.pos, s.pos)));
         }
-        let Some(f) = r.reference_f_g() else { continue };
-        let vib = if any_vib {
+        // Without `vib_kind` anywhere every row is taken as without vibration; with it, a row
+        // is used only when its vibration is known. Until the first row with `vib_kind` the
+        // former holds; at it, the rows kept (none of which had `vib_kind`) are dropped.
+        if r.vib_kind.is_some() && !self.any_vib {
+            self.any_vib = true;
+            self.clear_used();
+        }
+        let Some(f) = r.reference_f_g() else { return Ok(()) };
+        let vib = if self.any_vib {
             match r.vibration() {
                 Some(v) if v.is_valid() => v,
-                _ => continue,
+                _ => return Ok(()),
             }
         } else {
             Vibration::None
         };
-        used.push((s, r, f, vib));
-    }
-    if used.is_empty() {
-        return Err(DiagnoseError(format!(
-            "{rn}: no row has a known reference (fx_g, fy_g, fz_g{}): diagnosis needs what the rig applied",
-            if any_vib { " and the vibration cells" } else { "" }
-        )));
-    }
-    let n = used.len();
-    let skipped = real.len() - n;
-    if skipped > 0 {
-        notes.push(format!("{skipped} of {} rows skipped: reference not known", real.len()));
-    }
-    // Constant signals: a REAL channel that never changes is dead; a constant SIM channel is
-    // legitimate (one orientation, one temperature, no noise) and only costs the scale factor.
-    for (i, c) in ["ux_V", "uy_V", "uz_V"].iter().enumerate() {
-        let first = used[0].1.u_v[i];
-        if used.iter().all(|u| u.1.u_v[i] == first) {
-            return Err(DiagnoseError(format!(
-                "{rn}: column `{c}` is constant ({first} V) over the {n} rows with a known reference: no signal"
-            )));
+        if self.t.is_empty() {
+            self.first_u = r.u_v;
         }
-    }
-    if used.iter().all(|u| u.1.temp_c.is_finite()) && used.iter().all(|u| u.1.temp_c == used[0].1.temp_c) {
-        notes.push("temp_C is constant: no thermal mechanism can be tried".into());
-    }
-    let t: Vec<f64> = used.iter().map(|u| u.1.t_s).collect();
-    let temp: Vec<f64> = used.iter().map(|u| u.1.temp_c).collect();
-    let f: Vec<[f64; 3]> = used.iter().map(|u| u.2).collect();
-    let vib: Vec<Vibration<f64>> = used.iter().map(|u| u.3).collect();
-    let line: Vec<u64> = used.iter().map(|u| u.1.line).collect();
-    let diffs: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    let dt = if diffs.is_empty() { 1.0 } else { median(&diffs) };
-
-    // Vibration classes.
-    let mut vib_names: Vec<String> = Vec::new();
-    let vib_class: Vec<usize> = used
-        .iter()
-        .map(|u| {
-            let name = match (u.1.vib_kind, &u.3) {
+        for i in 0..3 {
+            self.u_varies[i] |= r.u_v[i] != self.first_u[i];
+            self.du[i].push(r.u_v[i] - s.u_v[i]);
+            self.sim_u[i].push(s.u_v[i]);
+        }
+        self.temp_finite &= r.temp_c.is_finite();
+        self.temp_same &= self.temp.first().is_none_or(|&t0| r.temp_c == t0);
+        let vib_class = {
+            let name = match (r.vib_kind, &vib) {
                 (_, Vibration::None) | (None, _) | (Some(VibKind::None), _) => "none".to_string(),
                 (Some(k), v) => format!("{} {:.3} g", k.as_str(), v.level_g()),
             };
-            match vib_names.iter().position(|x| *x == name) {
+            match self.vib_names.iter().position(|x| *x == name) {
                 Some(p) => p,
                 None => {
-                    vib_names.push(name);
-                    vib_names.len() - 1
+                    self.vib_names.push(name);
+                    self.vib_names.len() - 1
                 }
             }
-        })
-        .collect();
-    let mut pos_names: Vec<String> = Vec::new();
-    let pos: Vec<Option<usize>> = used
-        .iter()
-        .map(|u| {
-            u.1.pos.as_ref().map(|p| match pos_names.iter().position(|x| x == p) {
-                Some(i) => i,
-                None => {
-                    pos_names.push(p.clone());
-                    pos_names.len() - 1
-                }
-            })
-        })
-        .collect();
-    let power = if used.iter().all(|u| u.1.power_s.is_some()) {
-        Some(used.iter().map(|u| u.1.power_s.unwrap_or(0.0)).collect::<Vec<_>>())
-    } else {
-        if used.iter().any(|u| u.1.power_s.is_some()) {
-            notes.push("power_s not known on every row: turn-on mechanisms not tried".into());
-        }
-        None
-    };
-    // Segments: a new one where the reference changes or time jumps.
-    let mut seg = vec![0usize; n];
-    for i in 1..n {
-        let change = f[i] != f[i - 1]
-            || vib[i] != vib[i - 1]
-            || pos[i] != pos[i - 1]
-            || t[i] - t[i - 1] > 3.0 * dt
-            || (line[i] > 0 && line[i] != line[i - 1] + 1);
-        seg[i] = seg[i - 1] + usize::from(change);
+        };
+        let pos = r.pos.as_ref().map(|p| match self.pos_names.iter().position(|x| x == p) {
+            Some(i) => i,
+            None => {
+                self.pos_names.push(p.clone());
+                self.pos_names.len() - 1
+            }
+        });
+        self.power_all &= r.power_s.is_some();
+        self.power_any |= r.power_s.is_some();
+        self.power.push(r.power_s.unwrap_or(0.0));
+        self.line.push(r.line);
+        self.t.push(r.t_s);
+        self.temp.push(r.temp_c);
+        self.f.push(f);
+        self.vib.push(vib);
+        self.vib_class.push(vib_class);
+        self.pos.push(pos);
+        Ok(())
     }
 
-    // Scale factors from SIM: u_i = Σ K_ij f_j + U0_i on rows without vibration (all rows if
-    // none), columns scaled to unit norm.
-    let quiet: Vec<usize> = (0..n).filter(|&i| matches!(vib[i], Vibration::None)).collect();
-    let rows_k: Vec<usize> = if quiet.len() >= 4 { quiet } else { (0..n).collect() };
-    let design: Vec<Vec<f64>> =
-        (0..4).map(|j| rows_k.iter().map(|&i| if j < 3 { f[i][j] } else { 1.0 }).collect()).collect();
-    let norms: Vec<f64> = design.iter().map(|c| dot(c, c).sqrt()).collect();
-    let mut gram = vec![0.0; 16];
-    for a in 0..4 {
-        for b in 0..4 {
-            gram[a * 4 + b] = if norms[a] > 0.0 && norms[b] > 0.0 {
-                dot(&design[a], &design[b]) / (norms[a] * norms[b])
-            } else if a == b {
-                1.0
-            } else {
-                0.0
-            };
+    /// The prepared pair: scale factors, residual, segments, temperature rate and white-noise
+    /// levels from the rows kept.
+    pub fn finish(self) -> Result<Prepared, DiagnoseError> {
+        let rn = self.real_name.as_str();
+        let Builder {
+            n_total,
+            any_vib,
+            line,
+            t,
+            temp,
+            f,
+            vib,
+            vib_class,
+            vib_names,
+            pos,
+            pos_names,
+            power,
+            power_all,
+            power_any,
+            du,
+            sim_u,
+            first_u,
+            u_varies,
+            temp_finite,
+            temp_same,
+            ..
+        } = self;
+        let mut notes = Vec::new();
+        if !any_vib {
+            notes.push("no vib_kind in the recordings: every row taken as without vibration".to_string());
         }
-    }
-    let mut k_full = [[0.0; 3]; 3];
-    let mut u0 = [0.0; 3];
-    let mut k_diag = [1.0; 3];
-    let mut k_determined = [false; 3];
-    for i in 0..3 {
-        let u: Vec<f64> = rows_k.iter().map(|&r| used[r].0.u_v[i]).collect();
-        let b: Vec<f64> = (0..4).map(|j| if norms[j] > 0.0 { dot(&design[j], &u) / norms[j] } else { 0.0 }).collect();
-        let ok = norms[i] > 0.0 && norms[3] > 0.0;
-        let sol = if ok { chol_solve(&gram, &b, 4, 1e-9) } else { None };
-        match sol {
-            Some((x, _)) if (x[i] / norms[i]).abs() > 1e-9 => {
-                for j in 0..4 {
-                    let v = if norms[j] > 0.0 { x[j] / norms[j] } else { 0.0 };
-                    if j < 3 {
-                        k_full[i][j] = v;
-                    } else {
-                        u0[i] = v;
-                    }
-                }
-                k_diag[i] = k_full[i][i];
-                k_determined[i] = true;
+        if t.is_empty() {
+            return Err(DiagnoseError(format!(
+                "{rn}: no row has a known reference (fx_g, fy_g, fz_g{}): diagnosis needs what the rig applied",
+                if any_vib { " and the vibration cells" } else { "" }
+            )));
+        }
+        let n = t.len();
+        let skipped = n_total - n;
+        if skipped > 0 {
+            notes.push(format!("{skipped} of {n_total} rows skipped: reference not known"));
+        }
+        // Constant signals: a REAL channel that never changes is dead; a constant SIM channel
+        // is legitimate (one orientation, one temperature, no noise) and only costs the scale
+        // factor.
+        for (i, c) in ["ux_V", "uy_V", "uz_V"].iter().enumerate() {
+            if !u_varies[i] {
+                let first = first_u[i];
+                return Err(DiagnoseError(format!(
+                    "{rn}: column `{c}` is constant ({first} V) over the {n} rows with a known reference: no signal"
+                )));
             }
-            _ => {
-                let mut uu: Vec<f64> = (0..n).map(|r| used[r].0.u_v[i]).collect();
-                u0[i] = median(&uu);
-                uu.clear();
-                notes.push(format!(
+        }
+        if temp_finite && temp_same {
+            notes.push("temp_C is constant: no thermal mechanism can be tried".into());
+        }
+        let diffs: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+        let dt = if diffs.is_empty() { 1.0 } else { median(&diffs) };
+        drop(diffs);
+        let power = if power_all {
+            Some(power)
+        } else {
+            if power_any {
+                notes.push("power_s not known on every row: turn-on mechanisms not tried".into());
+            }
+            None
+        };
+        // Segments: a new one where the reference changes or time jumps.
+        let mut seg = vec![0usize; n];
+        for i in 1..n {
+            let change = f[i] != f[i - 1]
+                || vib[i] != vib[i - 1]
+                || pos[i] != pos[i - 1]
+                || t[i] - t[i - 1] > 3.0 * dt
+                || (line[i] > 0 && line[i] != line[i - 1] + 1);
+            seg[i] = seg[i - 1] + usize::from(change);
+        }
+
+        // Scale factors from SIM: u_i = Σ K_ij f_j + U0_i on rows without vibration (all rows if
+        // none), columns scaled to unit norm.
+        let quiet: Vec<usize> = (0..n).filter(|&i| matches!(vib[i], Vibration::None)).collect();
+        let rows_k: Vec<usize> = if quiet.len() >= 4 { quiet } else { (0..n).collect() };
+        let design: Vec<Vec<f64>> =
+            (0..4).map(|j| rows_k.iter().map(|&i| if j < 3 { f[i][j] } else { 1.0 }).collect()).collect();
+        let norms: Vec<f64> = design.iter().map(|c| dot(c, c).sqrt()).collect();
+        let mut gram = vec![0.0; 16];
+        for a in 0..4 {
+            for b in 0..4 {
+                gram[a * 4 + b] = if norms[a] > 0.0 && norms[b] > 0.0 {
+                    dot(&design[a], &design[b]) / (norms[a] * norms[b])
+                } else if a == b {
+                    1.0
+                } else {
+                    0.0
+                };
+            }
+        }
+        let mut k_full = [[0.0; 3]; 3];
+        let mut u0 = [0.0; 3];
+        let mut k_diag = [1.0; 3];
+        let mut k_determined = [false; 3];
+        for i in 0..3 {
+            let u: Vec<f64> = rows_k.iter().map(|&r| sim_u[i][r]).collect();
+            let b: Vec<f64> =
+                (0..4).map(|j| if norms[j] > 0.0 { dot(&design[j], &u) / norms[j] } else { 0.0 }).collect();
+            let ok = norms[i] > 0.0 && norms[3] > 0.0;
+            let sol = if ok { chol_solve(&gram, &b, 4, 1e-9) } else { None };
+            match sol {
+                Some((x, _)) if (x[i] / norms[i]).abs() > 1e-9 => {
+                    for j in 0..4 {
+                        let v = if norms[j] > 0.0 { x[j] / norms[j] } else { 0.0 };
+                        if j < 3 {
+                            k_full[i][j] = v;
+                        } else {
+                            u0[i] = v;
+                        }
+                    }
+                    k_diag[i] = k_full[i][i];
+                    k_determined[i] = true;
+                }
+                _ => {
+                    let mut uu: Vec<f64> = sim_u[i].clone();
+                    u0[i] = median(&uu);
+                    uu.clear();
+                    notes.push(format!(
                     "scale factor of accelerometer {} not determinable from SIM (too few orientations): residual in V at a nominal 1 V/g",
                     AXES[i]
                 ));
+                }
             }
         }
-    }
-    let mut r: [Vec<f64>; 3] = Default::default();
-    let mut sim_g: [Vec<f64>; 3] = Default::default();
-    for i in 0..3 {
-        r[i] = used.iter().map(|u| (u.1.u_v[i] - u.0.u_v[i]) / k_diag[i]).collect();
-        sim_g[i] = used
-            .iter()
-            .map(|u| {
-                let lin: f64 = (0..3).map(|j| k_full[i][j] * u.2[j]).sum::<f64>() + u0[i];
-                (u.0.u_v[i] - lin) / k_diag[i]
-            })
-            .collect();
-    }
-    // Temperature rate: centred difference over ±max(30 s, 15 dt).
-    let w = (30.0f64).max(15.0 * dt);
-    let mut dtemp = vec![0.0; n];
-    let (mut lo, mut hi) = (0usize, 0usize);
-    for i in 0..n {
-        while t[i] - t[lo] > w {
-            lo += 1;
-        }
-        while hi + 1 < n && t[hi + 1] - t[i] <= w {
-            hi += 1;
-        }
-        if t[hi] > t[lo] {
-            dtemp[i] = (temp[hi] - temp[lo]) / (t[hi] - t[lo]);
-        }
-    }
-    let temp_s = smooth_temperature(&t, &temp, ((10.0 / dt).round() as usize).clamp(1, 50));
-    // White noise per vibration class from within-segment differences (robust: median of
-    // squared differences / (2·0.4549)).
-    let mut r_white: [Vec<f64>; 3] = Default::default();
-    for i in 0..3 {
-        let mut per_class: Vec<Vec<f64>> = vec![Vec::new(); vib_names.len()];
-        for k in 1..n {
-            if seg[k] == seg[k - 1] {
-                let d = r[i][k] - r[i][k - 1];
-                per_class[vib_class[k]].push(d * d);
+        let mut r: [Vec<f64>; 3] = du;
+        let mut sim_g: [Vec<f64>; 3] = sim_u;
+        for i in 0..3 {
+            r[i].iter_mut().for_each(|v| *v /= k_diag[i]);
+            for (k, v) in sim_g[i].iter_mut().enumerate() {
+                let lin: f64 = (0..3).map(|j| k_full[i][j] * f[k][j]).sum::<f64>() + u0[i];
+                *v = (*v - lin) / k_diag[i];
             }
         }
-        let all: Vec<f64> = per_class.iter().flatten().copied().collect();
-        let global = if all.is_empty() { 0.0 } else { median(&all) / (2.0 * 0.454_936_4) };
-        let floor = {
-            let scale = r[i].iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            (1e-9 * scale).powi(2).max(1e-30)
-        };
-        let class_var: Vec<f64> = per_class
-            .iter()
-            .map(|d| if d.len() >= 20 { median(d) / (2.0 * 0.454_936_4) } else { global })
-            .map(|v| v.max(floor))
-            .collect();
-        r_white[i] = vib_class.iter().map(|&c| class_var[c]).collect();
+        // Temperature rate: centred difference over ±max(30 s, 15 dt).
+        let w = (30.0f64).max(15.0 * dt);
+        let mut dtemp = vec![0.0; n];
+        let (mut lo, mut hi) = (0usize, 0usize);
+        for i in 0..n {
+            while t[i] - t[lo] > w {
+                lo += 1;
+            }
+            while hi + 1 < n && t[hi + 1] - t[i] <= w {
+                hi += 1;
+            }
+            if t[hi] > t[lo] {
+                dtemp[i] = (temp[hi] - temp[lo]) / (t[hi] - t[lo]);
+            }
+        }
+        let temp_s = smooth_temperature(&t, &temp, ((10.0 / dt).round() as usize).clamp(1, 50));
+        // White noise per vibration class from within-segment differences (robust: median of
+        // squared differences / (2·0.4549)).
+        let mut r_white: [Vec<f64>; 3] = Default::default();
+        for i in 0..3 {
+            let mut per_class: Vec<Vec<f64>> = vec![Vec::new(); vib_names.len()];
+            for k in 1..n {
+                if seg[k] == seg[k - 1] {
+                    let d = r[i][k] - r[i][k - 1];
+                    per_class[vib_class[k]].push(d * d);
+                }
+            }
+            let all: Vec<f64> = per_class.iter().flatten().copied().collect();
+            let global = if all.is_empty() { 0.0 } else { median(&all) / (2.0 * 0.454_936_4) };
+            let floor = {
+                let scale = r[i].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                (1e-9 * scale).powi(2).max(1e-30)
+            };
+            let class_var: Vec<f64> = per_class
+                .iter()
+                .map(|d| if d.len() >= 20 { median(d) / (2.0 * 0.454_936_4) } else { global })
+                .map(|v| v.max(floor))
+                .collect();
+            r_white[i] = vib_class.iter().map(|&c| class_var[c]).collect();
+        }
+        Ok(Prepared {
+            n_total,
+            skipped,
+            line,
+            t,
+            temp,
+            f,
+            vib,
+            vib_class,
+            vib_names,
+            pos,
+            pos_names,
+            power,
+            seg,
+            r,
+            sim_g,
+            k_diag,
+            k_determined,
+            dt,
+            temp_s,
+            dtemp,
+            r_white,
+            notes,
+        })
     }
-    Ok(Prepared {
-        n_total: real.len(),
-        skipped,
-        line,
-        t,
-        temp,
-        f,
-        vib,
-        vib_class,
-        vib_names,
-        pos,
-        pos_names,
-        power,
-        seg,
-        r,
-        sim_g,
-        k_diag,
-        k_determined,
-        dt,
-        temp_s,
-        dtemp,
-        r_white,
-        notes,
-    })
 }
+
 /// Mean square residual of the least-squares line through `(t, x)` over rows `lo..=hi`, and
 /// the line's value at `t_at`.
 fn line_fit(t: &[f64], x: &[f64], lo: usize, hi: usize, t_at: f64) -> (f64, f64) {
