@@ -384,6 +384,33 @@ pub fn max_fold_share(c: impl Iterator<Item = f64> + Clone, fold: &[usize]) -> f
     e.iter().fold(0.0, |a: f64, &b| a.max(b)) / total
 }
 
+/// The shortest τ [s] at which `e^(−P/τ)` has at most [`TURN_ON_MAX_FOLD_SHARE`] of its
+/// centred energy in one held-out fold, by bisection in log τ (the share falls as τ grows and
+/// the signature spreads over more blocks); ∞ without `power_s` or when no τ up to 100× the
+/// longest `power_s` qualifies.
+fn turn_on_min_tau_s(p: &Prepared) -> f64 {
+    let Some(pw) = p.power.as_deref() else { return f64::INFINITY };
+    let pmax = pw.iter().fold(0.0, |a: f64, &b| a.max(b));
+    let fold = super::fit::folds_of(pw.len());
+    let ok = |tau: f64| max_fold_share(pw.iter().map(|v| (-v / tau).exp()), &fold) <= TURN_ON_MAX_FOLD_SHARE;
+    let (mut lo, mut hi) = ((0.1 * p.dt).max(1e-6).ln(), (100.0 * pmax).max(1.0).ln());
+    if !ok(hi.exp()) {
+        return f64::INFINITY;
+    }
+    if ok(lo.exp()) {
+        return lo.exp();
+    }
+    for _ in 0..30 {
+        let mid = 0.5 * (lo + hi);
+        if ok(mid.exp()) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    hi.exp()
+}
+
 /// What the columns of a mechanism are built from, per accelerometer.
 pub struct Context<'a> {
     /// The data.
@@ -406,6 +433,11 @@ pub struct Context<'a> {
     pub nuisance_orders: Vec<i32>,
     /// What the nuisance is, for the report.
     pub nuisance_names: Vec<String>,
+    /// The recording's `power_s` range [s] (`(∞, −∞)` without `power_s`).
+    pub power_range_s: (f64, f64),
+    /// The shortest turn-on τ [s] whose `e^(−P/τ)` has at most [`TURN_ON_MAX_FOLD_SHARE`] of
+    /// its centred energy in one held-out fold (∞ when none has): see [`Context::offered`].
+    pub turn_on_min_tau_s: f64,
 }
 
 /// SIM's own calibration forms `b_j(f)·ΔTᵖ` (`b` = 1, f_x, f_y, f_z; p = 1…3; ΔT from the
@@ -488,6 +520,13 @@ impl<'a> Context<'a> {
             nuisance,
             nuisance_orders,
             nuisance_names,
+            power_range_s: p
+                .power
+                .as_deref()
+                .unwrap_or(&[])
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v))),
+            turn_on_min_tau_s: turn_on_min_tau_s(p),
         }
     }
 
@@ -531,11 +570,8 @@ impl<'a> Context<'a> {
         if !matches!(m, Mech::SelfHeating | Mech::Warmup) {
             return true;
         }
-        let pw = self.p.power.as_deref().unwrap_or(&[]);
-        let (pmin, pmax) = pw.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-        (-pmin / theta).exp() - (-pmax / theta).exp() >= TURN_ON_MIN_RANGE
-            && max_fold_share(pw.iter().map(|p| (-p / theta).exp()), &super::fit::folds_of(pw.len()))
-                <= TURN_ON_MAX_FOLD_SHARE
+        let (pmin, pmax) = self.power_range_s;
+        (-pmin / theta).exp() - (-pmax / theta).exp() >= TURN_ON_MIN_RANGE && theta >= self.turn_on_min_tau_s
     }
 
     fn grid_span(&self, m: Mech) -> Vec<f64> {
