@@ -810,15 +810,12 @@ fn drift_alternatives(
     let Some((_, _, sse_full, _)) = gls(&filt, y, &bank.slices_of(model)) else { return beyond };
     let n = filt.n_used as f64;
     let grid = ctx.grid(Mech::Drift);
+    // The members' whitened products once per set, only the drift's column per θ.
+    let drift_cols: Vec<Vec<Vec<f64>>> = grid.iter().map(|&th| ctx.columns(Mech::Drift, th)).collect();
     let with_drift = |members: &[usize]| {
-        grid.iter()
-            .filter_map(|&th| {
-                let extra = ctx.columns(Mech::Drift, th);
-                let mut cols = bank.slices_of(members);
-                cols.extend(extra.iter().map(|v| v.as_slice()));
-                gls(&filt, y, &cols).map(|g| g.2)
-            })
-            .fold(f64::INFINITY, f64::min)
+        let fixed: Vec<Vec<f64>> = bank.slices_of(members).into_iter().map(<[f64]>::to_vec).collect();
+        let part = PartialLs::new(&filt, y, &fixed);
+        drift_cols.iter().map(|extra| part.sse_plus(&filt, extra)).fold(f64::INFINITY, f64::min)
     };
     let sse_model_drift = with_drift(model);
     for (k, &c) in model.iter().enumerate() {
