@@ -384,7 +384,7 @@ pub fn max_fold_share(c: impl Iterator<Item = f64> + Clone, fold: &[usize]) -> f
     e.iter().fold(0.0, |a: f64, &b| a.max(b)) / total
 }
 
-/// The shortest τ [s] at which `e^(−P/τ)` has at most [`TURN_ON_MAX_FOLD_SHARE`] of its
+/// The shortest τ \[s\] at which `e^(−P/τ)` has at most [`TURN_ON_MAX_FOLD_SHARE`] of its
 /// centred energy in one held-out fold, by bisection in log τ (the share falls as τ grows and
 /// the signature spreads over more blocks); ∞ without `power_s` or when no τ up to 100× the
 /// longest `power_s` qualifies.
@@ -433,9 +433,9 @@ pub struct Context<'a> {
     pub nuisance_orders: Vec<i32>,
     /// What the nuisance is, for the report.
     pub nuisance_names: Vec<String>,
-    /// The recording's `power_s` range [s] (`(∞, −∞)` without `power_s`).
+    /// The recording's `power_s` range \[s\] (`(∞, −∞)` without `power_s`).
     pub power_range_s: (f64, f64),
-    /// The shortest turn-on τ [s] whose `e^(−P/τ)` has at most [`TURN_ON_MAX_FOLD_SHARE`] of
+    /// The shortest turn-on τ \[s\] whose `e^(−P/τ)` has at most [`TURN_ON_MAX_FOLD_SHARE`] of
     /// its centred energy in one held-out fold (∞ when none has): see [`Context::offered`].
     pub turn_on_min_tau_s: f64,
 }
