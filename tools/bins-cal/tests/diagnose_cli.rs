@@ -3,7 +3,6 @@
 //! never panics on mutated files (property test), and the time of a 30 000-row pair.
 
 use bins_cal::diagnose::{cases, diagnose, diagnose_files};
-use bins_cal::recording::{Columns, Row, Writer};
 use proptest::prelude::*;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -11,16 +10,7 @@ use std::process::Command;
 #[allow(dead_code)] // the CLI helpers other test files use
 mod common;
 use common::csv_text::Csv;
-
-fn write(path: &Path, rows: &[Row]) {
-    let f = std::fs::File::create(path).unwrap();
-    let mut w =
-        Writer::new(std::io::BufWriter::new(f), path, Columns::all(), &["recording format v1 -- test"]).unwrap();
-    for r in rows {
-        w.write_row(r).unwrap();
-    }
-    w.finish().unwrap();
-}
+use common::write_recording as write;
 
 fn case(name: &str, rows: usize) -> cases::Case {
     let mut c = cases::suite().into_iter().find(|c| c.name == name).unwrap();

@@ -6,18 +6,12 @@
 //! missing on some rows); and a bad pair is refused with the same one-line error.
 
 use bins_cal::diagnose::{cases, prep, prepare_files};
-use bins_cal::recording::{Columns, Row, VibKind, Writer, read_all};
+use bins_cal::recording::{Row, VibKind, read_all};
 use std::path::{Path, PathBuf};
 
-fn write(path: &Path, rows: &[Row]) {
-    let f = std::fs::File::create(path).unwrap();
-    let mut w =
-        Writer::new(std::io::BufWriter::new(f), path, Columns::all(), &["recording format v1 -- test"]).unwrap();
-    for r in rows {
-        w.write_row(r).unwrap();
-    }
-    w.finish().unwrap();
-}
+#[allow(dead_code)] // the helpers other test files use
+mod common;
+use common::write_recording as write;
 
 /// The in-memory path on the same files.
 fn whole(sim: &Path, real: &Path) -> Result<prep::Prepared, String> {

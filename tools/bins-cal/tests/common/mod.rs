@@ -40,3 +40,16 @@ pub fn without_column(csv: &str, name: &str) -> String {
     c.remove_column(name);
     c.to_text()
 }
+
+/// Writes `rows` as a recording (format v1, every column) at `path`.
+#[allow(dead_code)] // not every test file that includes this module writes recordings
+pub fn write_recording(path: &Path, rows: &[bins_cal::recording::Row]) {
+    use bins_cal::recording::{Columns, Writer};
+    let f = std::fs::File::create(path).unwrap();
+    let mut w =
+        Writer::new(std::io::BufWriter::new(f), path, Columns::all(), &["recording format v1 -- test"]).unwrap();
+    for r in rows {
+        w.write_row(r).unwrap();
+    }
+    w.finish().unwrap();
+}
