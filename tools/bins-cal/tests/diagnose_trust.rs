@@ -228,3 +228,137 @@ fn a_one_way_temperature_term_is_ambiguous_with_a_drift_and_a_reversal_separates
     assert_eq!(named, ["bias_temp_order"], "{groups:?}");
     assert!(groups.iter().all(|(ids, _)| !ids.iter().any(|i| i == "drift")), "{groups:?}");
 }
+
+/// SIM and REAL of a short cooling sampled fast, shaped like a bench run of several sensors: 240 s
+/// at 100 Hz, one static orientation, the unit cooling 3 °C (exponentially), and per-sample
+/// noise that is mostly **coloured**: a resonance near 20 Hz (1.5 mg RMS, an AR(2) with poles
+/// at 0.8·e^(±i·0.4π)) over 0.3 mg of white noise, so sample-to-sample differences misjudge it.
+/// Slow structure no mechanism of the library has (two sinusoids of 47 s and 83 s) on x
+/// (`slow_mg[0]` RMS) and z (`slow_mg[2]`), none on y. SIM is the offset-only cubic in the
+/// thermistor's reading fitted to REAL, as in [`warm_soak`]. Returns SIM, REAL and what REAL − SIM
+/// holds besides the noise (RMS per axis, mg).
+fn coloured_cooling(seed: u64, slow_mg: [f64; 3]) -> (Vec<Row>, Vec<Row>, [f64; 3]) {
+    let (rate_hz, dur_s) = (100.0, 240.0);
+    let n = (rate_hz * dur_s) as usize;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let unit = Normal::new(0.0, 1.0).unwrap();
+    let (rho, w) = (0.8f64, 0.4 * std::f64::consts::PI);
+    let (a1, a2) = (2.0 * rho * w.cos(), -rho * rho);
+    // Stationary variance of the AR(2) per unit innovation variance.
+    let gain = (1.0 - a2) / ((1.0 + a2) * ((1.0 - a2).powi(2) - a1 * a1));
+    let innov = 1.5e-3 / gain.sqrt();
+    let cubic = [[1.2e-4, -3e-6, 1e-7], [-1.5e-4, 2e-6, -4e-8], [0.8e-4, 5e-6, 2e-8]]; // g/°Cᵖ
+    let mut ar = [[0.0f64; 2]; 3];
+    let mut noise: [Vec<f64>; 3] = Default::default();
+    let mut real = Vec::with_capacity(n);
+    for k in 0..n {
+        let t = k as f64 / rate_hz;
+        let temp = 25.0 - 3.0 * (1.0 - (-t / 100.0).exp()) / (1.0 - (-dur_s / 100.0f64).exp());
+        let read = ((temp + 0.005 * unit.sample(&mut rng)) * 100.0).round() / 100.0;
+        let mut row = Row { line: k as u64 + 2, t_s: t, temp_c: read, pos: Some("zdown".into()), ..Row::default() };
+        row.f_g = [Some(0.0), Some(0.0), Some(1.0)];
+        row.set_vibration(&Vibration::None);
+        for i in 0..3 {
+            let c = a1 * ar[i][0] + a2 * ar[i][1] + innov * unit.sample(&mut rng);
+            ar[i] = [c, ar[i][0]];
+            let e = c + 0.3e-3 * unit.sample(&mut rng);
+            let dtc = temp - 25.0;
+            let bias = ((cubic[i][2] * dtc + cubic[i][1]) * dtc + cubic[i][0]) * dtc;
+            // Unit RMS: two sinusoids of amplitude 1 have RMS 1.
+            let slow = slow_mg[i]
+                * 1e-3
+                * ((2.0 * std::f64::consts::PI * t / 47.0 + 0.4 * i as f64).sin()
+                    + (2.0 * std::f64::consts::PI * t / 83.0 + 1.1).sin());
+            row.u_v[i] = row.f_g[i].unwrap() + 0.01 * i as f64 + bias + slow + e;
+            noise[i].push(e);
+        }
+        real.push(row);
+    }
+    let mut sim = real.clone();
+    let x: Vec<[f64; 4]> = real
+        .iter()
+        .map(|r| {
+            let d = (r.temp_c - 23.5) / 1.5;
+            [1.0, d, d * d, d * d * d]
+        })
+        .collect();
+    let mut slow_rms = [0.0; 3];
+    for i in 0..3 {
+        let mut a = vec![vec![0.0; 4]; 4];
+        let mut b = vec![0.0; 4];
+        for (r, xr) in real.iter().zip(&x) {
+            let y = r.u_v[i] - r.f_g[i].unwrap();
+            for u in 0..4 {
+                b[u] += xr[u] * y;
+                for v in 0..4 {
+                    a[u][v] += xr[u] * xr[v];
+                }
+            }
+        }
+        let c = solve(a, b);
+        for (s, xr) in sim.iter_mut().zip(&x) {
+            s.u_v[i] = s.f_g[i].unwrap() + (0..4).map(|u| c[u] * xr[u]).sum::<f64>();
+        }
+        let clean: Vec<f64> = sim.iter().zip(&real).zip(&noise[i]).map(|((s, r), e)| r.u_v[i] - e - s.u_v[i]).collect();
+        let m = clean.iter().sum::<f64>() / n as f64;
+        slow_rms[i] = (clean.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n as f64).sqrt() * 1e3;
+    }
+    (sim, real, slow_rms)
+}
+
+#[test]
+fn coloured_noise_is_neither_structure_nor_hides_it() {
+    for (seed, slow_mg) in [(31u64, [0.35, 0.0, 0.25]), (32, [0.5, 0.0, 0.3])] {
+        let (sim, real, put_in_mg) = coloured_cooling(seed, slow_mg);
+        let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
+        let r = &d.report;
+        let summary = format!(
+            "seed {seed}: effects {:?}; ambiguous {:?}; held-out {:?} → {:?}; verdict {:?}; unexplained {:?} at {:?} s; floor {:?}; put in {put_in_mg:?}",
+            r.effects.iter().map(|e| (&e.id, &e.axes, &e.heldout_cut_mg)).collect::<Vec<_>>(),
+            r.ambiguous.iter().map(|g| (&g.ids, &g.axes)).collect::<Vec<_>>(),
+            r.heldout_rms_before_mg,
+            r.heldout_rms_after_mg,
+            r.verdict,
+            r.unexplained_rms_mg,
+            r.unexplained_scale_s,
+            r.noise_floor_mg
+        );
+        println!("{summary}");
+        for (i, ax) in ["x", "y", "z"].into_iter().enumerate() {
+            let named: Vec<_> = r.effects.iter().filter(|e| e.axes.iter().any(|a| a == ax)).collect();
+            let modelled = !named.is_empty() || r.ambiguous.iter().any(|g| g.axes.iter().any(|a| a == ax));
+            let (before, after) = (r.heldout_rms_before_mg[ax], r.heldout_rms_after_mg[ax]);
+            if modelled {
+                assert!(after < before, "{ax}: a modelled effect and held-out {before} → {after} mg: {summary}");
+            }
+            for e in &named {
+                let [cut, se] = e.heldout_cut_mg[ax];
+                assert!(cut > se, "{ax}: {} cuts the held-out RMS by {cut} mg, standard error {se}: {summary}", e.id);
+            }
+            let v = r.verdict[ax].as_str();
+            let unexplained = r.unexplained_rms_mg[ax];
+            if v == "at the noise" {
+                assert!(!modelled && unexplained == 0.0, "{ax}: at the noise beside a finding: {summary}");
+            }
+            if unexplained > 0.0 {
+                assert!(v == "unexplained" || v == "partly explained", "{ax}: unexplained {unexplained} mg but {v}");
+            }
+            if slow_mg[i] > 0.0 {
+                // The slow part is seen and sized at its scale, not inflated by the coloured
+                // noise that sample-to-sample differences understate.
+                let put_in = put_in_mg[i];
+                assert!(
+                    unexplained > 0.5 * put_in && unexplained < 2.0 * put_in,
+                    "{ax}: unexplained {unexplained:.3} mg, slow structure {put_in:.3} mg RMS: {summary}"
+                );
+            } else {
+                // Coloured noise alone is no structure and no mechanism.
+                assert!(named.is_empty(), "{ax}: named on coloured noise alone: {summary}");
+                assert!(
+                    unexplained < 0.05,
+                    "{ax}: coloured noise reported as {unexplained:.3} mg of structure: {summary}"
+                );
+            }
+        }
+    }
+}
