@@ -342,7 +342,8 @@ pub struct AxisFit {
     /// and what the verdicts look at on every time scale ([`super::noise::structure_scales`]).
     pub heldout_resid: (Vec<f64>, Vec<f64>),
     /// Per term (as in `terms`): the cut of the raw held-out RMS the term brings \[g\] (the
-    /// model without it minus the model) and that cut's fold-to-fold standard error.
+    /// model without it, or the offset alone where that is lower, minus the model) and that
+    /// cut's fold-to-fold standard error. Never more than "before" minus "after".
     pub heldout_gain: Vec<(f64, f64)>,
 }
 
@@ -1051,13 +1052,18 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     // With nothing named the model is SIM itself: its own terms re-fitted alone are not a
     // finding, and "after" is "before".
     let ha = if members.is_empty() { raw_heldout(t, r, q, y, &[], fold) } else { raw_heldout(t, r, q, y, &refs, fold) };
-    // Each term's cut of the raw held-out RMS: the model without it, the others as fitted.
+    // Each term's cut of the raw held-out RMS: the model without it (the others as fitted),
+    // or the offset alone ("before") where that predicts better. SIM's own terms re-fitted
+    // without the term can predict the held-out folds worse than the offset alone (a cubic in
+    // T extrapolated into a fold); a cut measured from there would credit the term with
+    // undoing that, and print a cut larger than the "before → after" beside it.
     let mut heldout_gain = Vec::new();
     let mut off = ctx.nuisance.len();
     for (m, th) in &members {
         let nc = ctx.columns(*m, th.unwrap_or(0.0)).len();
         let without: Vec<&[f64]> = refs[..off].iter().chain(&refs[off + nc..]).copied().collect();
-        heldout_gain.push(ha.gain_over(&raw_heldout(t, r, q, y, &without, fold)));
+        let hw = raw_heldout(t, r, q, y, &without, fold);
+        heldout_gain.push(ha.gain_over(if hb.rms() < hw.rms() { &hb } else { &hw }));
         off += nc;
     }
     AxisFit {

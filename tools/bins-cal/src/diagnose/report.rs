@@ -28,9 +28,10 @@ pub struct Effect {
     pub explanation: String,
     /// Likelihood-ratio statistic and p-value for dropping it, per accelerometer.
     pub significance: PerAxis<[f64; 2]>,
-    /// Per accelerometer: the cut of the raw held-out RMS it brings (the model without it
-    /// minus the model) and that cut's fold-to-fold standard error \[mg\]; a term is named
-    /// only when the cut exceeds its standard error.
+    /// Per accelerometer: the cut of the raw held-out RMS it brings (the model without it, or
+    /// the offset alone where that is lower, minus the model: never more than the printed
+    /// "before" minus "after") and that cut's fold-to-fold standard error \[mg\]; a term is
+    /// named only when the cut exceeds its standard error.
     pub heldout_cut_mg: PerAxis<[f64; 2]>,
     /// Per accelerometer, parameters the data does not determine: a 95 % interval spanning
     /// [`UNDETERMINED_RATIO`] or more. Their values are not findings.
