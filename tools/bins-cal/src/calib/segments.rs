@@ -41,8 +41,11 @@ pub struct Segment {
     pub f_g: [f64; 3],
     /// Time of the first and last row used \[s\].
     pub t_s: (f64, f64),
-    /// Rows used (after the settling margin): signals \[V\] and temperature [°C].
+    /// Rows used (after the settling margin): signals \[V\] and temperature [°C]. Empty for
+    /// the static intervals of `calibrate --free`, whose rows are not kept.
     pub rows: Vec<([f64; 3], f64)>,
+    /// Number of rows used.
+    pub n_rows: usize,
     /// Mean signals \[V\].
     pub mean_u_v: [f64; 3],
     /// Standard deviation of the signals \[V\].
@@ -216,6 +219,7 @@ fn segment(path: &Path, run: Run, opt: &Options) -> Segment {
         f_g: run.f_g,
         t_s: (rows.first().map_or(t_first, |r| r.0), rows.last().map_or(t_last, |r| r.0)),
         rows: rows.iter().map(|r| (r.1, r.2)).collect(),
+        n_rows: rows.len(),
         mean_u_v: mean,
         std_u_v: std,
         temp_c: temp,
