@@ -43,11 +43,12 @@ fn direction(k: usize) -> [f64; 3] {
 
 /// Writes the million-row recording: 400 holds of 20 s joined by 5 s turns at 100 Hz, white
 /// noise of 10 µV (a linear congruential generator), 20 °C throughout; the reference columns
-/// give the true specific force. Returns the row count.
+/// give the true specific force, every fourth hold is labelled `CP1`…`CP6`. Returns the row
+/// count.
 fn write_hand_recording(path: &Path) -> usize {
     let mut out = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
     writeln!(out, "# recording format v1 -- written by the long_recordings test").unwrap();
-    writeln!(out, "t_s,ux_V,uy_V,uz_V,temp_C,fx_g,fy_g,fz_g").unwrap();
+    writeln!(out, "t_s,ux_V,uy_V,uz_V,temp_C,fx_g,fy_g,fz_g,pos").unwrap();
     let mut state: u64 = 0x2545_f491_4f6c_dd1d;
     let mut noise = || {
         state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
@@ -68,9 +69,11 @@ fn write_hand_recording(path: &Path) -> usize {
         let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
         let f = f.map(|x| x / norm);
         let u: Vec<f64> = (0..3).map(|i| U0[i] + (0..3).map(|j| K[i][j] * f[j]).sum::<f64>() + noise()).collect();
+        // Every fourth hold is labelled as a check dwell (for `verify`).
+        let pos = if t < 0.0 && hold % 4 == 0 { format!("CP{}", 1 + (hold / 4) % 6) } else { String::new() };
         writeln!(
             out,
-            "{},{:.8},{:.8},{:.8},20.0,{:.6},{:.6},{:.6}",
+            "{},{:.8},{:.8},{:.8},20.0,{:.6},{:.6},{:.6},{pos}",
             k as f64 / RATE_HZ,
             u[0],
             u[1],
@@ -123,6 +126,23 @@ fn follow_reads_a_million_rows_in_100_mib() {
     assert!(err.contains("1000000 rows predicted"), "{err}");
     let text = std::fs::read_to_string(dir.join("sim.csv")).unwrap();
     assert_eq!(text.lines().filter(|l| !l.starts_with('#')).count(), n + 1, "header and every row");
+}
+
+/// `verify` with a calibration that has thermal dynamics runs them over every row and keeps
+/// the check dwells' rows only.
+#[test]
+fn verify_with_dynamics_reads_a_million_rows_in_100_mib() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    write_hand_recording(&dir.join("hand.csv"));
+    let cal = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../calibrations/paper-two-range-dynamics.toml");
+    let args = ["verify", "--check", "hand.csv", "--calib", cal.to_str().unwrap(), "-o", "v"];
+    let o = run_limited(dir, &args);
+    assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    let table = std::fs::read_to_string(dir.join("v/verify.csv")).unwrap();
+    // 100 labelled holds, each a dwell with a value of the method with the dynamics.
+    let with_dynamics = table.lines().filter(|l| l.contains("dynamics")).count();
+    assert!(with_dynamics >= 100, "{with_dynamics} rows with the dynamics:\n{table}");
 }
 
 /// A scenario asking for a billion rows, by its rate, by a long step or by many holds: one

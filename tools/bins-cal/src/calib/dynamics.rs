@@ -1265,17 +1265,52 @@ fn invert(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
 /// power-on from `power_s`, else from the first row): the effective temperature and bias-play
 /// fraction of every row, as the firmware computes them (in f64).
 pub fn run_core(rows: &[crate::recording::Row], d: &ThermalDynamics<f64>) -> Vec<Effective<f64>> {
-    let mut st = DynamicsState::new();
-    let t_first = rows.first().map_or(0.0, |r| r.t_s);
-    let mut prev: Option<f64> = None;
-    rows.iter()
-        .map(|r| {
-            let dt = prev.map_or(0.0, |p| r.t_s - p);
-            prev = Some(r.t_s);
-            let t_on = r.power_s.unwrap_or(r.t_s - t_first);
-            d.step(&mut st, r.temp_c, dt, t_on)
-        })
-        .collect()
+    let mut core = CoreRun::new(d);
+    rows.iter().map(|r| core.step(r)).collect()
+}
+
+/// [`run_core`] over a recording read row by row (a progress bar on standard error), keeping
+/// only the rows whose `t_s` `keep` accepts: their times and effective values. Holds those
+/// rows, not the recording. Errors name the file.
+pub fn run_core_kept(
+    path: &Path,
+    d: &ThermalDynamics<f64>,
+    keep: impl Fn(f64) -> bool,
+) -> anyhow::Result<(Vec<f64>, Vec<Effective<f64>>)> {
+    let mut pass = Pass::open(path, "dynamics").map_err(|e| anyhow!("{e}"))?;
+    let mut core = CoreRun::new(d);
+    let (mut t, mut e) = (Vec::new(), Vec::new());
+    let mut row = Row::default();
+    while pass.read_row(&mut row).map_err(|e| anyhow!("{e}"))? {
+        let eff = core.step(&row);
+        if keep(row.t_s) {
+            t.push(row.t_s);
+            e.push(eff);
+        }
+    }
+    Ok((t, e))
+}
+
+/// The core's dynamics stepped one row at a time.
+struct CoreRun<'a> {
+    d: &'a ThermalDynamics<f64>,
+    st: DynamicsState<f64>,
+    t_first: Option<f64>,
+    prev: Option<f64>,
+}
+
+impl<'a> CoreRun<'a> {
+    fn new(d: &'a ThermalDynamics<f64>) -> CoreRun<'a> {
+        CoreRun { d, st: DynamicsState::new(), t_first: None, prev: None }
+    }
+
+    fn step(&mut self, r: &Row) -> Effective<f64> {
+        let t_first = *self.t_first.get_or_insert(r.t_s);
+        let dt = self.prev.map_or(0.0, |p| r.t_s - p);
+        self.prev = Some(r.t_s);
+        let t_on = r.power_s.unwrap_or(r.t_s - t_first);
+        self.d.step(&mut self.st, r.temp_c, dt, t_on)
+    }
 }
 
 /// The compensated acceleration \[g\] of one sample with the thermal dynamics: the core's
