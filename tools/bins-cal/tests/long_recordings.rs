@@ -187,3 +187,65 @@ fn a_scenario_of_a_billion_rows_is_refused_in_a_second() {
     left.sort();
     assert_eq!(left, ["holds.toml", "long.toml", "rate.toml"], "nothing written");
 }
+
+/// The static intervals `static_intervals` finds (its window slid over the rows with a bounded
+/// buffer) are those of a direct computation: every row's centred window (cut at the ends)
+/// summed afresh, its variance against the still period's, runs of static rows. Recordings
+/// shorter than the window, as long, and much longer; still periods at both ends.
+#[test]
+fn the_sliding_window_finds_what_a_direct_computation_finds() {
+    use bins_cal::calib::free::{StaticOptions, static_intervals};
+    use bins_cal::calib::segments::Options;
+    let seg = Options { settle_s: 1.0, max_std_v: 0.01, max_rate_c_per_min: 0.5, temp_tol_c: 3.0 };
+    let mut state: u64 = 7;
+    let mut noise = || {
+        state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2e-5
+    };
+    // (rate, rows, window [s], where the unit moves: every `period` rows for `moving` rows).
+    for (rate, n, window_s, period, moving) in
+        [(20.0, 30, 10.0, 1000, 0), (20.0, 41, 0.3, 17, 3), (10.0, 400, 1.0, 60, 7), (100.0, 5000, 1.0, 700, 150)]
+    {
+        let rows: Vec<(f64, [f64; 3], f64)> = (0..n)
+            .map(|k| {
+                let still = k < 12 || k % period >= moving;
+                let step = if still { 0.0 } else { 0.1 * ((k % period) as f64 + 1.0) };
+                let t = k as f64 / rate;
+                (t, [0.3 + step + noise(), -0.2 + noise(), 0.5 - step + noise()], 20.0)
+            })
+            .collect();
+        let opt =
+            StaticOptions { init_s: 11.5 / rate, static_threshold: 6.0, static_window_s: window_s, min_static_s: 0.1 };
+        let got = static_intervals(Path::new("w.csv"), &rows, &opt, &seg).unwrap();
+        // The direct computation.
+        let var = |a: usize, b: usize| -> f64 {
+            let m = (b - a) as f64;
+            (0..3)
+                .map(|i| {
+                    let mean = rows[a..b].iter().map(|r| r.1[i]).sum::<f64>() / m;
+                    rows[a..b].iter().map(|r| (r.1[i] - mean).powi(2)).sum::<f64>() / m
+                })
+                .sum()
+        };
+        let n_init = rows.iter().take_while(|r| r.0 < opt.init_s).count();
+        let limit = opt.static_threshold * var(0, n_init);
+        let dt = rows[n - 1].0 / (n - 1) as f64;
+        let half = ((0.5 * window_s / dt).round() as usize).max(1);
+        let still: Vec<bool> = (0..n).map(|k| var(k.saturating_sub(half), (k + half + 1).min(n)) <= limit).collect();
+        let mut want = Vec::new();
+        let mut k = 0;
+        while k < n {
+            let a = k;
+            while k < n && still[k] {
+                k += 1;
+            }
+            if k - a >= 3 && rows[k - 1].0 - rows[a].0 >= opt.min_static_s {
+                want.push((rows[a].0, rows[k - 1].0, k - a));
+            }
+            k += 1;
+        }
+        let found: Vec<(f64, f64, usize)> = got.iter().map(|s| (s.t_s.0, s.t_s.1, s.n_rows)).collect();
+        assert_eq!(found, want, "rate {rate}, {n} rows, window {window_s} s");
+        assert!(!want.is_empty(), "rate {rate}, {n} rows: no interval to compare");
+    }
+}
