@@ -249,3 +249,42 @@ fn the_sliding_window_finds_what_a_direct_computation_finds() {
         assert!(!want.is_empty(), "rate {rate}, {n} rows: no interval to compare");
     }
 }
+
+/// A recording without a line end (`/dev/zero`) or whose header has 50 000 empty extra
+/// columns, given to every command that reads recordings (each pass of `calibrate --free`,
+/// `--dynamics identify`, `simulate --follow` included): one line naming the file and line 1,
+/// in under a second within 100 MiB, nothing written.
+#[test]
+fn no_line_end_or_fifty_thousand_columns_are_refused_by_every_reader() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let header = format!("t_s,ux_V,uy_V,uz_V,temp_C,fx_g,fy_g,fz_g,pos{}\n", ",".repeat(50_000));
+    std::fs::write(dir.join("wide.csv"), format!("{header}0.0,0,0,0,20,0,0,1,TP1{}\n", ",".repeat(50_000))).unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let cal = root.join("calibrations/paper-two-range-dynamics.toml");
+    let scenario = root.join("scenarios/paper-tilter.toml");
+    let (cal, scenario) = (cal.to_str().unwrap(), scenario.to_str().unwrap());
+    for (bad, why) in [("/dev/zero", "/dev/zero:1: line longer than"), ("wide.csv", "wide.csv:1: more than 4096 cells")]
+    {
+        for args in [
+            vec!["calibrate", "--tilter", bad, "-o", "c.toml"],
+            vec!["calibrate", "--free", "--tilter", bad, "-o", "c.toml"],
+            vec!["calibrate", "--tilter", bad, "--model", "poly:1", "--dynamics", "identify", "-o", "c.toml"],
+            vec!["verify", "--check", bad, "--calib", cal, "-o", "v"],
+            vec!["replay", "--rec", bad, "--calib", cal, "-o", "r.csv"],
+            vec!["simulate", "--follow", bad, scenario, "-o", "f.csv"],
+        ] {
+            let t = Instant::now();
+            let o = run_limited(dir, &args);
+            let took = t.elapsed();
+            let e = String::from_utf8_lossy(&o.stderr);
+            assert!(!o.status.success(), "{args:?}: accepted");
+            assert!(took < Duration::from_secs(1), "{args:?}: {took:?}");
+            assert_eq!(e.trim_end().lines().count(), 1, "{args:?}: {e}");
+            assert!(e.starts_with(&format!("bins-cal: error: {why}")), "{args:?}: {e}");
+        }
+    }
+    let left: Vec<String> =
+        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert_eq!(left, ["wide.csv"], "nothing written");
+}
