@@ -1,10 +1,14 @@
 //! `cargo xtask bench`: instructions per sample and stack depth in QEMU, flash and static RAM
-//! of the images against their budgets, host samples per second, the diagnosis's speed.
+//! of the images against their budgets, host samples per second, the diagnosis's speed, the
+//! CPU time and peak memory of `calibrate` and `verify` on a day at 100 Hz.
 
+use std::path::Path;
+use std::process::Stdio;
 use std::time::Instant;
 
 use crate::process::{output, show};
-use crate::task::{Result, Xtask};
+use crate::rusage::measured;
+use crate::task::{Result, StepFn, Xtask};
 
 /// Flash budget of the flight image \[B\]: 32 KiB.
 pub(crate) const FLASH_BUDGET: u64 = 32 * 1024;
@@ -36,50 +40,202 @@ pub(crate) fn flash_and_ram(sections: &str) -> Result<(u64, u64)> {
     Ok((flash, ram))
 }
 
+/// CPU-time budget of one `calibrate` or `verify` run on a day at 100 Hz \[s\].
+pub(crate) const DAY_CPU_BUDGET_S: f64 = 30.0;
+
+/// Peak-memory budget of one `calibrate` or `verify` run on a day at 100 Hz \[MB\].
+pub(crate) const DAY_RSS_BUDGET_MB: f64 = 500.0;
+
+/// The day's runs: what is measured and its arguments after `bins-cal` (`DAY` stands for the
+/// recording, `DIR` for the directory of the outputs, `ROOT` for the repository). `verify`
+/// with a calibration that has thermal dynamics runs them over every row. The day's dwells are at −39.5 and
+/// +70.4 °C, so T0 is taken at the cold one; `--max-rate-c-per-min 0.2` keeps the first
+/// cooling (a slow −0.34 °C/min on average) out of the free fit's static intervals.
+pub(crate) const DAY_RUNS: [(&str, &[&str]); 5] = [
+    (
+        "calibrate (static tilter)",
+        &["calibrate", "--tilter", "DAY", "--model", "poly:1", "--t0=-39.5", "-o", "DIR/static.toml"],
+    ),
+    (
+        "calibrate --free",
+        &[
+            "calibrate",
+            "--free",
+            "--tilter",
+            "DAY",
+            "--model",
+            "poly:1",
+            "--t0=-39.5",
+            "--max-rate-c-per-min",
+            "0.2",
+            "-o",
+            "DIR/free.toml",
+        ],
+    ),
+    (
+        "calibrate --dynamics identify",
+        &[
+            "calibrate",
+            "--tilter",
+            "DAY",
+            "--model",
+            "poly:1",
+            "--t0=-39.5",
+            "--dynamics",
+            "identify",
+            "-o",
+            "DIR/dyn.toml",
+        ],
+    ),
+    ("verify", &["verify", "--check", "DAY", "--calib", "DIR/static.toml", "-o", "DIR/verify"]),
+    (
+        "verify with thermal dynamics",
+        &[
+            "verify",
+            "--check",
+            "DAY",
+            "--calib",
+            "ROOT/calibrations/paper-two-range-dynamics.toml",
+            "-o",
+            "DIR/verify-dyn",
+        ],
+    ),
+];
+
+/// A bench step: its number, its title and what it runs.
+type BenchStep = (usize, &'static str, StepFn);
+
 impl Xtask {
-    /// `cargo xtask bench`: instructions per sample of each method/model case, the worst
-    /// single step and the step's stack high-water mark (the `bench` firmware in QEMU,
+    /// `cargo xtask bench [--only N]`: instructions per sample of each method/model case, the
+    /// worst single step and the step's stack high-water mark (the `bench` firmware in QEMU,
     /// `-icount shift=0`), flash and static RAM of the replay firmware, the link-check image
-    /// and the flight image (`llvm-size`), the host's samples per second (criterion), and the
-    /// diagnosis's wall time on 30 000- and 260 000-row pairs against its budgets.
-    pub(crate) fn bench(&mut self) -> bool {
-        let started = Instant::now();
-        let ok = self.step(1, "toolchain", Xtask::setup_toolchain)
-            && self.step(2, "build", |x| {
-                x.build_firmware()?;
-                let args = ["--release", "--features", "firmware-log", "--bin", "bench"];
-                x.run(x.thumb_cargo("build", args)?)
-            })
-            && self.step(3, "instructions per sample (QEMU)", |x| x.run_qemu_in(&x.elf("bench"), &x.root))
-            && self.step(4, "size of the replay firmware, the link-check image and the flight image", |x| {
-                x.build_linkcheck()?;
-                let mut c = x.command("llvm-size");
-                c.arg(x.elf("replay")).arg(x.elf("linkcheck")).arg(x.elf("flight"));
-                x.run(c)?;
-                let mut c = x.command("llvm-size");
-                c.arg("-A").arg(x.elf("flight"));
-                println!("$ {}", show(&c));
-                let sections = output(&mut c)?;
-                print!("{sections}");
-                let (flash, ram) = flash_and_ram(&sections)?;
-                let verdict = |used: u64, budget: u64| if used <= budget { "met" } else { "MISSED" };
-                println!("flight image: flash {flash} B of {FLASH_BUDGET} ({})", verdict(flash, FLASH_BUDGET));
-                println!("flight image: static RAM {ram} B of {RAM_BUDGET} ({})", verdict(ram, RAM_BUDGET));
-                if flash > FLASH_BUDGET || ram > RAM_BUDGET {
-                    return Err("the flight image is over its flash or RAM budget".into());
+    /// and the flight image (`llvm-size`), the host's samples per second (criterion), the
+    /// diagnosis's wall time on 30 000- and 260 000-row pairs against its budgets, and the CPU
+    /// time and peak memory of `calibrate` and `verify` on a simulated day at 100 Hz against
+    /// theirs. `--only N` runs step N alone (the steps after 2 need the toolchain of step 1 only
+    /// for the firmware).
+    pub(crate) fn bench(&mut self, args: &[String]) -> bool {
+        let only = match args {
+            [] => None,
+            [flag, n] if flag == "--only" => match n.parse::<usize>() {
+                Ok(n) if (1..=BENCH_STEPS.len()).contains(&n) => Some(n),
+                _ => {
+                    eprintln!("cargo xtask bench --only N: N is a step number, 1 to {}", BENCH_STEPS.len());
+                    return false;
                 }
-                Ok(())
-            })
-            && self.step(5, "host samples per second (criterion)", |x| {
-                x.run(x.host_cargo(["bench", "-p", "host-tests", "--bench", "throughput"]))
-            })
-            && self.step(6, "bins-cal diagnose: 30 000 rows < 2 s, 260 000 rows < 10 s (release, one thread)", |x| {
-                x.run(x.host_cargo(["run", "--release", "-q", "-p", "bins-cal", "--example", "diagnose_speed"]))
-            });
+            },
+            _ => {
+                eprintln!("usage: cargo xtask bench [--only N]");
+                return false;
+            }
+        };
+        let started = Instant::now();
+        let mut ok = true;
+        for &(n, name, f) in BENCH_STEPS.iter().filter(|s| only.is_none_or(|k| k == s.0)) {
+            ok = self.step(n, name, f);
+            if !ok {
+                break;
+            }
+        }
         self.summary(started);
         ok
     }
+
+    /// Bench step 7: simulates a day at 100 Hz (8.64 M rows, 1.17 GB) into a temporary directory
+    /// and measures each of [`DAY_RUNS`] (release, one thread): CPU time and peak resident set
+    /// of the child against [`DAY_CPU_BUDGET_S`] and [`DAY_RSS_BUDGET_MB`].
+    fn bench_day(&mut self) -> Result {
+        self.run(self.host_cargo(["build", "--release", "-q", "-p", "bins-cal"]))?;
+        let bin = self.root.join("target/release/bins-cal");
+        let dir = std::env::temp_dir().join(format!("bins-cal-bench-day-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let r = self.bench_day_in(&bin, &dir);
+        let _ = std::fs::remove_dir_all(&dir);
+        r
+    }
+
+    fn bench_day_in(&self, bin: &Path, dir: &Path) -> Result {
+        let day = dir.join("day.csv");
+        let scenario = self.root.join("scenarios/day-100hz.toml");
+        let mut c = self.command(bin);
+        c.arg("simulate").arg(&scenario).arg("-o").arg(&day).arg("--quiet");
+        let sim = measured(c)?;
+        println!("simulate: {:.1} s CPU, {:.1} MB peak ({:.1} s wall)", sim.cpu_s, sim.peak_rss_mb, sim.wall_s);
+        let mut missed = Vec::new();
+        let mut table = Vec::new();
+        for (what, args) in DAY_RUNS {
+            let mut c = self.command(bin);
+            for a in args {
+                let a = a
+                    .replace("DAY", &day.to_string_lossy())
+                    .replace("DIR", &dir.to_string_lossy())
+                    .replace("ROOT", &self.root.to_string_lossy());
+                c.arg(a);
+            }
+            c.stdout(Stdio::null());
+            let u = measured(c)?;
+            let met = u.cpu_s < DAY_CPU_BUDGET_S && u.peak_rss_mb < DAY_RSS_BUDGET_MB;
+            if !met {
+                missed.push(what);
+            }
+            table.push(format!(
+                "  {what:<30} {:>7.1} s CPU {:>8.1} MB peak {:>7.1} s wall  {}",
+                u.cpu_s,
+                u.peak_rss_mb,
+                u.wall_s,
+                if met { "met" } else { "MISSED" }
+            ));
+        }
+        println!(
+            "a day at 100 Hz (8.64 M rows), budgets < {DAY_CPU_BUDGET_S} s CPU and < {DAY_RSS_BUDGET_MB} MB peak each:"
+        );
+        for l in &table {
+            println!("{l}");
+        }
+        if missed.is_empty() { Ok(()) } else { Err(format!("over budget: {}", missed.join(", "))) }
+    }
 }
+
+/// The bench's steps in order.
+const BENCH_STEPS: [BenchStep; 7] = [
+    (1, "toolchain", Xtask::setup_toolchain),
+    (2, "build", |x| {
+        x.build_firmware()?;
+        let args = ["--release", "--features", "firmware-log", "--bin", "bench"];
+        x.run(x.thumb_cargo("build", args)?)
+    }),
+    (3, "instructions per sample (QEMU)", |x| x.run_qemu_in(&x.elf("bench"), &x.root)),
+    (4, "size of the replay firmware, the link-check image and the flight image", |x| {
+        x.build_linkcheck()?;
+        let mut c = x.command("llvm-size");
+        c.arg(x.elf("replay")).arg(x.elf("linkcheck")).arg(x.elf("flight"));
+        x.run(c)?;
+        let mut c = x.command("llvm-size");
+        c.arg("-A").arg(x.elf("flight"));
+        println!("$ {}", show(&c));
+        let sections = output(&mut c)?;
+        print!("{sections}");
+        let (flash, ram) = flash_and_ram(&sections)?;
+        let verdict = |used: u64, budget: u64| if used <= budget { "met" } else { "MISSED" };
+        println!("flight image: flash {flash} B of {FLASH_BUDGET} ({})", verdict(flash, FLASH_BUDGET));
+        println!("flight image: static RAM {ram} B of {RAM_BUDGET} ({})", verdict(ram, RAM_BUDGET));
+        if flash > FLASH_BUDGET || ram > RAM_BUDGET {
+            return Err("the flight image is over its flash or RAM budget".into());
+        }
+        Ok(())
+    }),
+    (5, "host samples per second (criterion)", |x| {
+        x.run(x.host_cargo(["bench", "-p", "host-tests", "--bench", "throughput"]))
+    }),
+    (6, "bins-cal diagnose: 30 000 rows < 2 s, 260 000 rows < 10 s (release, one thread)", |x| {
+        x.run(x.host_cargo(["run", "--release", "-q", "-p", "bins-cal", "--example", "diagnose_speed"]))
+    }),
+    (
+        7,
+        "bins-cal calibrate (static, --free, --dynamics identify) and verify on a day at 100 Hz: < 30 s CPU, < 500 MB peak each (release, one thread)",
+        Xtask::bench_day,
+    ),
+];
 
 #[cfg(test)]
 mod tests {

@@ -8,13 +8,14 @@
 //!
 //! `main` only dispatches; each concern has its module: [`task`] (steps and their timing),
 //! [`process`] (child processes), [`toolchain`] (host and thumb cargo, firmware builds),
-//! [`qemu`] (runs in QEMU, the replay), [`test`](mod@test), [`bench`](mod@bench), [`demo`], [`verify_csv`] (`bins-cal
+//! [`qemu`] (runs in QEMU, the replay), [`rusage`] (one child's CPU time and peak memory), [`test`](mod@test), [`bench`](mod@bench), [`demo`], [`verify_csv`] (`bins-cal
 //! verify`'s table, by column name).
 
 mod bench;
 mod demo;
 mod process;
 mod qemu;
+mod rusage;
 mod task;
 mod test;
 mod toolchain;
@@ -31,11 +32,11 @@ fn main() -> ExitCode {
         Some("test") => x.test(),
         Some("demo") => x.demo(),
         Some("replay") => x.replay(args.get(1..).unwrap_or(&[])),
-        Some("bench") => x.bench(),
+        Some("bench") => x.bench(args.get(1..).unwrap_or(&[])),
         _ => {
             eprintln!("usage: cargo xtask <test|demo|replay|bench>");
             eprintln!(
-                "  bench  instructions per sample in QEMU, stack depth, flash/RAM of the firmware images, host samples per second"
+                "  bench [--only N]  instructions per sample in QEMU, stack depth, flash/RAM of the firmware images, host samples per second, the diagnosis's speed, calibrate/verify on a day at 100 Hz"
             );
             eprintln!(
                 "  test   fmt, clippy, doc, host tests, thumb clippy, vectors, firmware build + link check, flight image and firmware in QEMU"

@@ -13,6 +13,7 @@
 //! | [`memmap`] | the CALIB region's address, read from `memory.x` |
 //! | [`fsio`] | writing outputs atomically (temporary file + rename) |
 //! | [`recording`] | recording format v1: streaming reader and writer |
+//! | [`progress`] | a pass over a recording with a progress bar by bytes read |
 //! | [`sim`] | the simulator: the unit's truth model on its rigs, scenario files |
 #![deny(missing_docs)]
 
@@ -25,6 +26,7 @@ pub mod fsio;
 pub mod ihex;
 pub mod memmap;
 pub mod numarg;
+pub mod progress;
 pub mod recording;
 pub mod sim;
 

@@ -28,7 +28,7 @@ struct Fixture {
 }
 
 const LONG: &str = "description = \"endless\"\n[recording]\nrate_Hz = 1000.0\n[unit]\npreset = \"paper\"\n\
-                    [[step]]\nkind = \"hold\"\nposition = \"TP3\"\ndwell_s = 1.0e6\n";
+                    [[step]]\nkind = \"hold\"\nposition = \"TP3\"\ndwell_s = 2.0e5\n";
 const TINY: &str = "description = \"tiny\"\n[recording]\nrate_Hz = 10.0\n[unit]\npreset = \"paper\"\n\
                     [[step]]\nkind = \"hold\"\nposition = \"TP3\"\ndwell_s = 1.0\n";
 

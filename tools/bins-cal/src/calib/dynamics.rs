@@ -35,7 +35,8 @@
 use super::segments::{self, Options};
 use crate::diagnose::mech::{lagged, play};
 use crate::diagnose::noise::ls_sse;
-use crate::recording::{Row, read_all};
+use crate::progress::Pass;
+use crate::recording::Row;
 use anyhow::{anyhow, bail};
 use bins_comp::dynamics::{DynamicsState, Effective, ThermalDynamics};
 use bins_comp::temperature::MAX_POLY_ORDER;
@@ -45,7 +46,9 @@ use std::path::Path;
 /// Scale of ΔT in the regressors [°C] (conditioning only).
 const DT_SCALE: f64 = 30.0;
 
-/// One recording, every row, with the dwells that enter the fit.
+/// One recording: the time and temperature of every row (what the lag and play run over),
+/// and the dwells' blocks that enter the fit with their signals' means. The signals of the
+/// rows are not kept: 16 bytes per row of the recording are held.
 #[derive(Clone, Debug)]
 pub struct Series {
     /// The file (for messages).
@@ -54,20 +57,29 @@ pub struct Series {
     pub t_s: Vec<f64>,
     /// `temp_C` of every row (the thermistor).
     pub temp_c: Vec<f64>,
-    /// Signals of every row \[V\].
-    pub u_v: Vec<[f64; 3]>,
     /// The dwells' blocks: row range `[from, to)` and the reference specific force \[g\].
     pub blocks: Vec<(usize, usize, [f64; 3])>,
+    /// Per block, its signals' mean \[V\] two ways: `[0]` the sum over its rows divided by
+    /// their number, `[1]` the sum of each row divided by the number (the two fits' sums).
+    pub block_u_v: Vec<[[f64; 3]; 2]>,
     /// A block whose temperature moves faster than this [°C/min] is in a ramp.
     pub max_rate_c_per_min: f64,
 }
 
 impl Series {
-    /// Reads a recording and finds its dwells (labels starting with `pos_prefix`), ramping or
-    /// not ([`from_rows`](Self::from_rows)). Errors name the file.
+    /// Reads a recording in one pass (a progress bar on standard error) and finds its dwells
+    /// (labels starting with `pos_prefix`), ramping or not ([`from_rows`](Self::from_rows)).
+    /// Holds the time and temperature of every row and the rows of the dwell being read.
+    /// Errors name the file.
     pub fn read(path: &Path, opt: &Options, pos_prefix: &str, block_s: f64) -> anyhow::Result<Series> {
-        let (_, rows) = read_all(path).map_err(|e| anyhow!("{e}"))?;
-        Self::from_rows(&path.display().to_string(), &rows, opt, pos_prefix, block_s)
+        let name = path.display().to_string();
+        let mut pass = Pass::open(path, "dwells").map_err(|e| anyhow!("{e}"))?;
+        let mut b = Builder::new(&name, opt, pos_prefix, block_s);
+        let mut row = Row::default();
+        while pass.read_row(&mut row).map_err(|e| anyhow!("{e}"))? {
+            b.push(&row)?;
+        }
+        b.finish()
     }
 
     /// The dwells of `rows`: runs of consecutive rows with the same `pos` label (starting with
@@ -82,69 +94,11 @@ impl Series {
         pos_prefix: &str,
         block_s: f64,
     ) -> anyhow::Result<Series> {
-        if let Some(r) = rows.iter().find(|r| !r.temp_c.is_finite()) {
-            bail!("{name}: line {}: no `temp_C`: the dynamics need the temperature of every row", r.line);
+        let mut b = Builder::new(name, opt, pos_prefix, block_s);
+        for r in rows {
+            b.push(r)?;
         }
-        let t_s: Vec<f64> = rows.iter().map(|r| r.t_s).collect();
-        // Runs: (first row, end row, f).
-        let mut runs: Vec<(usize, usize, [f64; 3])> = Vec::new();
-        let mut k = 0;
-        while k < rows.len() {
-            let key = |r: &Row| match (&r.pos, r.reference_f_g()) {
-                (Some(p), Some(f)) if p.starts_with(pos_prefix) && !p.is_empty() => Some((p.clone(), f)),
-                _ => None,
-            };
-            let Some(first) = key(&rows[k]) else {
-                k += 1;
-                continue;
-            };
-            let mut e = k + 1;
-            while e < rows.len() && key(&rows[e]).as_ref() == Some(&first) {
-                e += 1;
-            }
-            runs.push((k, e, first.1));
-            k = e;
-        }
-        let mut blocks = Vec::new();
-        for (a, b, f) in runs {
-            let run: Vec<segments::RunRow> = (a..b).map(|k| (rows[k].t_s, rows[k].u_v, rows[k].temp_c)).collect();
-            let kept = segments::after_settling(&run, opt);
-            if kept.len() < 3 {
-                continue;
-            }
-            let n = kept.len() as f64;
-            let stationary = (0..3).all(|i| {
-                let m = kept.iter().map(|r| r.1[i]).sum::<f64>() / n;
-                (kept.iter().map(|r| (r.1[i] - m).powi(2)).sum::<f64>() / n).sqrt() <= opt.max_std_v
-            });
-            if !stationary {
-                continue;
-            }
-            let a = a + (run.len() - kept.len());
-            let mut k = a;
-            while k < b {
-                let mut e = k + 1;
-                while e < b && t_s[e] - t_s[k] < block_s {
-                    e += 1;
-                }
-                blocks.push((k, e, f));
-                k = e;
-            }
-        }
-        if blocks.is_empty() {
-            bail!(
-                "{name}: no stationary dwell labelled `{pos_prefix}…` with a known specific force (signal std ≤ {} V)",
-                opt.max_std_v
-            );
-        }
-        Ok(Series {
-            name: name.to_string(),
-            t_s,
-            temp_c: rows.iter().map(|r| r.temp_c).collect(),
-            u_v: rows.iter().map(|r| r.u_v).collect(),
-            blocks,
-            max_rate_c_per_min: opt.max_rate_c_per_min,
-        })
+        b.finish()
     }
 
     /// The series keeping only the blocks whose rows lie in `[from_s, to_s)` (the rows
@@ -157,7 +111,14 @@ impl Series {
     /// stay).
     pub fn keep(&self, keep: impl Fn(f64, f64) -> bool) -> Series {
         let mut s = self.clone();
-        s.blocks.retain(|b| keep(self.t_s[b.0], self.t_s[b.1 - 1]));
+        let (blocks, means) = self
+            .blocks
+            .iter()
+            .zip(&self.block_u_v)
+            .filter(|(b, _)| keep(self.t_s[b.0], self.t_s[b.1 - 1]))
+            .map(|(b, m)| (*b, *m))
+            .unzip();
+        (s.blocks, s.block_u_v) = (blocks, means);
         s
     }
 
@@ -190,6 +151,128 @@ impl Series {
         }
         let m = d.len() / 2;
         *d.select_nth_unstable_by(m, f64::total_cmp).1
+    }
+}
+
+/// Builds a [`Series`] from rows given one at a time: the current dwell's rows are held until
+/// it ends, then cut into blocks whose signal means are kept.
+struct Builder<'a> {
+    name: &'a str,
+    opt: &'a Options,
+    pos_prefix: &'a str,
+    block_s: f64,
+    t_s: Vec<f64>,
+    temp_c: Vec<f64>,
+    blocks: Vec<(usize, usize, [f64; 3])>,
+    block_u_v: Vec<[[f64; 3]; 2]>,
+    /// The dwell being read: its label and force, its first row, its rows.
+    run: Option<(String, [f64; 3], usize)>,
+    run_rows: Vec<segments::RunRow>,
+}
+
+impl<'a> Builder<'a> {
+    fn new(name: &'a str, opt: &'a Options, pos_prefix: &'a str, block_s: f64) -> Builder<'a> {
+        Builder {
+            name,
+            opt,
+            pos_prefix,
+            block_s,
+            t_s: Vec::new(),
+            temp_c: Vec::new(),
+            blocks: Vec::new(),
+            block_u_v: Vec::new(),
+            run: None,
+            run_rows: Vec::new(),
+        }
+    }
+
+    fn push(&mut self, r: &Row) -> anyhow::Result<()> {
+        if !r.temp_c.is_finite() {
+            bail!("{}: line {}: no `temp_C`: the dynamics need the temperature of every row", self.name, r.line);
+        }
+        let k = self.t_s.len();
+        self.t_s.push(r.t_s);
+        self.temp_c.push(r.temp_c);
+        let key = match (&r.pos, r.reference_f_g()) {
+            (Some(p), Some(f)) if p.starts_with(self.pos_prefix) && !p.is_empty() => Some((p, f)),
+            _ => None,
+        };
+        let same = match (&self.run, key) {
+            (Some((p, f, _)), Some((q, g))) => p == q && *f == g,
+            _ => false,
+        };
+        if !same {
+            self.close_run();
+            if let Some((p, f)) = key {
+                self.run = Some((p.clone(), f, k));
+            }
+        }
+        if self.run.is_some() {
+            self.run_rows.push((r.t_s, r.u_v, r.temp_c));
+        }
+        Ok(())
+    }
+
+    /// The dwell read so far, less its settling margin, cut into blocks if stationary.
+    fn close_run(&mut self) {
+        let Some((_, f, a)) = self.run.take() else { return };
+        let run = std::mem::take(&mut self.run_rows);
+        let b = a + run.len();
+        let kept = segments::after_settling(&run, self.opt);
+        if kept.len() < 3 {
+            return;
+        }
+        let n = kept.len() as f64;
+        let stationary = (0..3).all(|i| {
+            let m = kept.iter().map(|r| r.1[i]).sum::<f64>() / n;
+            (kept.iter().map(|r| (r.1[i] - m).powi(2)).sum::<f64>() / n).sqrt() <= self.opt.max_std_v
+        });
+        if !stationary {
+            return;
+        }
+        let a = a + (run.len() - kept.len());
+        let first = b - run.len();
+        let mut k = a;
+        while k < b {
+            let mut e = k + 1;
+            while e < b && self.t_s[e] - self.t_s[k] < self.block_s {
+                e += 1;
+            }
+            let rows = &run[k - first..e - first];
+            let n = rows.len() as f64;
+            let (mut whole, mut parts) = ([0.0; 3], [0.0; 3]);
+            for i in 0..3 {
+                whole[i] = rows.iter().map(|r| r.1[i]).sum::<f64>() / n;
+            }
+            for r in rows {
+                for i in 0..3 {
+                    parts[i] += r.1[i] / n;
+                }
+            }
+            self.blocks.push((k, e, f));
+            self.block_u_v.push([whole, parts]);
+            k = e;
+        }
+    }
+
+    fn finish(mut self) -> anyhow::Result<Series> {
+        self.close_run();
+        if self.blocks.is_empty() {
+            bail!(
+                "{}: no stationary dwell labelled `{}…` with a known specific force (signal std ≤ {} V)",
+                self.name,
+                self.pos_prefix,
+                self.opt.max_std_v
+            );
+        }
+        Ok(Series {
+            name: self.name.to_string(),
+            t_s: self.t_s,
+            temp_c: self.temp_c,
+            blocks: self.blocks,
+            block_u_v: self.block_u_v,
+            max_rate_c_per_min: self.opt.max_rate_c_per_min,
+        })
     }
 }
 
@@ -302,10 +385,11 @@ pub fn fit_at(series: &[Series], th: &Theta, req: &Request, scale_v_per_g: [f64;
     let (mut tmin, mut tmax) = (req.t0_c, req.t0_c);
     for s in series {
         let (te, d) = effective(s, th);
-        for &(a, b, f) in &s.blocks {
+        for (&(a, b, f), means) in s.blocks.iter().zip(&s.block_u_v) {
             let n = (b - a) as f64;
             let mut pw = vec![0.0; order + 1];
-            let (mut dm, mut um) = (0.0, [0.0; 3]);
+            let mut dm = 0.0;
+            let um = means[1];
             for k in a..b {
                 tmin = tmin.min(te[k]);
                 tmax = tmax.max(te[k]);
@@ -316,9 +400,6 @@ pub fn fit_at(series: &[Series], th: &Theta, req: &Request, scale_v_per_g: [f64;
                     xp *= x;
                 }
                 dm += d[k] / n;
-                for i in 0..3 {
-                    um[i] += s.u_v[k][i] / n;
-                }
             }
             for (c, p) in cols_base.iter_mut().zip(&pw) {
                 c.push(*p);
@@ -690,10 +771,9 @@ impl<'a> Blocks<'a> {
             let t_first = s.t_s.first().copied().unwrap_or(0.0);
             let len = (s.duration_s() / CHUNKS_PER_RECORDING).max(CHUNK_MIN_S);
             let mut last = 0;
-            for &(a, b, fb) in &s.blocks {
-                let n = (b - a) as f64;
+            for (&(a, _, fb), means) in s.blocks.iter().zip(&s.block_u_v) {
                 for i in 0..3 {
-                    let u = (a..b).map(|k| s.u_v[k][i]).sum::<f64>() / n;
+                    let u = means[0][i];
                     y[i].push(u - (0..3).filter(|&j| !var[j]).map(|j| req.k_prior[i][j] * fb[j]).sum::<f64>());
                 }
                 f.push(fb);
@@ -1185,17 +1265,52 @@ fn invert(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
 /// power-on from `power_s`, else from the first row): the effective temperature and bias-play
 /// fraction of every row, as the firmware computes them (in f64).
 pub fn run_core(rows: &[crate::recording::Row], d: &ThermalDynamics<f64>) -> Vec<Effective<f64>> {
-    let mut st = DynamicsState::new();
-    let t_first = rows.first().map_or(0.0, |r| r.t_s);
-    let mut prev: Option<f64> = None;
-    rows.iter()
-        .map(|r| {
-            let dt = prev.map_or(0.0, |p| r.t_s - p);
-            prev = Some(r.t_s);
-            let t_on = r.power_s.unwrap_or(r.t_s - t_first);
-            d.step(&mut st, r.temp_c, dt, t_on)
-        })
-        .collect()
+    let mut core = CoreRun::new(d);
+    rows.iter().map(|r| core.step(r)).collect()
+}
+
+/// [`run_core`] over a recording read row by row (a progress bar on standard error), keeping
+/// only the rows whose `t_s` `keep` accepts: their times and effective values. Holds those
+/// rows, not the recording. Errors name the file.
+pub fn run_core_kept(
+    path: &Path,
+    d: &ThermalDynamics<f64>,
+    keep: impl Fn(f64) -> bool,
+) -> anyhow::Result<(Vec<f64>, Vec<Effective<f64>>)> {
+    let mut pass = Pass::open(path, "dynamics").map_err(|e| anyhow!("{e}"))?;
+    let mut core = CoreRun::new(d);
+    let (mut t, mut e) = (Vec::new(), Vec::new());
+    let mut row = Row::default();
+    while pass.read_row(&mut row).map_err(|e| anyhow!("{e}"))? {
+        let eff = core.step(&row);
+        if keep(row.t_s) {
+            t.push(row.t_s);
+            e.push(eff);
+        }
+    }
+    Ok((t, e))
+}
+
+/// The core's dynamics stepped one row at a time.
+struct CoreRun<'a> {
+    d: &'a ThermalDynamics<f64>,
+    st: DynamicsState<f64>,
+    t_first: Option<f64>,
+    prev: Option<f64>,
+}
+
+impl<'a> CoreRun<'a> {
+    fn new(d: &'a ThermalDynamics<f64>) -> CoreRun<'a> {
+        CoreRun { d, st: DynamicsState::new(), t_first: None, prev: None }
+    }
+
+    fn step(&mut self, r: &Row) -> Effective<f64> {
+        let t_first = *self.t_first.get_or_insert(r.t_s);
+        let dt = self.prev.map_or(0.0, |p| r.t_s - p);
+        self.prev = Some(r.t_s);
+        let t_on = r.power_s.unwrap_or(r.t_s - t_first);
+        self.d.step(&mut self.st, r.temp_c, dt, t_on)
+    }
 }
 
 /// The compensated acceleration \[g\] of one sample with the thermal dynamics: the core's

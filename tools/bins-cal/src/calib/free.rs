@@ -38,11 +38,13 @@
 //! makes the tilts smallest) and the directions the holds do not determine.
 
 use super::segments::{Options, RunRow, Segment, temp_rate_c_per_min};
-use crate::recording::{Reader, Row};
+use crate::progress::Pass;
+use crate::recording::Row;
 use anyhow::{anyhow, bail};
 use bins_comp::Constants;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use std::collections::VecDeque;
 use std::path::Path;
 
 /// How static intervals are found.
@@ -70,18 +72,28 @@ impl Default for StaticOptions {
 }
 
 /// The static intervals of a recording, as [`Segment`]s labelled `S1`, `S2`, … in time order
-/// (`f_g` is NaN: the orientation is not known). Intervals shorter than `min_static_s` are
-/// not returned; an interval whose temperature is not settled (`seg.max_rate_c_per_min`) is
-/// returned rejected. Errors name the file: unreadable, shorter than the initial period, an
-/// initial period without variance.
+/// (`f_g` is NaN: the orientation is not known; `rows` is empty, `n_rows` counts them).
+/// Intervals shorter than `min_static_s` are not returned; an interval whose temperature is
+/// not settled (`seg.max_rate_c_per_min`) is returned rejected. Errors name the file:
+/// unreadable, shorter than the initial period, an initial period without variance.
+///
+/// Two passes over the file, each with a progress bar: the first counts the rows and takes
+/// the initial period's variance and the mean sample period (which sets the window), the
+/// second slides the window. What is held: the window's rows and the rows of the static run
+/// being read (the longest static run, not the file).
 pub fn find_static(path: &Path, opt: &StaticOptions, seg: &Options) -> anyhow::Result<Vec<Segment>> {
-    let mut reader = Reader::open(path).map_err(|e| anyhow!("{e}"))?;
-    let mut rows: Vec<RunRow> = Vec::new();
+    let mut survey = Survey::new(opt.init_s);
     let mut row = Row::default();
-    while reader.read_row(&mut row).map_err(|e| anyhow!("{e}"))? {
-        rows.push((row.t_s, row.u_v, row.temp_c));
+    let mut pass = Pass::open(path, "noise level").map_err(|e| anyhow!("{e}"))?;
+    while pass.read_row(&mut row).map_err(|e| anyhow!("{e}"))? {
+        survey.push(&(row.t_s, row.u_v, row.temp_c));
     }
-    static_intervals(path, &rows, opt, seg)
+    let mut window = survey.window(path, opt, seg)?;
+    let mut pass = Pass::open(path, "static intervals").map_err(|e| anyhow!("{e}"))?;
+    while pass.read_row(&mut row).map_err(|e| anyhow!("{e}"))? {
+        window.push((row.t_s, row.u_v, row.temp_c));
+    }
+    Ok(window.finish())
 }
 
 /// [`find_static`] on rows already read: (`t_s`, `u_v`, `temp_c`).
@@ -91,65 +103,175 @@ pub fn static_intervals(
     opt: &StaticOptions,
     seg: &Options,
 ) -> anyhow::Result<Vec<Segment>> {
-    let n = rows.len();
-    let Some(first) = rows.first() else { bail!("{}: no rows", path.display()) };
-    let n_init = rows.iter().take_while(|r| r.0 < first.0 + opt.init_s).count();
-    if n_init < 10 || rows.last().is_none_or(|r| r.0 < first.0 + opt.init_s) {
-        bail!(
-            "{}: the recording is shorter than the initial still period (--init-s {} s) or has fewer than 10 rows in it",
-            path.display(),
-            opt.init_s
-        );
+    let mut survey = Survey::new(opt.init_s);
+    for r in rows {
+        survey.push(r);
     }
-    // Prefix sums of u and u² per axis.
-    let mut s1 = vec![[0.0f64; 3]; n + 1];
-    let mut s2 = vec![[0.0f64; 3]; n + 1];
-    for (k, r) in rows.iter().enumerate() {
-        for i in 0..3 {
-            s1[k + 1][i] = s1[k][i] + r.1[i];
-            s2[k + 1][i] = s2[k][i] + r.1[i] * r.1[i];
+    let mut window = survey.window(path, opt, seg)?;
+    for r in rows {
+        window.push(*r);
+    }
+    Ok(window.finish())
+}
+
+/// The first pass: the row count, the first and last time, and the sums of `u` and `u²` per
+/// axis over the initial still period (the rows before `t_first + init_s`).
+struct Survey {
+    init_s: f64,
+    n: usize,
+    t_first: f64,
+    t_last: f64,
+    n_init: usize,
+    in_init: bool,
+    s1: [f64; 3],
+    s2: [f64; 3],
+}
+
+impl Survey {
+    fn new(init_s: f64) -> Survey {
+        Survey { init_s, n: 0, t_first: 0.0, t_last: 0.0, n_init: 0, in_init: true, s1: [0.0; 3], s2: [0.0; 3] }
+    }
+
+    fn push(&mut self, r: &RunRow) {
+        if self.n == 0 {
+            self.t_first = r.0;
+        }
+        self.n += 1;
+        self.t_last = r.0;
+        self.in_init &= r.0 < self.t_first + self.init_s;
+        if self.in_init {
+            self.n_init += 1;
+            for i in 0..3 {
+                self.s1[i] += r.1[i];
+                self.s2[i] += r.1[i] * r.1[i];
+            }
         }
     }
-    let var = |a: usize, b: usize| -> f64 {
-        let m = (b - a) as f64;
-        (0..3).map(|i| ((s2[b][i] - s2[a][i]) - (s1[b][i] - s1[a][i]).powi(2) / m) / m).sum::<f64>().max(0.0)
-    };
-    let v_init = var(0, n_init);
-    if !(v_init > 0.0) {
-        bail!(
-            "{}: the signals do not vary at all in the initial still period ({} s): no noise level to compare with",
-            path.display(),
-            opt.init_s
-        );
-    }
-    let limit = opt.static_threshold * v_init;
-    // Centred window of ±half rows (by time: the mean sample period).
-    let dt = (rows[n - 1].0 - first.0) / (n - 1).max(1) as f64;
-    let half = ((0.5 * opt.static_window_s / dt).round() as usize).max(1);
-    let is_static: Vec<bool> = (0..n)
-        .map(|k| {
-            let (a, b) = (k.saturating_sub(half), (k + half + 1).min(n));
-            var(a, b) <= limit
+
+    /// The second pass's state; errors name the file: no rows, too short, a still period
+    /// without variance.
+    fn window<'a>(&self, path: &'a Path, opt: &StaticOptions, seg: &'a Options) -> anyhow::Result<Window<'a>> {
+        let n = self.n;
+        if n == 0 {
+            bail!("{}: no rows", path.display());
+        }
+        if self.n_init < 10 || self.t_last < self.t_first + opt.init_s {
+            bail!(
+                "{}: the recording is shorter than the initial still period (--init-s {} s) or has fewer than 10 rows in it",
+                path.display(),
+                opt.init_s
+            );
+        }
+        let v_init = var_of(&[[0.0; 3], [0.0; 3]], &[self.s1, self.s2], self.n_init);
+        if !(v_init > 0.0) {
+            bail!(
+                "{}: the signals do not vary at all in the initial still period ({} s): no noise level to compare with",
+                path.display(),
+                opt.init_s
+            );
+        }
+        // Centred window of ±half rows (by time: the mean sample period).
+        let dt = (self.t_last - self.t_first) / (n - 1).max(1) as f64;
+        let half = ((0.5 * opt.static_window_s / dt).round() as usize).max(1);
+        Ok(Window {
+            path,
+            seg,
+            min_static_s: opt.min_static_s,
+            limit: opt.static_threshold * v_init,
+            n,
+            half,
+            prefix: VecDeque::from([[[0.0; 3]; 2]]),
+            prefix_first: 0,
+            ahead: VecDeque::new(),
+            read: 0,
+            decided: 0,
+            run: Vec::new(),
+            out: Vec::new(),
         })
-        .collect();
-    let mut out = Vec::new();
-    let mut k = 0;
-    while k < n {
-        if !is_static[k] {
-            k += 1;
-            continue;
-        }
-        let a = k;
-        while k < n && is_static[k] {
-            k += 1;
-        }
-        let run = &rows[a..k];
-        if run[run.len() - 1].0 - run[0].0 < opt.min_static_s || run.len() < 3 {
-            continue;
-        }
-        out.push(interval(path, out.len() + 1, run, seg));
     }
-    Ok(out)
+}
+
+/// The variance of the signals summed over the axes between two prefix sums `a` and `b`
+/// (`[Σu, Σu²]` per axis) `m` rows apart.
+fn var_of(a: &[[f64; 3]; 2], b: &[[f64; 3]; 2], m: usize) -> f64 {
+    let m = m as f64;
+    (0..3).map(|i| ((b[1][i] - a[1][i]) - (b[0][i] - a[0][i]).powi(2) / m) / m).sum::<f64>().max(0.0)
+}
+
+/// The second pass: a row is static when the variance over the centred window of ±`half` rows
+/// (cut at the ends of the recording) is at most `limit`; runs of static rows become
+/// intervals. Holds the prefix sums and rows of the window, and the current static run.
+struct Window<'a> {
+    path: &'a Path,
+    seg: &'a Options,
+    min_static_s: f64,
+    limit: f64,
+    n: usize,
+    half: usize,
+    /// Prefix sums `[Σu, Σu²]` of rows `prefix_first..` (entry j: the sums over rows `< j`).
+    prefix: VecDeque<[[f64; 3]; 2]>,
+    prefix_first: usize,
+    /// Rows read whose window is not complete yet.
+    ahead: VecDeque<RunRow>,
+    read: usize,
+    decided: usize,
+    run: Vec<RunRow>,
+    out: Vec<Segment>,
+}
+
+impl Window<'_> {
+    fn push(&mut self, r: RunRow) {
+        let last = self.prefix[self.prefix.len() - 1];
+        let mut next = last;
+        for i in 0..3 {
+            next[0][i] = last[0][i] + r.1[i];
+            next[1][i] = last[1][i] + r.1[i] * r.1[i];
+        }
+        self.prefix.push_back(next);
+        self.ahead.push_back(r);
+        self.read += 1;
+        if self.read > self.half {
+            self.decide((self.decided + self.half + 1).min(self.n));
+        }
+    }
+
+    /// Decides the oldest row waiting, whose window ends before row `b`.
+    fn decide(&mut self, b: usize) {
+        let k = self.decided;
+        let a = k.saturating_sub(self.half);
+        let pa = self.prefix[a - self.prefix_first];
+        let pb = self.prefix[b - self.prefix_first];
+        let still = var_of(&pa, &pb, b - a) <= self.limit;
+        let Some(row) = self.ahead.pop_front() else { return };
+        if still {
+            self.run.push(row);
+        } else {
+            self.close_run();
+        }
+        self.decided += 1;
+        let keep_from = self.decided.saturating_sub(self.half);
+        while self.prefix_first < keep_from {
+            self.prefix.pop_front();
+            self.prefix_first += 1;
+        }
+    }
+
+    fn close_run(&mut self) {
+        let run = std::mem::take(&mut self.run);
+        let Some(last) = run.last() else { return };
+        if last.0 - run[0].0 < self.min_static_s || run.len() < 3 {
+            return;
+        }
+        self.out.push(interval(self.path, self.out.len() + 1, &run, self.seg));
+    }
+
+    fn finish(mut self) -> Vec<Segment> {
+        while self.decided < self.read {
+            self.decide(self.read);
+        }
+        self.close_run();
+        self.out
+    }
 }
 
 fn interval(path: &Path, number: usize, run: &[RunRow], seg: &Options) -> Segment {
@@ -176,7 +298,8 @@ fn interval(path: &Path, number: usize, run: &[RunRow], seg: &Options) -> Segmen
         pos: format!("S{number:02}"),
         f_g: [f64::NAN; 3],
         t_s: (run[0].0, run[run.len() - 1].0),
-        rows: run.iter().map(|r| (r.1, r.2)).collect(),
+        rows: Vec::new(),
+        n_rows: run.len(),
         mean_u_v: mean,
         std_u_v: var.map(f64::sqrt),
         temp_c: temp,

@@ -9,6 +9,7 @@
 //! seconds at the logger's rate is enough. Kept segments are grouped by temperature: sorted
 //! by mean temperature and split where two neighbours differ by more than `temp_tol_c`.
 
+use crate::progress::Pass;
 use crate::recording::{Group, Reader, Row, col, names_of};
 use anyhow::{anyhow, bail};
 use std::path::{Path, PathBuf};
@@ -41,8 +42,11 @@ pub struct Segment {
     pub f_g: [f64; 3],
     /// Time of the first and last row used \[s\].
     pub t_s: (f64, f64),
-    /// Rows used (after the settling margin): signals \[V\] and temperature [°C].
+    /// Rows used (after the settling margin): signals \[V\] and temperature [°C]. Empty for
+    /// the static intervals of `calibrate --free`, whose rows are not kept.
     pub rows: Vec<([f64; 3], f64)>,
+    /// Number of rows used.
+    pub n_rows: usize,
     /// Mean signals \[V\].
     pub mean_u_v: [f64; 3],
     /// Standard deviation of the signals \[V\].
@@ -106,10 +110,10 @@ pub fn missing_reference_columns(path: &Path) -> anyhow::Result<Vec<&'static str
 }
 
 /// The [`Reference`] of a recording: its specific force `fx_g`, `fy_g`, `fz_g` (the
-/// vibration columns are not needed for a dwell's reference). Reads it through; errors name
-/// the file.
+/// vibration columns are not needed for a dwell's reference). Reads it through (a progress
+/// bar on standard error); errors name the file.
 pub fn reference(path: &Path) -> anyhow::Result<Reference> {
-    let mut reader = Reader::open(path).map_err(|e| anyhow!("{e}"))?;
+    let mut reader = Pass::open(path, "reference").map_err(|e| anyhow!("{e}"))?;
     if !FORCE.iter().all(|c| reader.has_column(c)) {
         return Ok(Reference::Absent);
     }
@@ -121,11 +125,12 @@ pub fn reference(path: &Path) -> anyhow::Result<Reference> {
     Ok(if n == 0 { Reference::Empty } else { Reference::Rows(n) })
 }
 
-/// All dwells of a recording (kept and rejected). Errors name the file: unreadable, no `pos`
-/// column, no specific-force columns (named), no row with a known reference and a position
-/// label. The vibration columns are not needed.
+/// All dwells of a recording (kept and rejected), in one pass with a progress bar on standard
+/// error; the rows of the labelled runs are held, not the others. Errors name the file:
+/// unreadable, no `pos` column, no specific-force columns (named), no row with a known
+/// reference and a position label. The vibration columns are not needed.
 pub fn find(path: &Path, opt: &Options) -> anyhow::Result<Vec<Segment>> {
-    let mut reader = Reader::open(path).map_err(|e| anyhow!("{e}"))?;
+    let mut reader = Pass::open(path, "dwells").map_err(|e| anyhow!("{e}"))?;
     if !reader.has_column("pos") {
         bail!("{}: missing column `pos` (the rig position label): cannot find the dwells", path.display());
     }
@@ -216,6 +221,7 @@ fn segment(path: &Path, run: Run, opt: &Options) -> Segment {
         f_g: run.f_g,
         t_s: (rows.first().map_or(t_first, |r| r.0), rows.last().map_or(t_last, |r| r.0)),
         rows: rows.iter().map(|r| (r.1, r.2)).collect(),
+        n_rows: rows.len(),
         mean_u_v: mean,
         std_u_v: std,
         temp_c: temp,

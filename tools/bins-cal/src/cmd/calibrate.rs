@@ -159,7 +159,7 @@ pub fn print_segments(all: &[Segment]) {
             s.pos,
             s.t_s.0,
             s.t_s.1,
-            s.rows.len(),
+            s.n_rows,
             s.temp_c,
             s.rate_c_per_min,
             s.std_u_v.iter().fold(0.0f64, |a, b| a.max(*b)) * 1e3,
@@ -609,7 +609,7 @@ fn refine_tilt(fit: &mut TempFit<'_>, tol_mrad: f64, files: &str) -> anyhow::Res
     let labels: Vec<[f64; 3]> = fit.segments.iter().map(|s| s.f_g).collect();
     let u: Vec<[f64; 3]> = fit.segments.iter().map(|s| s.mean_u_v).collect();
     let se: Vec<[f64; 3]> =
-        fit.segments.iter().map(|s| s.std_u_v.map(|x| x / (s.rows.len().max(1) as f64).sqrt())).collect();
+        fit.segments.iter().map(|s| s.std_u_v.map(|x| x / (s.n_rows.max(1) as f64).sqrt())).collect();
     let t = fit.temp_c;
     let tf = free::fit_tilted(&labels, &u, &se, &fit.constants, tol_mrad * 1e-3)
         .map_err(|e| anyhow!("{files}: at {t:.2} °C: tilt fit: {e}"))?;

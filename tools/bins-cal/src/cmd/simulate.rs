@@ -6,6 +6,7 @@
 //! `bins-cal simulate --follow REAL.csv SCENARIO.toml -o SIM.csv`: instead of the scenario's
 //! rig program, the scenario's unit follows a real recording row for row
 //! ([`Simulation::follow`](bins_cal::sim::Simulation::follow)): a SIM for `bins-cal diagnose`.
+//! REAL is read twice row by row (its columns, then the prediction), never held.
 
 use bins_cal::sim::scenario;
 use std::path::PathBuf;
@@ -38,11 +39,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     let sim = scenario::load(&args.scenario)?;
     if let Some(real) = &args.follow {
-        let (_, rows) = bins_cal::recording::read_all(real)?;
-        if rows.is_empty() {
-            anyhow::bail!("{}: no data row to follow", real.display());
-        }
-        let n = sim.write_follow(&rows, &real.display().to_string(), &args.output)?;
+        let n = sim.write_follow(real, &args.output)?;
         eprintln!(
             "{}: {n} rows predicted for {} by the unit of {}",
             args.output.display(),

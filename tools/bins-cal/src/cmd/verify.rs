@@ -17,7 +17,7 @@ use bins_cal::calib::dynamics;
 use bins_cal::calib::segments::{self, Segment};
 use bins_cal::diagnose::plot::drawing_error;
 use bins_cal::fsio;
-use bins_cal::recording::{Table, read_all};
+use bins_cal::recording::Table;
 use bins_comp::dynamics::Effective;
 use bins_comp::{Calibration, CalibrationParams, Form, Method, Status};
 use std::fmt::Write as _;
@@ -216,13 +216,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if args.ramps { segments::Options { max_rate_c_per_min: f64::INFINITY, ..args.seg } } else { args.seg };
     let (all, files) = segments::find_all(&args.check, &seg_opt)?;
     let all: Vec<Segment> = all.into_iter().filter(|s| s.pos.starts_with(&args.pos_prefix)).collect();
-    // With dynamics: the effective temperature of every row of each check recording.
+    // With dynamics: the effective temperature of the rows of each check recording's dwells
+    // (the dynamics run over every row, one at a time).
     let mut effective: Vec<(Vec<f64>, Vec<Effective<f64>>)> = Vec::new();
     if let Some(d) = &dynamics {
         for p in &args.check {
-            let (_, rows) = read_all(p).map_err(|e| anyhow!("{e}"))?;
-            let e = dynamics::run_core(&rows, d);
-            effective.push((rows.iter().map(|r| r.t_s).collect(), e));
+            let mut spans: Vec<(f64, f64)> = all.iter().filter(|s| s.file == *p).map(|s| s.t_s).collect();
+            spans.sort_by(|a, b| a.0.total_cmp(&b.0));
+            // The dwells of one recording do not overlap: the last one starting before t.
+            let in_dwell = |t: f64| {
+                let k = spans.partition_point(|s| s.0 <= t);
+                k > 0 && t <= spans[k - 1].1
+            };
+            effective.push(dynamics::run_core_kept(p, d, in_dwell)?);
         }
     }
     let dg_dyn = |s: &Segment| -> anyhow::Result<f64> {

@@ -21,6 +21,7 @@ pub mod thermal;
 pub mod unit;
 
 use crate::fsio::AtomicFile;
+use crate::progress::Pass;
 use crate::recording::{Columns, Row, Writer};
 use bins_comp::vibration::Vibration;
 use rand::{Rng, SeedableRng};
@@ -76,27 +77,42 @@ impl Simulation {
         RowGen::new(self, seed)
     }
 
-    /// Writes [`follow`](Self::follow)'s rows to `output` (atomically), with REAL's columns
-    /// (columns the format does not define are dropped).
-    pub fn write_follow(&self, real: &[Row], real_name: &str, output: &Path) -> anyhow::Result<u64> {
+    /// Writes [`follow`](Self::follow)'s rows for the recording `real` to `output`
+    /// (atomically), with the columns of REAL that have a value in some row (columns the format
+    /// does not define are dropped). Two passes over REAL, each with a progress bar: the first
+    /// finds the columns and checks every row, the second predicts and writes row by row; one
+    /// row is held at a time. Errors name the file: REAL unreadable or without a data row.
+    pub fn write_follow(&self, real: &Path, output: &Path) -> anyhow::Result<u64> {
+        let rec = |e: crate::recording::Error| anyhow::anyhow!("{e}");
+        let mut row = Row::default();
+        let (mut chamber, mut pos, mut power, mut n) = (false, false, false, 0u64);
+        let mut pass = Pass::open(real, "checking").map_err(rec)?;
+        while pass.read_row(&mut row).map_err(rec)? {
+            chamber |= row.chamber_c.is_some();
+            pos |= row.pos.is_some();
+            power |= row.power_s.is_some();
+            n += 1;
+        }
+        if n == 0 {
+            anyhow::bail!("{}: no data row to follow", real.display());
+        }
         let comments = [
             format!("recording format v1 -- predicted by {}", crate::TOOL_VERSION),
-            format!("the scenario's unit following {real_name} row for row (reference, temp_C, power_s; no noise)"),
+            format!(
+                "the scenario's unit following {} row for row (reference, temp_C, power_s; no noise)",
+                real.display()
+            ),
         ];
         let refs: Vec<&str> = comments.iter().map(String::as_str).collect();
-        let columns = Columns {
-            reference: true,
-            chamber: real.iter().any(|r| r.chamber_c.is_some()),
-            pos: real.iter().any(|r| r.pos.is_some()),
-            power: real.iter().any(|r| r.power_s.is_some()),
-            extra: Vec::new(),
-        };
+        let columns = Columns { reference: true, chamber, pos, power, extra: Vec::new() };
         let mut file = AtomicFile::create(output)?;
         let mut w = Writer::new(file.writer(), output, columns, &refs)?;
+        let mut pass = Pass::open(real, "predicting").map_err(rec)?;
         let mut k = 0u64;
-        for mut row in self.follow(real) {
-            row.extra.clear();
-            w.write_row(&row)?;
+        while pass.read_row(&mut row).map_err(rec)? {
+            let mut out = self.follow_row(&row);
+            out.extra.clear();
+            w.write_row(&out)?;
             k += 1;
         }
         w.finish()?;
@@ -112,20 +128,21 @@ impl Simulation {
     /// matches row for row; rows whose reference is not known keep REAL's signals (the
     /// diagnosis skips them). The scenario's rig program and thermal chain are not used.
     pub fn follow(&self, real: &[Row]) -> Vec<Row> {
-        real.iter()
-            .map(|r| {
-                let mut row = r.clone();
-                let vib = if r.vib_kind.is_none() { Some(Vibration::None) } else { r.vibration() };
-                let (Some(f), Some(vib)) = (r.reference_f_g(), vib) else { return row };
-                if !r.temp_c.is_finite() {
-                    return row;
-                }
-                let rect_g = rectify::rectified_g(&self.unit.cf, &f, &vib);
-                let power_s = r.power_s.unwrap_or(self.power_on_s + r.t_s);
-                row.u_v = self.unit.signals_v(r.temp_c, &f, &[0.0; 3], &rect_g, power_s, 0.0);
-                row
-            })
-            .collect()
+        real.iter().map(|r| self.follow_row(r)).collect()
+    }
+
+    /// [`follow`](Self::follow) of one row.
+    pub fn follow_row(&self, r: &Row) -> Row {
+        let mut row = r.clone();
+        let vib = if r.vib_kind.is_none() { Some(Vibration::None) } else { r.vibration() };
+        let (Some(f), Some(vib)) = (r.reference_f_g(), vib) else { return row };
+        if !r.temp_c.is_finite() {
+            return row;
+        }
+        let rect_g = rectify::rectified_g(&self.unit.cf, &f, &vib);
+        let power_s = r.power_s.unwrap_or(self.power_on_s + r.t_s);
+        row.u_v = self.unit.signals_v(r.temp_c, &f, &[0.0; 3], &rect_g, power_s, 0.0);
+        row
     }
 
     /// Writes the recording of `sim` for `seed` to `output` atomically; returns the row count.

@@ -576,8 +576,10 @@ fn temp_c(key: &str, v: f64) -> Check<f64> {
     }
 }
 
-/// Most rows a scenario may make (about 11 days at 1 kHz).
-pub const MAX_ROWS: f64 = 1e9;
+/// Most rows a scenario may make: 3 days at 1 kHz (the longest chamber runs, 72 h, at the
+/// fastest logger rate are 2.6e8 rows, 35 GB of CSV); a scenario asking for 1e9 rows
+/// (130 GB) is refused before anything is written.
+pub const MAX_ROWS: f64 = 3e8;
 
 /// Most rig segments (holds, moves, ramps) a scenario may make: checked as the steps are
 /// built, so that a step like `holds = 1000000000` is refused before its segments are
@@ -687,7 +689,7 @@ impl ScenarioFile {
         }
         let mut tl = Timeline::new(start_f);
         for (i, s) in self.step.iter().enumerate() {
-            build_step(&mut tl, s, &format!("step[{i}]"))?;
+            build_step(&mut tl, s, &format!("step[{i}]"), rate_hz)?;
             if tl.segments.len() > MAX_SEGMENTS {
                 return Err(kerr(format!("step[{i}]"), format!("more than {MAX_SEGMENTS} rig segments in all")));
             }
@@ -743,7 +745,7 @@ fn theta(key: &str, v: f64) -> Check<f64> {
     }
 }
 
-fn build_step(tl: &mut Timeline, s: &StepSpec, key: &str) -> Check<()> {
+fn build_step(tl: &mut Timeline, s: &StepSpec, key: &str, rate_hz: f64) -> Check<()> {
     let k = |f: &str| format!("{key}.{f}");
     match s {
         StepSpec::Soak { chamber_c, dwell_s } => {
@@ -774,13 +776,23 @@ fn build_step(tl: &mut Timeline, s: &StepSpec, key: &str) -> Check<()> {
             if let Some(c) = chamber_c {
                 tl.set_chamber(temp_c(&k("chamber_C"), *c)?);
             }
-            tl.hand(
-                *holds,
+            let (init, dwell, mv) = (
                 positive(&k("init_s"), *init_s)?,
                 positive(&k("dwell_s"), *dwell_s)?,
                 non_negative(&k("move_s"), *move_s)?,
-                *seed,
             );
+            // The rows the whole timeline would have with this step, checked before its
+            // segments are made (up to a million of them).
+            let rows = (tl.duration_s() + init + *holds as f64 * (dwell + mv)) * rate_hz;
+            if rows > MAX_ROWS {
+                return Err(kerr(
+                    k("holds"),
+                    format!(
+                        "{holds} holds of {dwell} + {mv} s: {rows:.3e} rows at recording.rate_Hz = {rate_hz}, more than {MAX_ROWS:e}"
+                    ),
+                ));
+            }
+            tl.hand(*holds, init, dwell, mv, *seed);
         }
         StepSpec::Check { theta_deg, positions: p, dwell_s, move_s } => {
             let which = positions(&k("positions"), p)?;
