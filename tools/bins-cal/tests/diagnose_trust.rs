@@ -9,6 +9,10 @@
 //! with the report's own figures ("at the noise" never beside a named effect or an unexplained
 //! figure); the slow structure, far below the per-sample noise but far above what that noise
 //! leaves at minutes to hours, is reported as unexplained at its time scale, with its size.
+//! The same at the length of a three-day chamber run (74 h), and on a short fast cooling whose
+//! per-sample noise is mostly coloured (a 20 Hz resonance), where sample-to-sample differences
+//! misjudge the noise: nothing is named on the coloured noise, and the slow structure beside it
+//! is sized at its scale.
 
 use bins_cal::diagnose::diagnose;
 use bins_cal::recording::Row;
