@@ -46,6 +46,12 @@ pub(crate) const DAY_CPU_BUDGET_S: f64 = 30.0;
 /// Peak-memory budget of one `calibrate` or `verify` run on a day at 100 Hz \[MB\].
 pub(crate) const DAY_RSS_BUDGET_MB: f64 = 500.0;
 
+/// CPU-time budget of `diagnose` on a pair of days at 100 Hz \[s\].
+pub(crate) const DAY_DIAGNOSE_CPU_BUDGET_S: f64 = 60.0;
+
+/// Peak-memory budget of `diagnose` on a pair of days at 100 Hz \[MB\].
+pub(crate) const DAY_DIAGNOSE_RSS_BUDGET_MB: f64 = 1000.0;
+
 /// The day's runs: what is measured and its arguments after `bins-cal` (`DAY` stands for the
 /// recording, `DIR` for the directory of the outputs, `ROOT` for the repository). `verify`
 /// with a calibration that has thermal dynamics runs them over every row. The day's dwells are at −39.5 and
@@ -192,6 +198,28 @@ impl Xtask {
         for l in &table {
             println!("{l}");
         }
+        // The diagnosis of the day against its simulation without warm-up, die lag and play,
+        // the rows reduced to 1 s blocks.
+        let sim = dir.join("sim.csv");
+        let mut c = self.command(bin);
+        c.arg("simulate").arg(self.root.join("scenarios/day-100hz-sim.toml")).arg("-o").arg(&sim);
+        c.args(["--seed", "2", "--quiet"]);
+        measured(c)?;
+        let mut c = self.command(bin);
+        c.arg("diagnose").arg("--sim").arg(&sim).arg("--real").arg(&day).args(["--block-s", "1", "--report"]);
+        c.arg(dir.join("day.json")).stdout(Stdio::null());
+        let u = measured(c)?;
+        let met = u.cpu_s < DAY_DIAGNOSE_CPU_BUDGET_S && u.peak_rss_mb < DAY_DIAGNOSE_RSS_BUDGET_MB;
+        println!(
+            "diagnose --block-s 1, the day against its simulation without warm-up, lag and play (budgets < {DAY_DIAGNOSE_CPU_BUDGET_S} s, < {DAY_DIAGNOSE_RSS_BUDGET_MB} MB):\n  {:>7.1} s CPU {:>8.1} MB peak {:>7.1} s wall  {}",
+            u.cpu_s,
+            u.peak_rss_mb,
+            u.wall_s,
+            if met { "met" } else { "MISSED" }
+        );
+        if !met {
+            missed.push("diagnose --block-s 1");
+        }
         if missed.is_empty() { Ok(()) } else { Err(format!("over budget: {}", missed.join(", "))) }
     }
 }
@@ -232,7 +260,7 @@ const BENCH_STEPS: [BenchStep; 7] = [
     }),
     (
         7,
-        "bins-cal calibrate (static, --free, --dynamics identify) and verify on a day at 100 Hz: < 30 s CPU, < 500 MB peak each (release, one thread)",
+        "bins-cal calibrate (static, --free, --dynamics identify) and verify on a day at 100 Hz: < 30 s CPU, < 500 MB peak each; diagnose --block-s 1 of the day: < 60 s, < 1 GB (release, one thread)",
         Xtask::bench_day,
     ),
 ];

@@ -35,6 +35,11 @@ pub struct Args {
     /// without it, estimated from the data with every mechanism of the library in the model.
     #[arg(long, value_name = "MG_PER_SQRT_H")]
     random_walk: Option<f64>,
+    /// Reduce the rows to means over blocks of at most this many seconds before the search
+    /// (long recordings at a high rate: a day at 100 Hz in 1 s blocks); the noise floor and
+    /// the held-out figures stay per row of the recording
+    #[arg(long, value_name = "SECONDS")]
+    block_s: Option<f64>,
 }
 
 /// Runs `bins-cal diagnose`.
@@ -43,7 +48,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         [args.sim.as_ref(), args.calib.as_ref(), Some(&args.real)].into_iter().flatten().collect();
     fsio::refuse_overwriting_inputs(inputs.iter(), [Some(&args.report), args.model.as_ref()].into_iter().flatten())?;
     let t0 = std::time::Instant::now();
-    let opt = Options { random_walk_mg_per_sqrt_h: args.random_walk, progress: true };
+    let opt = Options { random_walk_mg_per_sqrt_h: args.random_walk, progress: true, block_s: args.block_s };
     let d = match (&args.sim, &args.calib) {
         (Some(sim), _) => diagnose_files(sim, &args.real, &opt),
         (None, Some(calib)) => diagnose_against_calibration(&args.real, calib, &opt),

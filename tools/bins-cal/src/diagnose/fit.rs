@@ -381,7 +381,19 @@ impl RawHeldout {
 
 /// [`RawHeldout`] of `y` on the columns `refs` (none: the offset alone) under the noise model
 /// (times `t`, white variances `r`, random walk `q`).
-pub fn raw_heldout(t: &[f64], r: &[f64], q: f64, y: &[f64], refs: &[&[f64]], fold: &[usize]) -> RawHeldout {
+///
+/// `blocks`: when the rows are blocks ([`super::prep::Builder::with_blocks`]), each block's
+/// rows and the residual's sum of squares within it: the offset is the rows' mean and the
+/// RMS is over the recording's rows.
+pub fn raw_heldout(
+    t: &[f64],
+    r: &[f64],
+    q: f64,
+    y: &[f64],
+    refs: &[&[f64]],
+    fold: &[usize],
+    blocks: Option<(&[f64], &[f64])>,
+) -> RawHeldout {
     let n = y.len();
     let mut resid = vec![0.0; n];
     let mut fold_ss = [(0.0, 0usize); FOLDS];
@@ -410,6 +422,16 @@ pub fn raw_heldout(t: &[f64], r: &[f64], q: f64, y: &[f64], refs: &[&[f64]], fol
         };
         let refs = &held;
         let ek: Vec<f64> = (0..n).map(|i| y[i] - refs.iter().zip(&bk).map(|(c, b)| c[i] * b).sum::<f64>()).collect();
+        if let Some((w, within)) = blocks {
+            let (s, c) = (0..n).filter(|&i| fold[i] != k).fold((0.0, 0.0), |(s, c), i| (s + w[i] * ek[i], c + w[i]));
+            let off = s / c.max(1.0);
+            for i in (0..n).filter(|&i| fold[i] == k) {
+                resid[i] = ek[i] - off;
+                fs.0 += w[i] * resid[i] * resid[i] + within[i];
+                fs.1 += w[i] as usize;
+            }
+            continue;
+        }
         let (s, c) = (0..n).filter(|&i| fold[i] != k).fold((0.0, 0usize), |(s, c), i| (s + ek[i], c + 1));
         let off = s / c.max(1) as f64;
         for i in (0..n).filter(|&i| fold[i] == k) {
@@ -419,6 +441,18 @@ pub fn raw_heldout(t: &[f64], r: &[f64], q: f64, y: &[f64], refs: &[&[f64]], fol
         }
     }
     RawHeldout { resid, fold_ss }
+}
+
+/// [`centred_rms`] over the recording's rows when `v` holds block means (`blocks`: each block's
+/// rows and the sum of squares within it, [`raw_heldout`]); without blocks, [`centred_rms`].
+pub fn centred_rms_rows(v: &[f64], blocks: Option<(&[f64], &[f64])>) -> f64 {
+    let Some((w, within)) = blocks else { return centred_rms(v, None) };
+    let c: f64 = w.iter().sum();
+    if !(c > 0.0) {
+        return 0.0;
+    }
+    let m = v.iter().zip(w).map(|(x, w)| x * w).sum::<f64>() / c;
+    ((v.iter().zip(w).zip(within).map(|((x, w), s)| w * (x - m).powi(2) + s).sum::<f64>()) / c).sqrt()
 }
 
 /// RMS of `v` about its mean (over the rows of `mask`, all when `None`).
@@ -1045,13 +1079,22 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     }
     let e: Vec<f64> = y.iter().zip(&prediction).map(|(a, b)| a - b).collect();
     let drift = smooth_level(t, r, q, &e);
-    let before = centred_rms(y, None);
-    let after = centred_rms(&e, None);
-    let drift_rms = centred_rms(&drift, None);
-    let hb = raw_heldout(t, r, q, y, &[], fold);
+    let blocks = (!ctx.p.weight.is_empty()).then(|| (ctx.p.weight.as_slice(), ctx.p.within[axis].as_slice()));
+    let before = centred_rms_rows(y, blocks);
+    let after = centred_rms_rows(&e, blocks);
+    // The drift is slow: its RMS over the rows is its blocks' weighted RMS.
+    let drift_rms = match blocks {
+        Some((w, _)) => centred_rms_rows(&drift, Some((w, &vec![0.0; w.len()]))),
+        None => centred_rms(&drift, None),
+    };
+    let hb = raw_heldout(t, r, q, y, &[], fold, blocks);
     // With nothing named the model is SIM itself: its own terms re-fitted alone are not a
     // finding, and "after" is "before".
-    let ha = if members.is_empty() { raw_heldout(t, r, q, y, &[], fold) } else { raw_heldout(t, r, q, y, &refs, fold) };
+    let ha = if members.is_empty() {
+        raw_heldout(t, r, q, y, &[], fold, blocks)
+    } else {
+        raw_heldout(t, r, q, y, &refs, fold, blocks)
+    };
     // Each term's cut of the raw held-out RMS: the model without it (the others as fitted),
     // or the offset alone ("before") where that predicts better. SIM's own terms re-fitted
     // without the term can predict the held-out folds worse than the offset alone (a cubic in
@@ -1062,7 +1105,7 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     for (m, th) in &members {
         let nc = ctx.columns(*m, th.unwrap_or(0.0)).len();
         let without: Vec<&[f64]> = refs[..off].iter().chain(&refs[off + nc..]).copied().collect();
-        let hw = raw_heldout(t, r, q, y, &without, fold);
+        let hw = raw_heldout(t, r, q, y, &without, fold, blocks);
         heldout_gain.push(ha.gain_over(if hb.rms() < hw.rms() { &hb } else { &hw }));
         off += nc;
     }
@@ -1112,8 +1155,8 @@ mod tests {
         let r = vec![1e-10; n];
         let spike: Vec<f64> = t.iter().map(|p| (-p / 1.0).exp()).collect();
         let fold = folds_of(n);
-        let with = raw_heldout(&t, &r, 0.0, &y, &[&spike], &fold);
-        let without = raw_heldout(&t, &r, 0.0, &y, &[], &fold);
+        let with = raw_heldout(&t, &r, 0.0, &y, &[&spike], &fold, None);
+        let without = raw_heldout(&t, &r, 0.0, &y, &[], &fold, None);
         assert!(with.resid.iter().all(|v| v.is_finite()));
         assert!((with.rms() - without.rms()).abs() < 1e-3 * without.rms(), "{} vs {}", with.rms(), without.rms());
     }

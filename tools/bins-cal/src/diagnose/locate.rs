@@ -106,7 +106,13 @@ pub fn locate(p: &Prepared, fits: &[AxisFit], after_model: bool) -> Vec<Stratum>
         } else {
             p.r[axis].clone()
         };
-        let mean_all = raw.iter().sum::<f64>() / n.max(1) as f64;
+        // With blocks each row of `raw` stands for `w` of the recording's rows.
+        let w = |i: usize| if p.weight.is_empty() { 1.0 } else { p.weight[i] };
+        let mean_all = if p.weight.is_empty() {
+            raw.iter().sum::<f64>() / n.max(1) as f64
+        } else {
+            raw.iter().enumerate().map(|(i, v)| v * w(i)).sum::<f64>() / p.weight.iter().sum::<f64>().max(1.0)
+        };
         let y: Vec<f64> = raw.iter().map(|v| v - mean_all).collect();
         for (dim, val, mask) in &st {
             let (mut sum, mut var, mut rows, mut dur) = (0.0, 0.0, 0usize, 0.0);
@@ -117,9 +123,9 @@ pub fn locate(p: &Prepared, fits: &[AxisFit], after_model: bool) -> Vec<Stratum>
                         first = p.t[i];
                     }
                     last = p.t[i];
-                    sum += y[i];
-                    var += p.r_white[axis][i];
-                    rows += 1;
+                    sum += y[i] * w(i);
+                    var += p.r_white[axis][i] * w(i) * w(i);
+                    rows += w(i) as usize;
                     dur += if i + 1 < n { (p.t[i + 1] - p.t[i]).min(3.0 * p.dt) } else { p.dt };
                 }
             }

@@ -68,6 +68,9 @@ pub struct Options {
     pub random_walk_mg_per_sqrt_h: Option<f64>,
     /// A progress bar on stderr while the recordings are read (drawn on a terminal only).
     pub progress: bool,
+    /// Reduce the rows to means over blocks of at most this many seconds before the search
+    /// ([`prep::Builder::with_blocks`]); `None`: every row.
+    pub block_s: Option<f64>,
 }
 
 impl Options {
@@ -92,7 +95,7 @@ pub fn diagnose_with(
     opt: &Options,
 ) -> Result<Diagnosis, DiagnoseError> {
     check_options(opt)?;
-    let p = prep::prepare(sim, real, sim_name, real_name)?;
+    let p = prep::prepare_blocks(sim, real, sim_name, real_name, opt.block_s)?;
     diagnose_prepared(p, sim_name, real_name, opt)
 }
 
@@ -101,6 +104,11 @@ fn check_options(opt: &Options) -> Result<(), DiagnoseError> {
         && !(rw.is_finite() && rw >= 0.0)
     {
         return Err(DiagnoseError(format!("--random-walk {rw}: must be a finite value ≥ 0 mg/√h")));
+    }
+    if let Some(b) = opt.block_s
+        && !(b.is_finite() && b > 0.0)
+    {
+        return Err(DiagnoseError(format!("--block-s {b}: must be a finite value > 0 s")));
     }
     Ok(())
 }
@@ -206,7 +214,7 @@ pub fn diagnose_against_calibration(real: &Path, calib: &Path, opt: &Options) ->
     let (file, _) = crate::calfile::CalibrationFile::read_checked(calib).map_err(|e| DiagnoseError(e.to_string()))?;
     let (params, _) = file.to_params().map_err(|e| DiagnoseError(format!("{}: {e}", calib.display())))?;
     let sim_name = format!("{} (predicted by {})", real.display(), calib.display());
-    let p = read_pair(Source::Predicted(&params), real, Path::new(&sim_name), opt.progress)?;
+    let p = read_pair(Source::Predicted(&params), real, Path::new(&sim_name), opt.progress, opt.block_s)?;
     diagnose_prepared(p, Path::new(&sim_name), real, opt)
 }
 
@@ -215,14 +223,14 @@ pub fn diagnose_against_calibration(real: &Path, calib: &Path, opt: &Options) ->
 /// to what [`prep::Prepared`] keeps as it is read ([`prep::Builder`]).
 pub fn diagnose_files(sim: &Path, real: &Path, opt: &Options) -> Result<Diagnosis, DiagnoseError> {
     check_options(opt)?;
-    let p = read_pair(Source::File(sim), real, sim, opt.progress)?;
+    let p = read_pair(Source::File(sim), real, sim, opt.progress, opt.block_s)?;
     diagnose_prepared(p, sim, real, opt)
 }
 
 /// The prepared pair of two recordings read in lockstep ([`diagnose_files`] without the
 /// diagnosis).
 pub fn prepare_files(sim: &Path, real: &Path, progress: bool) -> Result<prep::Prepared, DiagnoseError> {
-    read_pair(Source::File(sim), real, sim, progress)
+    read_pair(Source::File(sim), real, sim, progress, None)
 }
 
 /// Where SIM's rows come from.
@@ -262,7 +270,13 @@ fn open_counted(path: &Path, bytes: &Rc<Cell<u64>>) -> Result<(CountedReader, u6
 /// SIM (from `sim`) and REAL read in lockstep into a [`prep::Builder`]: one row of each in
 /// memory at a time. A pair whose row counts differ is refused with both counts (the rest of
 /// the longer file is counted, not kept).
-fn read_pair(sim: Source, real: &Path, sim_name: &Path, progress: bool) -> Result<prep::Prepared, DiagnoseError> {
+fn read_pair(
+    sim: Source,
+    real: &Path,
+    sim_name: &Path,
+    progress: bool,
+    block_s: Option<f64>,
+) -> Result<prep::Prepared, DiagnoseError> {
     let rec = |e: recording::Error| DiagnoseError(e.to_string());
     let bytes = Rc::new(Cell::new(0u64));
     let mut sim_reader = match sim {
@@ -276,7 +290,7 @@ fn read_pair(sim: Source, real: &Path, sim_name: &Path, progress: bool) -> Resul
         indicatif::ProgressStyle::with_template("reading {bar:30} {bytes}/{total_bytes}, {elapsed} (eta {eta})")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    let mut b = prep::Builder::new(sim_name, real);
+    let mut b = prep::Builder::new(sim_name, real).with_blocks(block_s);
     let (mut s, mut r) = (Row::default(), Row::default());
     let (mut n_sim, mut n_real) = (0u64, 0u64);
     loop {

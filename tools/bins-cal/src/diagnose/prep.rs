@@ -54,8 +54,18 @@ pub struct Prepared {
     pub temp_s: Vec<f64>,
     /// Temperature rate (centred difference over about a minute) [°C/s].
     pub dtemp: Vec<f64>,
-    /// White-noise variance of the residual at each row \[g²\], per accelerometer.
+    /// White-noise variance of the residual at each row \[g²\], per accelerometer (of a block's
+    /// mean when the rows are blocks).
     pub r_white: [Vec<f64>; 3],
+    /// With rows reduced to blocks ([`Builder::with_blocks`]): the recording's rows in each
+    /// block; empty when every row is one of the recording's.
+    pub weight: Vec<f64>,
+    /// With blocks: the residual's sum of squares about its block mean, per block \[g²\], per
+    /// accelerometer (what the block means do not show of the per-row figures).
+    pub within: [Vec<f64>; 3],
+    /// With blocks: the per-row noise floor measured from consecutive rows (the Allan deviation
+    /// at one row, `√(½·mean((r_k − r_{k−1})²))`, over rows without vibration, or all) \[g\].
+    pub row_floor: Option<[f64; 3]>,
     /// Notes for the report.
     pub notes: Vec<String>,
 }
@@ -97,6 +107,18 @@ fn opt_same(a: Option<f64>, b: Option<f64>) -> bool {
 /// Aligns a pair held in memory and computes the residual ([`Builder`]). Errors name REAL's
 /// file and line.
 pub fn prepare(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> Result<Prepared, DiagnoseError> {
+    prepare_blocks(sim, real, sim_name, real_name, None)
+}
+
+/// [`prepare`], the rows reduced to blocks of at most `block_s` seconds when given
+/// ([`Builder::with_blocks`]).
+pub fn prepare_blocks(
+    sim: &[Row],
+    real: &[Row],
+    sim_name: &Path,
+    real_name: &Path,
+    block_s: Option<f64>,
+) -> Result<Prepared, DiagnoseError> {
     let (sn, rn) = (sim_name.display(), real_name.display());
     if real.is_empty() || sim.is_empty() {
         let which = if real.is_empty() { &rn } else { &sn };
@@ -109,7 +131,7 @@ pub fn prepare(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> 
             sim.len()
         )));
     }
-    let mut b = Builder::new(sim_name, real_name);
+    let mut b = Builder::new(sim_name, real_name).with_blocks(block_s);
     for (s, r) in sim.iter().zip(real) {
         b.push(s, r)?;
     }
@@ -148,9 +170,63 @@ pub struct Builder {
     u_varies: [bool; 3],
     temp_finite: bool,
     temp_same: bool,
+    /// The first kept row's `temp_C`.
+    first_temp_c: Option<f64>,
+    /// Block length \[s\] when the rows are reduced to blocks.
+    block_s: Option<f64>,
+    /// The block being filled.
+    pending: Option<Pending>,
+    /// Rows per block kept.
+    weight: Vec<f64>,
+    /// Sum of squares of REAL − SIM about the block mean per block [V²].
+    within_du: [Vec<f64>; 3],
+    /// Squared differences of REAL − SIM between consecutive rows of one constant-reference
+    /// run, per vibration class [V²] (the white-noise level's median).
+    diff2: Vec<[Vec<f32>; 3]>,
+    /// Sum and count of those squared differences on rows without vibration, per axis.
+    quiet_diff2: ([f64; 3], usize),
+    /// The previous row's line, time and REAL − SIM, and its reference (for the differences).
+    prev: Option<PrevRow>,
+}
+
+/// The previous usable row of a blocked [`Builder`].
+struct PrevRow {
+    line: u64,
+    t: f64,
+    du: [f64; 3],
+    f: [f64; 3],
+    vib: Vibration<f64>,
+    pos: Option<usize>,
+}
+
+/// A block being filled: sums over its rows.
+struct Pending {
+    line: u64,
+    last_line: u64,
+    t0: f64,
+    n: usize,
+    t: f64,
+    temp: f64,
+    power: f64,
+    f: [f64; 3],
+    vib: Vibration<f64>,
+    vib_class: usize,
+    pos: Option<usize>,
+    du: [f64; 3],
+    du2: [f64; 3],
+    sim_u: [f64; 3],
 }
 
 impl Builder {
+    /// Reduces the rows to blocks of at most `block_s` seconds (means of consecutive rows with
+    /// one reference, vibration and position, lines without a gap), keeping per block the
+    /// rows' count and the residual's spread about the mean; the white-noise level comes from
+    /// every pair of consecutive rows as it does without blocks. `None`: every row is kept.
+    pub fn with_blocks(mut self, block_s: Option<f64>) -> Self {
+        self.block_s = block_s;
+        self
+    }
+
     /// An empty builder; `sim_name` and `real_name` name the files in errors.
     pub fn new(sim_name: &Path, real_name: &Path) -> Self {
         Builder {
@@ -176,6 +252,14 @@ impl Builder {
             u_varies: [false; 3],
             temp_finite: true,
             temp_same: true,
+            first_temp_c: None,
+            block_s: None,
+            pending: None,
+            weight: Vec::new(),
+            within_du: Default::default(),
+            diff2: Vec::new(),
+            quiet_diff2: ([0.0; 3], 0),
+            prev: None,
         }
     }
 
@@ -188,8 +272,8 @@ impl Builder {
     fn clear_used(&mut self) {
         let fresh = Builder::new(Path::new(""), Path::new(""));
         let (sim_name, real_name) = (std::mem::take(&mut self.sim_name), std::mem::take(&mut self.real_name));
-        let (n_total, any_vib) = (self.n_total, self.any_vib);
-        *self = Builder { sim_name, real_name, n_total, any_vib, ..fresh };
+        let (n_total, any_vib, block_s) = (self.n_total, self.any_vib, self.block_s);
+        *self = Builder { sim_name, real_name, n_total, any_vib, block_s, ..fresh };
     }
 
     /// Checks one pair (SIM's row `s`, REAL's row `r`) and keeps what the diagnosis needs of it
@@ -241,16 +325,15 @@ impl Builder {
         } else {
             Vibration::None
         };
-        if self.t.is_empty() {
+        if self.t.is_empty() && self.pending.is_none() {
             self.first_u = r.u_v;
         }
         for i in 0..3 {
             self.u_varies[i] |= r.u_v[i] != self.first_u[i];
-            self.du[i].push(r.u_v[i] - s.u_v[i]);
-            self.sim_u[i].push(s.u_v[i]);
         }
         self.temp_finite &= r.temp_c.is_finite();
-        self.temp_same &= self.temp.first().is_none_or(|&t0| r.temp_c == t0);
+        self.temp_same &= self.first_temp_c.is_none_or(|t0| r.temp_c == t0);
+        self.first_temp_c.get_or_insert(r.temp_c);
         let vib_class = {
             let name = match (r.vib_kind, &vib) {
                 (_, Vibration::None) | (None, _) | (Some(VibKind::None), _) => "none".to_string(),
@@ -273,20 +356,102 @@ impl Builder {
         });
         self.power_all &= r.power_s.is_some();
         self.power_any |= r.power_s.is_some();
-        self.power.push(r.power_s.unwrap_or(0.0));
-        self.line.push(r.line);
-        self.t.push(r.t_s);
-        self.temp.push(r.temp_c);
-        self.f.push(f);
-        self.vib.push(vib);
-        self.vib_class.push(vib_class);
-        self.pos.push(pos);
+        let du = [0, 1, 2].map(|i| r.u_v[i] - s.u_v[i]);
+        let Some(block_s) = self.block_s else {
+            for i in 0..3 {
+                self.du[i].push(du[i]);
+                self.sim_u[i].push(s.u_v[i]);
+            }
+            self.power.push(r.power_s.unwrap_or(0.0));
+            self.line.push(r.line);
+            self.t.push(r.t_s);
+            self.temp.push(r.temp_c);
+            self.f.push(f);
+            self.vib.push(vib);
+            self.vib_class.push(vib_class);
+            self.pos.push(pos);
+            return Ok(());
+        };
+        // The same run as the previous row: same reference, vibration and position, the next
+        // line, no longer gap than a block.
+        let run = self.prev.as_ref().is_some_and(|p| {
+            p.line + 1 == r.line && p.f == f && p.vib == vib && p.pos == pos && r.t_s - p.t <= block_s
+        });
+        if run && let Some(p) = &self.prev {
+            while self.diff2.len() <= vib_class {
+                self.diff2.push(Default::default());
+            }
+            for i in 0..3 {
+                let d = du[i] - p.du[i];
+                self.diff2[vib_class][i].push((d * d) as f32);
+                if matches!(vib, Vibration::None) {
+                    self.quiet_diff2.0[i] += d * d;
+                }
+            }
+            if matches!(vib, Vibration::None) {
+                self.quiet_diff2.1 += 1;
+            }
+        }
+        let joins = run && self.pending.as_ref().is_some_and(|b| r.t_s - b.t0 < block_s);
+        if !joins {
+            self.flush();
+        }
+        let power = r.power_s.unwrap_or(0.0);
+        let b = self.pending.get_or_insert(Pending {
+            line: r.line,
+            last_line: r.line,
+            t0: r.t_s,
+            n: 0,
+            t: 0.0,
+            temp: 0.0,
+            power: 0.0,
+            f,
+            vib,
+            vib_class,
+            pos,
+            du: [0.0; 3],
+            du2: [0.0; 3],
+            sim_u: [0.0; 3],
+        });
+        b.n += 1;
+        b.last_line = r.line;
+        b.t += r.t_s;
+        b.temp += r.temp_c;
+        b.power += power;
+        for i in 0..3 {
+            b.du[i] += du[i];
+            b.du2[i] += du[i] * du[i];
+            b.sim_u[i] += s.u_v[i];
+        }
+        self.prev = Some(PrevRow { line: r.line, t: r.t_s, du, f, vib, pos });
         Ok(())
+    }
+
+    /// Closes the block being filled: its means, count and spread are kept.
+    fn flush(&mut self) {
+        let Some(b) = self.pending.take() else { return };
+        let n = b.n as f64;
+        self.line.push(b.line);
+        self.t.push(b.t / n);
+        self.temp.push(b.temp / n);
+        self.power.push(b.power / n);
+        self.f.push(b.f);
+        self.vib.push(b.vib);
+        self.vib_class.push(b.vib_class);
+        self.pos.push(b.pos);
+        self.weight.push(n);
+        for i in 0..3 {
+            let m = b.du[i] / n;
+            self.du[i].push(m);
+            self.sim_u[i].push(b.sim_u[i] / n);
+            self.within_du[i].push((b.du2[i] - n * m * m).max(0.0));
+        }
     }
 
     /// The prepared pair: scale factors, residual, segments, temperature rate and white-noise
     /// levels from the rows kept.
-    pub fn finish(self) -> Result<Prepared, DiagnoseError> {
+    pub fn finish(mut self) -> Result<Prepared, DiagnoseError> {
+        self.flush();
         let rn = self.real_name.as_str();
         let Builder {
             n_total,
@@ -309,8 +474,14 @@ impl Builder {
             u_varies,
             temp_finite,
             temp_same,
+            block_s,
+            weight,
+            within_du,
+            diff2,
+            quiet_diff2,
             ..
         } = self;
+        let blocked = block_s.is_some();
         let mut notes = Vec::new();
         if !any_vib {
             notes.push("no vib_kind in the recordings: every row taken as without vibration".to_string());
@@ -322,7 +493,8 @@ impl Builder {
             )));
         }
         let n = t.len();
-        let skipped = n_total - n;
+        let used = if blocked { weight.iter().sum::<f64>() as usize } else { n };
+        let skipped = n_total - used;
         if skipped > 0 {
             notes.push(format!("{skipped} of {n_total} rows skipped: reference not known"));
         }
@@ -358,7 +530,7 @@ impl Builder {
                 || vib[i] != vib[i - 1]
                 || pos[i] != pos[i - 1]
                 || t[i] - t[i - 1] > 3.0 * dt
-                || (line[i] > 0 && line[i] != line[i - 1] + 1);
+                || (line[i] > 0 && line[i] != line[i - 1] + if blocked { weight[i - 1] as u64 } else { 1 });
             seg[i] = seg[i - 1] + usize::from(change);
         }
 
@@ -439,7 +611,15 @@ impl Builder {
                 dtemp[i] = (temp[hi] - temp[lo]) / (t[hi] - t[lo]);
             }
         }
-        let temp_s = smooth_temperature(&t, &temp, ((10.0 / dt).round() as usize).clamp(1, 50));
+        // ±10 s, at least ±1 row, at most ±50 of the recording's rows: with blocks, the same
+        // span in seconds (at least ±1 block), so blocks smooth as the rows would.
+        let half = if blocked {
+            let dt_row = dt / median(&weight).max(1.0);
+            ((10.0f64.min(50.0 * dt_row) / dt).round() as usize).max(1)
+        } else {
+            ((10.0 / dt).round() as usize).clamp(1, 50)
+        };
+        let temp_s = smooth_temperature(&t, &temp, half);
         // White noise per vibration class from within-segment differences (robust: median of
         // squared differences / (2·0.4549)).
         let mut r_white: [Vec<f64>; 3] = Default::default();
@@ -464,6 +644,42 @@ impl Builder {
                 .collect();
             r_white[i] = vib_class.iter().map(|&c| class_var[c]).collect();
         }
+        let mut within: [Vec<f64>; 3] = Default::default();
+        let mut row_floor = None;
+        if blocked {
+            // The per-row white level from the rows' own differences (not the blocks'), each
+            // block's mean carrying 1/rows of it; the blocks' spread kept in g².
+            let mut floor_g = [0.0; 3];
+            for i in 0..3 {
+                let k2 = k_diag[i] * k_diag[i];
+                let med = |d: &[f32]| {
+                    let v: Vec<f64> = d.iter().map(|&x| f64::from(x)).collect();
+                    median(&v) / (2.0 * 0.454_936_4) / k2
+                };
+                let all: Vec<f32> = diff2.iter().flat_map(|c| c[i].iter().copied()).collect();
+                let global = if all.is_empty() { 0.0 } else { med(&all) };
+                let floor = {
+                    let scale = r[i].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                    (1e-9 * scale).powi(2).max(1e-30)
+                };
+                let class_var: Vec<f64> = (0..vib_names.len())
+                    .map(|c| match diff2.get(c) {
+                        Some(d) if d[i].len() >= 20 => med(&d[i]),
+                        _ => global,
+                    })
+                    .map(|v| v.max(floor))
+                    .collect();
+                r_white[i] = vib_class.iter().zip(&weight).map(|(&c, w)| class_var[c] / w).collect();
+                within[i] = within_du[i].iter().map(|v| v / k2).collect();
+                let (sum, count) = if quiet_diff2.1 > 0 {
+                    (quiet_diff2.0[i], quiet_diff2.1)
+                } else {
+                    (all.iter().map(|&x| f64::from(x)).sum(), all.len())
+                };
+                floor_g[i] = (0.5 * sum / count.max(1) as f64 / k2).sqrt();
+            }
+            row_floor = Some(floor_g);
+        }
         Ok(Prepared {
             n_total,
             skipped,
@@ -486,6 +702,9 @@ impl Builder {
             temp_s,
             dtemp,
             r_white,
+            weight,
+            within,
+            row_floor,
             notes,
         })
     }

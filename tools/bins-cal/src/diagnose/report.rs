@@ -312,8 +312,11 @@ pub fn noise_floor(p: &Prepared) -> ([f64; 3], Vec<AllanPoint>) {
         for (m, a, _) in &ad {
             curve.entry(*m).or_default().insert(AXES[axis].into(), a * 1e3);
         }
-        floor[axis] =
-            ad.first().map_or_else(|| p.r_white[axis].iter().sum::<f64>().sqrt() / (n as f64).sqrt(), |x| x.1);
+        floor[axis] = match p.row_floor {
+            // Blocks: the rows' own differences; the curve starts at one block.
+            Some(f) => f[axis],
+            None => ad.first().map_or_else(|| p.r_white[axis].iter().sum::<f64>().sqrt() / (n as f64).sqrt(), |x| x.1),
+        };
     }
     let allan = curve.into_iter().map(|(m, a)| AllanPoint { tau_s: m as f64 * p.dt, adev_mg: a }).collect();
     (floor, allan)
@@ -634,7 +637,7 @@ pub fn build(
         sim: sim.display().to_string(),
         real: real.display().to_string(),
         rows: p.n_total,
-        rows_used: p.t.len(),
+        rows_used: if p.weight.is_empty() { p.t.len() } else { p.weight.iter().sum::<f64>() as usize },
         scale_v_per_g: per_axis(|i| p.k_diag[i]),
         notes,
         noise_floor_mg: per_axis(|i| floor.0[i] * 1e3),
