@@ -5,22 +5,33 @@
 //! ambiguous groups as expected), no discovery on the null cases, held-out RMS down to the
 //! noise model's level (within 25 % of the white floor and the drift combined) or at least 3×
 //! smaller, parameters within 20 %.
+//!
+//! `DIAG_FASTER=K` samples every case K times faster (K times the rows over the same span);
+//! `DIAG_BLOCK_S=S` diagnoses in blocks of S seconds (`diagnose --block-s`): with both, the
+//! block path against the same cases on every row.
 
-use bins_cal::diagnose::{cases, diagnose};
+use bins_cal::diagnose::{Options, cases, diagnose_with};
 use std::path::Path;
 use std::time::Instant;
 
 #[test]
 fn concealed_effect_suite() {
     let only = std::env::var("DIAG_CASE").ok();
+    let env = |k: &str| std::env::var(k).ok().map(|v| v.parse::<f64>().unwrap_or_else(|_| panic!("{k}: a number")));
+    let (faster, block_s) = (env("DIAG_FASTER"), env("DIAG_BLOCK_S"));
     let mut scores = Vec::new();
-    for case in cases::suite() {
+    for mut case in cases::suite() {
         if only.as_deref().is_some_and(|o| o != case.name) {
             continue;
         }
+        let opt = Options { block_s, ..Options::default() };
+        if let Some(k) = faster {
+            case.plan.dt_s /= k;
+            case.plan.rows = (case.plan.rows as f64 * k).round() as usize;
+        }
         let (sim, real) = cases::generate(&case);
         let t0 = Instant::now();
-        let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
+        let d = diagnose_with(&sim, &real, Path::new("sim.csv"), Path::new("real.csv"), &opt).expect("diagnosis runs");
         let secs = t0.elapsed().as_secs_f64();
         let s = cases::score(&case, &d.report);
         assert!(d.report.steps.is_empty(), "{}: no case has a bias step, found {:?}", case.name, d.report.steps);
@@ -90,7 +101,8 @@ fn concealed_effect_suite_other_seeds() {
             let mut c = case.clone();
             c.seed = case.seed * 1000 + k;
             let (sim, real) = cases::generate(&c);
-            let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
+            let d = diagnose_with(&sim, &real, Path::new("sim.csv"), Path::new("real.csv"), &Options::default())
+                .expect("diagnosis runs");
             let s = cases::score(&c, &d.report);
             total += 1;
             if !d.report.steps.is_empty() {
