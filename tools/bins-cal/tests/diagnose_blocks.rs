@@ -4,7 +4,7 @@
 //! accelerometers, the same verdicts, the per-row noise floor and held-out "before" of every row,
 //! "after" within 5 %, each parameter within the full-rate fit's 95 % interval.
 
-use bins_cal::diagnose::{Options, cases, diagnose_with};
+use bins_cal::diagnose::{Options, cases, diagnose_with, prep};
 use std::path::Path;
 
 fn both(name: &str) {
@@ -61,4 +61,30 @@ fn blocks_name_what_every_row_names_warmup() {
 #[test]
 fn blocks_name_what_every_row_names_lag_and_asymmetry() {
     both("lag_plus_asymmetry");
+}
+
+/// The default reduction: every row kept until a count, then the rows kept turned into blocks
+/// and blocks from there on, builds what blocks from the first row build.
+#[test]
+fn blocks_from_a_row_count_are_blocks_from_the_start() {
+    let mut case = cases::suite().into_iter().find(|c| c.name == "lag_plus_asymmetry").expect("a suite case");
+    case.plan.dt_s = 0.2;
+    case.plan.rows = 20_000;
+    let (sim, real) = cases::generate(&case);
+    let build = |b: prep::Builder| {
+        let mut b = b;
+        for (s, r) in sim.iter().zip(&real) {
+            b.push(s, r).expect("rows match");
+        }
+        let mut p = b.finish().expect("prepared");
+        p.notes.retain(|n| !n.starts_with("more than"));
+        p
+    };
+    let (s, r) = (Path::new("sim.csv"), Path::new("real.csv"));
+    let from_start = build(prep::Builder::new(s, r).with_blocks(Some(1.0)));
+    let switched = build(prep::Builder::new(s, r).auto_blocks(7_001, 1.0));
+    let whole = build(prep::Builder::new(s, r).auto_blocks(20_001, 1.0));
+    assert_eq!(format!("{from_start:?}"), format!("{switched:?}"));
+    assert!(whole.weight.is_empty() && whole.t.len() == 20_000, "below the count every row is kept");
+    assert!(from_start.t.len() < 5_000, "{} blocks", from_start.t.len());
 }

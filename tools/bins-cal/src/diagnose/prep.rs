@@ -110,8 +110,9 @@ pub fn prepare(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> 
     prepare_blocks(sim, real, sim_name, real_name, None)
 }
 
-/// [`prepare`], the rows reduced to blocks of at most `block_s` seconds when given
-/// ([`Builder::with_blocks`]).
+/// [`prepare`] with the block choice of [`super::Options::block_s`]: `None` every row up to
+/// [`super::AUTO_BLOCK_ROWS`], then blocks of [`super::AUTO_BLOCK_S`]; `Some(0)` every row;
+/// `Some(s)` blocks of at most `s` seconds ([`Builder::with_blocks`]).
 pub fn prepare_blocks(
     sim: &[Row],
     real: &[Row],
@@ -131,7 +132,7 @@ pub fn prepare_blocks(
             sim.len()
         )));
     }
-    let mut b = Builder::new(sim_name, real_name).with_blocks(block_s);
+    let mut b = Builder::new(sim_name, real_name).choose_blocks(block_s);
     for (s, r) in sim.iter().zip(real) {
         b.push(s, r)?;
     }
@@ -174,6 +175,11 @@ pub struct Builder {
     first_temp_c: Option<f64>,
     /// Block length \[s\] when the rows are reduced to blocks.
     block_s: Option<f64>,
+    /// Rows kept as they are until this many, then blocks of this length \[s\]
+    /// ([`Builder::auto_blocks`]).
+    auto: Option<(usize, f64)>,
+    /// Whether the rows were turned into blocks on reaching `auto`'s count.
+    auto_blocked: bool,
     /// The block being filled.
     pending: Option<Pending>,
     /// Rows per block kept.
@@ -187,6 +193,20 @@ pub struct Builder {
     quiet_diff2: ([f64; 3], usize),
     /// The previous row's line, time and REAL − SIM, and its reference (for the differences).
     prev: Option<PrevRow>,
+}
+
+/// What a usable row keeps (before any block).
+struct Kept {
+    line: u64,
+    t: f64,
+    temp: f64,
+    power: f64,
+    f: [f64; 3],
+    vib: Vibration<f64>,
+    vib_class: usize,
+    pos: Option<usize>,
+    du: [f64; 3],
+    sim_u: [f64; 3],
 }
 
 /// The previous usable row of a blocked [`Builder`].
@@ -227,6 +247,23 @@ impl Builder {
         self
     }
 
+    /// The block choice of [`super::Options::block_s`] ([`prepare_blocks`]).
+    pub fn choose_blocks(self, block_s: Option<f64>) -> Self {
+        match block_s {
+            None => self.auto_blocks(super::AUTO_BLOCK_ROWS, super::AUTO_BLOCK_S),
+            Some(b) if b > 0.0 => self.with_blocks(Some(b)),
+            Some(_) => self,
+        }
+    }
+
+    /// Keeps every row up to `max_rows` usable rows; on reaching them, turns the rows kept into
+    /// blocks of `block_s` seconds ([`Builder::with_blocks`]) and goes on in blocks, so memory
+    /// stops growing with the rows.
+    pub fn auto_blocks(mut self, max_rows: usize, block_s: f64) -> Self {
+        self.auto = Some((max_rows, block_s));
+        self
+    }
+
     /// An empty builder; `sim_name` and `real_name` name the files in errors.
     pub fn new(sim_name: &Path, real_name: &Path) -> Self {
         Builder {
@@ -254,6 +291,8 @@ impl Builder {
             temp_same: true,
             first_temp_c: None,
             block_s: None,
+            auto: None,
+            auto_blocked: false,
             pending: None,
             weight: Vec::new(),
             within_du: Default::default(),
@@ -272,8 +311,8 @@ impl Builder {
     fn clear_used(&mut self) {
         let fresh = Builder::new(Path::new(""), Path::new(""));
         let (sim_name, real_name) = (std::mem::take(&mut self.sim_name), std::mem::take(&mut self.real_name));
-        let (n_total, any_vib, block_s) = (self.n_total, self.any_vib, self.block_s);
-        *self = Builder { sim_name, real_name, n_total, any_vib, block_s, ..fresh };
+        let (n_total, any_vib, block_s, auto) = (self.n_total, self.any_vib, self.block_s, self.auto);
+        *self = Builder { sim_name, real_name, n_total, any_vib, block_s, auto, ..fresh };
     }
 
     /// Checks one pair (SIM's row `s`, REAL's row `r`) and keeps what the diagnosis needs of it
@@ -357,26 +396,51 @@ impl Builder {
         self.power_all &= r.power_s.is_some();
         self.power_any |= r.power_s.is_some();
         let du = [0, 1, 2].map(|i| r.u_v[i] - s.u_v[i]);
+        let k = Kept {
+            line: r.line,
+            t: r.t_s,
+            temp: r.temp_c,
+            power: r.power_s.unwrap_or(0.0),
+            f,
+            vib,
+            vib_class,
+            pos,
+            du,
+            sim_u: s.u_v,
+        };
+        self.keep(k);
+        Ok(())
+    }
+
+    /// Keeps one usable row: as it is, or into the block being filled.
+    fn keep(&mut self, k: Kept) {
+        let Kept { line, t, temp, power, f, vib, vib_class, pos, du, sim_u } = k;
         let Some(block_s) = self.block_s else {
             for i in 0..3 {
                 self.du[i].push(du[i]);
-                self.sim_u[i].push(s.u_v[i]);
+                self.sim_u[i].push(sim_u[i]);
             }
-            self.power.push(r.power_s.unwrap_or(0.0));
-            self.line.push(r.line);
-            self.t.push(r.t_s);
-            self.temp.push(r.temp_c);
+            self.power.push(power);
+            self.line.push(line);
+            self.t.push(t);
+            self.temp.push(temp);
             self.f.push(f);
             self.vib.push(vib);
             self.vib_class.push(vib_class);
             self.pos.push(pos);
-            return Ok(());
+            if let Some((max_rows, block_s)) = self.auto
+                && self.t.len() >= max_rows
+            {
+                self.switch_to_blocks(block_s);
+            }
+            return;
         };
         // The same run as the previous row: same reference, vibration and position, the next
         // line, no longer gap than a block.
-        let run = self.prev.as_ref().is_some_and(|p| {
-            p.line + 1 == r.line && p.f == f && p.vib == vib && p.pos == pos && r.t_s - p.t <= block_s
-        });
+        let run = self
+            .prev
+            .as_ref()
+            .is_some_and(|p| p.line + 1 == line && p.f == f && p.vib == vib && p.pos == pos && t - p.t <= block_s);
         if run && let Some(p) = &self.prev {
             while self.diff2.len() <= vib_class {
                 self.diff2.push(Default::default());
@@ -392,15 +456,14 @@ impl Builder {
                 self.quiet_diff2.1 += 1;
             }
         }
-        let joins = run && self.pending.as_ref().is_some_and(|b| r.t_s - b.t0 < block_s);
+        let joins = run && self.pending.as_ref().is_some_and(|b| t - b.t0 < block_s);
         if !joins {
             self.flush();
         }
-        let power = r.power_s.unwrap_or(0.0);
         let b = self.pending.get_or_insert(Pending {
-            line: r.line,
-            last_line: r.line,
-            t0: r.t_s,
+            line,
+            last_line: line,
+            t0: t,
             n: 0,
             t: 0.0,
             temp: 0.0,
@@ -414,17 +477,47 @@ impl Builder {
             sim_u: [0.0; 3],
         });
         b.n += 1;
-        b.last_line = r.line;
-        b.t += r.t_s;
-        b.temp += r.temp_c;
+        b.last_line = line;
+        b.t += t;
+        b.temp += temp;
         b.power += power;
         for i in 0..3 {
             b.du[i] += du[i];
             b.du2[i] += du[i] * du[i];
-            b.sim_u[i] += s.u_v[i];
+            b.sim_u[i] += sim_u[i];
         }
-        self.prev = Some(PrevRow { line: r.line, t: r.t_s, du, f, vib, pos });
-        Ok(())
+        self.prev = Some(PrevRow { line, t, du, f, vib, pos });
+    }
+
+    /// Turns the rows kept so far into blocks of `block_s` and keeps blocks from now on.
+    fn switch_to_blocks(&mut self, block_s: f64) {
+        self.auto = None;
+        self.auto_blocked = true;
+        self.block_s = Some(block_s);
+        let line = std::mem::take(&mut self.line);
+        let t = std::mem::take(&mut self.t);
+        let temp = std::mem::take(&mut self.temp);
+        let power = std::mem::take(&mut self.power);
+        let f = std::mem::take(&mut self.f);
+        let vib = std::mem::take(&mut self.vib);
+        let vib_class = std::mem::take(&mut self.vib_class);
+        let pos = std::mem::take(&mut self.pos);
+        let du = std::mem::take(&mut self.du);
+        let sim_u = std::mem::take(&mut self.sim_u);
+        for k in 0..t.len() {
+            self.keep(Kept {
+                line: line[k],
+                t: t[k],
+                temp: temp[k],
+                power: power[k],
+                f: f[k],
+                vib: vib[k],
+                vib_class: vib_class[k],
+                pos: pos[k],
+                du: [du[0][k], du[1][k], du[2][k]],
+                sim_u: [sim_u[0][k], sim_u[1][k], sim_u[2][k]],
+            });
+        }
     }
 
     /// Closes the block being filled: its means, count and spread are kept.
@@ -479,10 +572,17 @@ impl Builder {
             within_du,
             diff2,
             quiet_diff2,
+            auto_blocked,
             ..
         } = self;
         let blocked = block_s.is_some();
         let mut notes = Vec::new();
+        if let (true, Some(b)) = (auto_blocked, block_s) {
+            notes.push(format!(
+                "more than {} rows: reduced to means over blocks of {b} s, the noise floor and held-out figures per row (every row: --block-s 0)",
+                super::AUTO_BLOCK_ROWS
+            ));
+        }
         if !any_vib {
             notes.push("no vib_kind in the recordings: every row taken as without vibration".to_string());
         }
