@@ -5,7 +5,7 @@
 //! `simulate --follow`) show one bar per pass. indicatif draws nothing when standard error is
 //! not a terminal.
 
-use crate::recording::{Error, ErrorKind, Reader, Row};
+use crate::recording::{Error, Reader, Row, io_error};
 use std::cell::Cell;
 use std::fs::File;
 use std::io::{BufReader, Read};
@@ -13,7 +13,7 @@ use std::path::Path;
 use std::rc::Rc;
 
 /// A reader that counts the bytes it hands out.
-struct Counted<R> {
+pub(crate) struct Counted<R> {
     inner: R,
     bytes: Rc<Cell<u64>>,
 }
@@ -26,12 +26,24 @@ impl<R: Read> Read for Counted<R> {
     }
 }
 
+/// A recording reader whose bytes read are counted.
+pub(crate) type CountedReader = Reader<BufReader<Counted<File>>>;
+
+/// Opens `path` (comments and header read) with its bytes read added to `bytes`; also returns
+/// the file's size. Errors name the file.
+pub(crate) fn open_counted(path: &Path, bytes: &Rc<Cell<u64>>) -> Result<(CountedReader, u64), Error> {
+    let f = File::open(path).map_err(|e| io_error(path, e))?;
+    let size = f.metadata().map(|m| m.len()).unwrap_or(0);
+    let src = BufReader::with_capacity(1 << 16, Counted { inner: f, bytes: Rc::clone(bytes) });
+    Ok((Reader::new(src, path)?, size))
+}
+
 /// Rows between two updates of the bar.
 const UPDATE_ROWS: u64 = 1 << 16;
 
 /// One pass over a recording: its rows one at a time, a progress bar by bytes read.
 pub struct Pass {
-    reader: Reader<BufReader<Counted<File>>>,
+    reader: CountedReader,
     bytes: Rc<Cell<u64>>,
     bar: indicatif::ProgressBar,
 }
@@ -40,16 +52,8 @@ impl Pass {
     /// Opens `path` (comments and header read) for a pass named `what` on the bar. Errors name
     /// the file.
     pub fn open(path: &Path, what: &str) -> Result<Pass, Error> {
-        let f = File::open(path).map_err(|e| Error {
-            file: path.to_path_buf(),
-            line: 0,
-            column: None,
-            kind: ErrorKind::Io(e.to_string()),
-        })?;
-        let size = f.metadata().map(|m| m.len()).unwrap_or(0);
         let bytes = Rc::new(Cell::new(0u64));
-        let src = BufReader::with_capacity(1 << 16, Counted { inner: f, bytes: Rc::clone(&bytes) });
-        let reader = Reader::new(src, path)?;
+        let (reader, size) = open_counted(path, &bytes)?;
         let bar = indicatif::ProgressBar::new(size);
         bar.set_style(
             indicatif::ProgressStyle::with_template(&format!(

@@ -28,11 +28,10 @@ pub mod report;
 pub mod stats;
 pub mod steps;
 
-use crate::recording::{self, Reader, Row};
+use crate::progress::CountedReader;
+use crate::recording::{self, Row};
 use std::cell::Cell;
 use std::fmt;
-use std::fs::File;
-use std::io::{BufReader, Read};
 use std::path::Path;
 use std::rc::Rc;
 
@@ -251,30 +250,10 @@ enum Source<'a> {
     Predicted(&'a bins_comp::CalibrationParams),
 }
 
-/// A reader that counts the bytes read through it (the progress bar's position).
-struct Counted<R> {
-    inner: R,
-    bytes: Rc<Cell<u64>>,
-}
-
-impl<R: Read> Read for Counted<R> {
-    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        let n = self.inner.read(buf)?;
-        self.bytes.set(self.bytes.get() + n as u64);
-        Ok(n)
-    }
-}
-
-type CountedReader = Reader<BufReader<Counted<File>>>;
-
-/// Opens `path` as a recording whose bytes read are added to `bytes`; also returns its size.
+/// Opens `path` as a recording whose bytes read are added to `bytes` (the progress bar's
+/// position); also returns its size.
 fn open_counted(path: &Path, bytes: &Rc<Cell<u64>>) -> Result<(CountedReader, u64), DiagnoseError> {
-    let err = |e: std::io::Error| DiagnoseError(recording::io_error(path, e).to_string());
-    let f = File::open(path).map_err(err)?;
-    let size = f.metadata().map(|m| m.len()).unwrap_or(0);
-    let src = BufReader::with_capacity(1 << 16, Counted { inner: f, bytes: Rc::clone(bytes) });
-    let r = Reader::new(src, path).map_err(|e| DiagnoseError(e.to_string()))?;
-    Ok((r, size))
+    crate::progress::open_counted(path, bytes).map_err(|e| DiagnoseError(e.to_string()))
 }
 
 /// SIM (from `sim`) and REAL read in lockstep into a [`prep::Builder`]: one row of each in
