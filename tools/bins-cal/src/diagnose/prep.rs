@@ -191,11 +191,12 @@ pub struct Builder {
     diff2: Vec<[Vec<f32>; 3]>,
     /// Sum and count of those squared differences on rows without vibration, per axis.
     quiet_diff2: ([f64; 3], usize),
-    /// The previous row's line, time and REAL − SIM, and its reference (for the differences).
-    prev: Option<PrevRow>,
+    /// The previous usable row (for the differences and the runs).
+    prev: Option<Kept>,
 }
 
 /// What a usable row keeps (before any block).
+#[derive(Clone, Copy)]
 struct Kept {
     line: u64,
     t: f64,
@@ -207,16 +208,6 @@ struct Kept {
     pos: Option<usize>,
     du: [f64; 3],
     sim_u: [f64; 3],
-}
-
-/// The previous usable row of a blocked [`Builder`].
-struct PrevRow {
-    line: u64,
-    t: f64,
-    du: [f64; 3],
-    f: [f64; 3],
-    vib: Vibration<f64>,
-    pos: Option<usize>,
 }
 
 /// A block being filled: sums over its rows.
@@ -486,7 +477,7 @@ impl Builder {
             b.du2[i] += du[i] * du[i];
             b.sim_u[i] += sim_u[i];
         }
-        self.prev = Some(PrevRow { line, t, du, f, vib, pos });
+        self.prev = Some(k);
     }
 
     /// Turns the rows kept so far into blocks of `block_s` and keeps blocks from now on.
