@@ -44,6 +44,44 @@ fn solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
     x
 }
 
+/// SIM as a user fits it: per axis the offset-only cubic in the thermistor's reading
+/// (`(temp_C − centre_c) / scale_c` as the variable), least squares over REAL itself. Also returns
+/// what REAL − SIM holds besides the `noise` put into REAL (RMS per axis, mg): the structure less
+/// what the cubic took of it.
+fn cubic_sim(real: &[Row], noise: &[Vec<f64>; 3], centre_c: f64, scale_c: f64) -> (Vec<Row>, [f64; 3]) {
+    let n = real.len();
+    let mut sim = real.to_vec();
+    let x: Vec<[f64; 4]> = real
+        .iter()
+        .map(|r| {
+            let d = (r.temp_c - centre_c) / scale_c;
+            [1.0, d, d * d, d * d * d]
+        })
+        .collect();
+    let mut slow_rms = [0.0; 3];
+    for i in 0..3 {
+        let mut a = vec![vec![0.0; 4]; 4];
+        let mut b = vec![0.0; 4];
+        for (r, xr) in real.iter().zip(&x) {
+            let y = r.u_v[i] - r.f_g[i].unwrap();
+            for u in 0..4 {
+                b[u] += xr[u] * y;
+                for v in 0..4 {
+                    a[u][v] += xr[u] * xr[v];
+                }
+            }
+        }
+        let c = solve(a, b);
+        for (s, xr) in sim.iter_mut().zip(&x) {
+            s.u_v[i] = s.f_g[i].unwrap() + (0..4).map(|u| c[u] * xr[u]).sum::<f64>();
+        }
+        let clean: Vec<f64> = sim.iter().zip(real).zip(&noise[i]).map(|((s, r), e)| r.u_v[i] - e - s.u_v[i]).collect();
+        let m = clean.iter().sum::<f64>() / n as f64;
+        slow_rms[i] = (clean.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n as f64).sqrt() * 1e3;
+    }
+    (sim, slow_rms)
+}
+
 /// SIM and REAL of the warm soak: `hours` at 1 Hz.
 fn warm_soak(hours: f64, seed: u64) -> (Vec<Row>, Vec<Row>, [f64; 3]) {
     let n = (hours * 3600.0) as usize;
@@ -83,38 +121,7 @@ fn warm_soak(hours: f64, seed: u64) -> (Vec<Row>, Vec<Row>, [f64; 3]) {
         }
         real.push(row);
     }
-    // SIM: the offset-only cubic in the thermistor's reading, fitted to REAL per axis.
-    let mut sim = real.clone();
-    let x: Vec<[f64; 4]> = real
-        .iter()
-        .map(|r| {
-            let d = (r.temp_c - 26.0) / 6.0;
-            [1.0, d, d * d, d * d * d]
-        })
-        .collect();
-    let mut slow_rms = [0.0; 3];
-    for i in 0..3 {
-        let mut a = vec![vec![0.0; 4]; 4];
-        let mut b = vec![0.0; 4];
-        for (r, xr) in real.iter().zip(&x) {
-            let y = r.u_v[i] - r.f_g[i].unwrap();
-            for u in 0..4 {
-                b[u] += xr[u] * y;
-                for v in 0..4 {
-                    a[u][v] += xr[u] * xr[v];
-                }
-            }
-        }
-        let c = solve(a, b);
-        for (s, xr) in sim.iter_mut().zip(&x) {
-            s.u_v[i] = s.f_g[i].unwrap() + (0..4).map(|u| c[u] * xr[u]).sum::<f64>();
-        }
-        // What REAL − SIM holds besides the white noise: the slow structure and the random
-        // walk less what SIM's cubic took of them.
-        let clean: Vec<f64> = sim.iter().zip(&real).zip(&noise[i]).map(|((s, r), e)| r.u_v[i] - e - s.u_v[i]).collect();
-        let m = clean.iter().sum::<f64>() / n as f64;
-        slow_rms[i] = (clean.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n as f64).sqrt() * 1e3;
-    }
+    let (sim, slow_rms) = cubic_sim(&real, &noise, 26.0, 6.0);
     (sim, real, slow_rms)
 }
 
@@ -296,35 +303,7 @@ fn coloured_cooling(seed: u64, slow_mg: [f64; 3]) -> (Vec<Row>, Vec<Row>, [f64; 
         }
         real.push(row);
     }
-    let mut sim = real.clone();
-    let x: Vec<[f64; 4]> = real
-        .iter()
-        .map(|r| {
-            let d = (r.temp_c - 23.5) / 1.5;
-            [1.0, d, d * d, d * d * d]
-        })
-        .collect();
-    let mut slow_rms = [0.0; 3];
-    for i in 0..3 {
-        let mut a = vec![vec![0.0; 4]; 4];
-        let mut b = vec![0.0; 4];
-        for (r, xr) in real.iter().zip(&x) {
-            let y = r.u_v[i] - r.f_g[i].unwrap();
-            for u in 0..4 {
-                b[u] += xr[u] * y;
-                for v in 0..4 {
-                    a[u][v] += xr[u] * xr[v];
-                }
-            }
-        }
-        let c = solve(a, b);
-        for (s, xr) in sim.iter_mut().zip(&x) {
-            s.u_v[i] = s.f_g[i].unwrap() + (0..4).map(|u| c[u] * xr[u]).sum::<f64>();
-        }
-        let clean: Vec<f64> = sim.iter().zip(&real).zip(&noise[i]).map(|((s, r), e)| r.u_v[i] - e - s.u_v[i]).collect();
-        let m = clean.iter().sum::<f64>() / n as f64;
-        slow_rms[i] = (clean.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n as f64).sqrt() * 1e3;
-    }
+    let (sim, slow_rms) = cubic_sim(&real, &noise, 23.5, 1.5);
     (sim, real, slow_rms)
 }
 
