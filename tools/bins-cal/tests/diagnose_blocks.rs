@@ -5,6 +5,9 @@
 //! "after" within 5 %, each parameter within the full-rate fit's 95 % interval.
 
 use bins_cal::diagnose::{Options, cases, diagnose_with, prep};
+use bins_cal::recording::Row;
+use rand::SeedableRng;
+use rand_distr::Distribution;
 use std::path::Path;
 
 fn both(name: &str) {
@@ -13,7 +16,8 @@ fn both(name: &str) {
     case.plan.rows = 120_000;
     let (sim, real) = cases::generate(&case);
     let (s, r) = (Path::new("sim.csv"), Path::new("real.csv"));
-    let full = diagnose_with(&sim, &real, s, r, &Options::default()).expect("every row").report;
+    let every_row = Options { block_s: Some(0.0), ..Options::default() };
+    let full = diagnose_with(&sim, &real, s, r, &every_row).expect("every row").report;
     let opt = Options { block_s: Some(1.0), ..Options::default() };
     let blocked = diagnose_with(&sim, &real, s, r, &opt).expect("1 s blocks").report;
     let names = |rep: &bins_cal::diagnose::report::Report| {
@@ -87,4 +91,119 @@ fn blocks_from_a_row_count_are_blocks_from_the_start() {
     assert_eq!(format!("{from_start:?}"), format!("{switched:?}"));
     assert!(whole.weight.is_empty() && whole.t.len() == 20_000, "below the count every row is kept");
     assert!(from_start.t.len() < 5_000, "{} blocks", from_start.t.len());
+}
+
+/// A pair at `hz` of 600 s over a 2 °C/min ramp with a 60 s lag in REAL, REAL's noise an AR(1)
+/// sequence of lag-one correlation `rho` (0: white), 0.05 mg; SIM without noise. Written here
+/// from the lag's definition, not by the library's generator.
+fn ramp_pair(hz: f64, rho: f64) -> (Vec<Row>, Vec<Row>) {
+    let n = (600.0 * hz) as usize;
+    let dt = 1.0 / hz;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+    let normal = rand_distr::Normal::new(0.0, 1.0).expect("a normal");
+    let (mut lagged_c, mut ar) = (20.0, 0.0);
+    let mut sim = Vec::with_capacity(n);
+    let mut real = Vec::with_capacity(n);
+    for k in 0..n {
+        let t = k as f64 * dt;
+        let temp_c = 20.0 + t / 30.0;
+        lagged_c += (temp_c - lagged_c) * (1.0 - (-dt / 60.0f64).exp());
+        ar = rho * ar + (1.0 - rho * rho).sqrt() * 0.05e-3 * normal.sample(&mut rng);
+        let row = |u: [f64; 3]| Row {
+            line: k as u64 + 2,
+            t_s: t,
+            u_v: u,
+            temp_c,
+            f_g: [Some(0.0), Some(0.0), Some(1.0)],
+            ..Row::default()
+        };
+        // 50 µg/°C of bias on every accelerometer, 1 V/g, z up.
+        let u_sim = [1e-3 + 50e-6 * (temp_c - 20.0), 2e-3 + 50e-6 * (temp_c - 20.0), 1.0 + 50e-6 * (temp_c - 20.0)];
+        let u_real = u_sim.map(|u| u + 50e-6 * (lagged_c - temp_c) + ar);
+        sim.push(row(u_sim));
+        real.push(row(u_real));
+    }
+    // A second orientation for the scale factors: the first tenth upside down.
+    for rows in [&mut sim, &mut real] {
+        for r in rows.iter_mut().take(n / 10) {
+            r.f_g[2] = Some(-1.0);
+            r.u_v[2] -= 2.0;
+        }
+    }
+    (sim, real)
+}
+
+/// The block choice of a builder fed the pair.
+fn choice(sim: &[Row], real: &[Row]) -> prep::BlockChoice {
+    let mut b = prep::Builder::new(Path::new("sim.csv"), Path::new("real.csv"));
+    for (s, r) in sim.iter().zip(real) {
+        b.push(s, r).expect("rows match");
+    }
+    b.block_choice().expect("a choice")
+}
+
+fn prepared(sim: &[Row], real: &[Row]) -> prep::Prepared {
+    prep::prepare(sim, real, Path::new("sim.csv"), Path::new("real.csv")).expect("prepared")
+}
+
+/// By default, a 100 Hz recording of white noise is reduced to blocks of a third of a second
+/// (a third of the shortest time constant searched), and the note says how much the residual
+/// spreads inside them; the same recording at 2 Hz is kept whole (a block would hold one row).
+#[test]
+fn white_noise_at_100_hz_is_reduced_to_a_third_of_a_second() {
+    let (sim, real) = ramp_pair(100.0, 0.0);
+    let p = prepared(&sim, &real);
+    assert!(!p.weight.is_empty(), "blocks expected; notes {:?}", p.notes);
+    let rows: f64 = p.weight.iter().sum();
+    assert_eq!(rows as usize, sim.len());
+    let full = p.weight.iter().fold(0.0f64, |m, w| m.max(*w));
+    assert_eq!(full, 34.0, "rows at 0, 0.01 … 0.33 s in a block of 1/3 s");
+    assert!(
+        p.notes.iter().any(|n| n.starts_with("reduced to means over blocks of 0.3333 s (34 rows")),
+        "{:?}",
+        p.notes
+    );
+    let c = choice(&sim, &real);
+    assert!(c.accepts());
+    for r in c.within_ratio {
+        assert!((r - 1.0).abs() < 0.05, "within ratio {r}, expected 1 for white noise");
+    }
+    // Past a row count the same length is taken, and the rows kept are turned into blocks as
+    // if the blocks had been built from the first row.
+    let build = |b: prep::Builder| {
+        let mut b = b;
+        for (s, r) in sim.iter().zip(&real) {
+            b.push(s, r).expect("rows match");
+        }
+        let mut p = b.finish().expect("prepared");
+        p.notes.clear();
+        p
+    };
+    let (s, r) = (Path::new("sim.csv"), Path::new("real.csv"));
+    let capped = build(prep::Builder::new(s, r).blocks_from_data(20_001));
+    let from_start = build(prep::Builder::new(s, r).with_blocks(Some(1.0 / 3.0)));
+    assert_eq!(format!("{capped:?}"), format!("{from_start:?}"));
+    let (sim, real) = ramp_pair(2.0, 0.0);
+    let p = prepared(&sim, &real);
+    assert!(p.weight.is_empty() && p.t.len() == sim.len(), "every row at 2 Hz");
+    assert!(!p.notes.iter().any(|n| n.contains("blocks")), "{:?}", p.notes);
+}
+
+/// Noise correlated from row to row (an AR(1) sequence, lag-one correlation ρ = 0.6, as a
+/// resonance or a filter leaves it) spreads inside a block of 34 rows 2.29× what the
+/// consecutive differences predict (`(34 − n·var(mean)/σ²) / (33 (1 − ρ))`, with
+/// `n·var(mean)/σ² = (1+ρ)/(1−ρ) − 2ρ(1−ρ³⁴)/(34 (1−ρ)²) = 3.78`): the rows stay whole and the
+/// note says why.
+#[test]
+fn correlated_noise_keeps_every_row() {
+    let (sim, real) = ramp_pair(100.0, 0.6);
+    let p = prepared(&sim, &real);
+    assert!(p.weight.is_empty() && p.t.len() == sim.len(), "every row expected; notes {:?}", p.notes);
+    let note = p.notes.iter().find(|n| n.starts_with("every row kept")).expect("a note");
+    assert!(note.contains("spreads 2."), "{note}");
+    let c = choice(&sim, &real);
+    assert!(!c.accepts());
+    for r in c.within_ratio {
+        assert!((r - 2.29).abs() < 0.15, "within ratio {r}, expected about 2.29");
+    }
 }

@@ -37,7 +37,8 @@ pub struct Args {
     random_walk: Option<f64>,
     /// Reduce the rows to means over blocks of at most this many seconds before the search;
     /// the noise floor and the held-out figures stay per row of the recording. 0: every row.
-    /// Without it: every row up to 2 000 000 rows, 1 s blocks beyond (a day at 100 Hz)
+    /// Without it: blocks of the length the data allow (a third of a second at 100 Hz), every
+    /// row where blocks would change what the search sees (the report's note says which)
     #[arg(long, value_name = "SECONDS")]
     block_s: Option<f64>,
 }

@@ -68,8 +68,9 @@ pub struct Options {
     /// A progress bar on stderr while the recordings are read (drawn on a terminal only).
     pub progress: bool,
     /// Reduce the rows to means over blocks of at most this many seconds before the search
-    /// ([`prep::Builder::with_blocks`]); `Some(0)`: every row; `None`: every row up to
-    /// [`AUTO_BLOCK_ROWS`] usable rows, blocks of [`AUTO_BLOCK_S`] beyond.
+    /// ([`prep::Builder::with_blocks`]); `Some(0)`: every row; `None`: the length the data
+    /// allow ([`prep::Builder::blocks_from_data`], [`prep::Builder::block_choice`]), every row
+    /// where they allow none (up to [`AUTO_BLOCK_ROWS`] usable rows).
     pub block_s: Option<f64>,
 }
 
@@ -78,9 +79,13 @@ pub struct Options {
 /// whole).
 pub const AUTO_BLOCK_ROWS: usize = 2_000_000;
 
-/// Block length \[s\] of the default reduction: the structure scales start at 1 s, and the
-/// shortest time constant searched is three blocks (docs/diagnosis.md, "Long recordings").
-pub const AUTO_BLOCK_S: f64 = 1.0;
+/// The most the residual may spread inside the default blocks, over what its consecutive
+/// differences predict, for the blocks to be used ([`prep::BlockChoice::accepts`]); white noise
+/// gives 1 (within ±0.01 over 20 000 rows in blocks of 34).
+pub const BLOCK_WITHIN_RATIO: f64 = 1.1;
+
+/// The fewest rows a default block holds: below, the rows are kept whole.
+pub const BLOCK_MIN_ROWS: usize = 4;
 
 impl Options {
     /// The random-walk intensity [g²/s] of [`Options::random_walk_mg_per_sqrt_h`].

@@ -110,8 +110,8 @@ pub fn prepare(sim: &[Row], real: &[Row], sim_name: &Path, real_name: &Path) -> 
     prepare_blocks(sim, real, sim_name, real_name, None)
 }
 
-/// [`prepare`] with the block choice of [`super::Options::block_s`]: `None` every row up to
-/// [`super::AUTO_BLOCK_ROWS`], then blocks of [`super::AUTO_BLOCK_S`]; `Some(0)` every row;
+/// [`prepare`] with the block choice of [`super::Options::block_s`]: `None` the length the data
+/// allow ([`Builder::blocks_from_data`] at [`super::AUTO_BLOCK_ROWS`]); `Some(0)` every row;
 /// `Some(s)` blocks of at most `s` seconds ([`Builder::with_blocks`]).
 pub fn prepare_blocks(
     sim: &[Row],
@@ -175,11 +175,12 @@ pub struct Builder {
     first_temp_c: Option<f64>,
     /// Block length \[s\] when the rows are reduced to blocks.
     block_s: Option<f64>,
-    /// Rows kept as they are until this many, then blocks of this length \[s\]
-    /// ([`Builder::auto_blocks`]).
-    auto: Option<(usize, f64)>,
-    /// Whether the rows were turned into blocks on reaching `auto`'s count.
-    auto_blocked: bool,
+    /// Rows kept as they are until this many, then blocks of this length \[s\], or of the
+    /// length the rows kept allow when `None` ([`Builder::auto_blocks`],
+    /// [`Builder::blocks_from_data`]).
+    auto: Option<(usize, Option<f64>)>,
+    /// What the report says of the reduction (blocks, or every row and why).
+    block_note: Option<String>,
     /// The block being filled.
     pending: Option<Pending>,
     /// Rows per block kept.
@@ -193,6 +194,51 @@ pub struct Builder {
     quiet_diff2: ([f64; 3], usize),
     /// The previous usable row (for the differences and the runs).
     prev: Option<Kept>,
+}
+
+/// A block length chosen from the rows ([`Builder::block_choice`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BlockChoice {
+    /// The block length \[s\].
+    pub block_s: f64,
+    /// The rows' median spacing \[s\].
+    pub dt_s: f64,
+    /// Rows in a full block.
+    pub rows: usize,
+    /// Per accelerometer: the residual's spread inside the blocks over what its consecutive
+    /// differences predict (1 for white noise; [`Builder::block_choice`]).
+    pub within_ratio: [f64; 3],
+}
+
+impl BlockChoice {
+    /// Whether the blocks change nothing the search sees: at least
+    /// [`super::BLOCK_MIN_ROWS`] rows a block, no spread inside them beyond
+    /// [`super::BLOCK_WITHIN_RATIO`].
+    pub fn accepts(&self) -> bool {
+        self.rows >= super::BLOCK_MIN_ROWS && self.within_ratio.iter().all(|r| *r <= super::BLOCK_WITHIN_RATIO)
+    }
+
+    /// What the length rests on, for the report's note.
+    fn describe(&self) -> String {
+        let [x, y, z] = self.within_ratio;
+        format!(
+            "a third of the shortest time constant searched and within the temperature's smoothing; inside a block the residual spreads {x:.3} / {y:.3} / {z:.3}× what its consecutive differences predict"
+        )
+    }
+
+    /// Why the rows would rather stay whole.
+    fn refusal(&self) -> String {
+        if self.rows < super::BLOCK_MIN_ROWS {
+            return format!("blocks of {:.4} s would hold {} rows", self.block_s, self.rows);
+        }
+        let (i, r) = self.within_ratio.iter().enumerate().fold((0, 0.0), |b, (i, &r)| if r > b.1 { (i, r) } else { b });
+        format!(
+            "inside {:.4} s blocks the residual on {} spreads {r:.3}× what its consecutive differences predict (more than {}: structure or correlated noise below the block)",
+            self.block_s,
+            AXES[i],
+            super::BLOCK_WITHIN_RATIO
+        )
+    }
 }
 
 /// What a usable row keeps (before any block).
@@ -241,7 +287,7 @@ impl Builder {
     /// The block choice of [`super::Options::block_s`] ([`prepare_blocks`]).
     pub fn choose_blocks(self, block_s: Option<f64>) -> Self {
         match block_s {
-            None => self.auto_blocks(super::AUTO_BLOCK_ROWS, super::AUTO_BLOCK_S),
+            None => self.blocks_from_data(super::AUTO_BLOCK_ROWS),
             Some(b) if b > 0.0 => self.with_blocks(Some(b)),
             Some(_) => self,
         }
@@ -251,8 +297,93 @@ impl Builder {
     /// blocks of `block_s` seconds ([`Builder::with_blocks`]) and goes on in blocks, so memory
     /// stops growing with the rows.
     pub fn auto_blocks(mut self, max_rows: usize, block_s: f64) -> Self {
-        self.auto = Some((max_rows, block_s));
+        self.auto = Some((max_rows, Some(block_s)));
         self
+    }
+
+    /// Keeps every row, then reduces them to blocks of the length the rows allow
+    /// ([`Builder::block_choice`]) where the blocks would change nothing the search sees: at
+    /// [`Builder::finish`], or on reaching `max_rows` usable rows (then in any case, chosen
+    /// from the rows kept, so memory stops growing with the rows).
+    pub fn blocks_from_data(mut self, max_rows: usize) -> Self {
+        self.auto = Some((max_rows, None));
+        self
+    }
+
+    /// The block length the rows kept so far allow, and what it rests on. The length is the
+    /// shorter of
+    ///
+    /// - a third of the shortest time constant the search tries on every row
+    ///   (`max(3 dt, 1 s)`, `mech::Context::grid`), so that blocks leave the grid as it is, and
+    /// - the half-width the thermal regressors' temperature is smoothed over on every row
+    ///   (`min(10 s, 50 dt)`, [`smooth_temperature`]), so a block mean averages no more of the
+    ///   temperature than the regressors already do.
+    ///
+    /// Within blocks of that length the reference, vibration and position are constant (a block
+    /// ends where they change), so a mechanism's column can vary inside a block only through
+    /// something faster than both: what would show as spread of the residual inside the
+    /// blocks beyond what its consecutive differences predict. [`BlockChoice::within_ratio`]
+    /// measures that on the rows (`Builder::within_ratio`); the blocks are used when it is at most
+    /// [`super::BLOCK_WITHIN_RATIO`] on every accelerometer and a block holds at least
+    /// [`super::BLOCK_MIN_ROWS`] rows. `None` with fewer than two rows.
+    pub fn block_choice(&self) -> Option<BlockChoice> {
+        if self.t.len() < 2 || self.block_s.is_some() {
+            return None;
+        }
+        let diffs: Vec<f64> = self.t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+        if diffs.is_empty() {
+            return None;
+        }
+        let dt = median(&diffs);
+        let block_s = ((3.0 * dt).max(1.0) / 3.0).min((50.0 * dt).min(10.0));
+        // Rows `k` with `k·dt < block_s` (a block takes rows while `t − t0 < block_s`).
+        let rows = (block_s / dt - 1e-6).ceil() as usize;
+        let within_ratio = if rows >= 2 { self.within_ratio(block_s) } else { [1.0; 3] };
+        Some(BlockChoice { block_s, dt_s: dt, rows, within_ratio })
+    }
+
+    /// Per accelerometer, over the rows kept cut into blocks of `block_s` as
+    /// [`Builder::with_blocks`] cuts them: the residual's sum of squares about each block's
+    /// mean over half the sum of its squared consecutive differences inside the blocks. Both
+    /// have the expectation `(rows − 1)·σ²` per block for white noise of any level; structure
+    /// inside a block (a fast transient, a step, noise correlated from row to row) raises the
+    /// first more than the second.
+    fn within_ratio(&self, block_s: f64) -> [f64; 3] {
+        let (mut within, mut half_d2) = ([0.0; 3], [0.0; 3]);
+        let (mut k0, mut sum, mut sum2, mut m) = (0usize, [0.0; 3], [0.0; 3], 0usize);
+        let close = |within: &mut [f64; 3], sum: &[f64; 3], sum2: &[f64; 3], m: usize| {
+            if m > 1 {
+                for i in 0..3 {
+                    within[i] += (sum2[i] - sum[i] * sum[i] / m as f64).max(0.0);
+                }
+            }
+        };
+        for k in 0..self.t.len() {
+            let joins = k > 0
+                && self.line[k - 1] + 1 == self.line[k]
+                && self.f[k - 1] == self.f[k]
+                && self.vib[k - 1] == self.vib[k]
+                && self.pos[k - 1] == self.pos[k]
+                && self.t[k] - self.t[k0] < block_s;
+            if joins {
+                for i in 0..3 {
+                    let d = self.du[i][k] - self.du[i][k - 1];
+                    half_d2[i] += 0.5 * d * d;
+                }
+            } else {
+                close(&mut within, &sum, &sum2, m);
+                (k0, sum, sum2, m) = (k, [0.0; 3], [0.0; 3], 0);
+            }
+            // About the block's first row, so that the sums do not carry the offset.
+            for i in 0..3 {
+                let v = self.du[i][k] - self.du[i][k0];
+                sum[i] += v;
+                sum2[i] += v * v;
+            }
+            m += 1;
+        }
+        close(&mut within, &sum, &sum2, m);
+        [0, 1, 2].map(|i| if half_d2[i] > 0.0 { within[i] / half_d2[i] } else { 1.0 })
     }
 
     /// An empty builder; `sim_name` and `real_name` name the files in errors.
@@ -283,7 +414,7 @@ impl Builder {
             first_temp_c: None,
             block_s: None,
             auto: None,
-            auto_blocked: false,
+            block_note: None,
             pending: None,
             weight: Vec::new(),
             within_du: Default::default(),
@@ -419,9 +550,18 @@ impl Builder {
             self.vib.push(vib);
             self.vib_class.push(vib_class);
             self.pos.push(pos);
-            if let Some((max_rows, block_s)) = self.auto
+            if let Some((max_rows, fixed)) = self.auto
                 && self.t.len() >= max_rows
             {
+                let block_s = match fixed {
+                    Some(b) => {
+                        self.block_note = Some(format!(
+                            "more than {max_rows} rows: reduced to means over blocks of {b} s, the noise floor and held-out figures per row (every row: --block-s 0)"
+                        ));
+                        b
+                    }
+                    None => self.forced_blocks(max_rows),
+                };
                 self.switch_to_blocks(block_s);
             }
             return;
@@ -480,10 +620,23 @@ impl Builder {
         self.prev = Some(k);
     }
 
+    /// The block length taken on reaching `max_rows` rows with [`Builder::blocks_from_data`]:
+    /// [`Builder::block_choice`]'s, but at least [`super::BLOCK_MIN_ROWS`] rows, and taken
+    /// even where the rows would rather stay whole (the note says so).
+    fn forced_blocks(&mut self, max_rows: usize) -> f64 {
+        let c = self.block_choice().unwrap_or(BlockChoice { block_s: 1.0, dt_s: 1.0, rows: 1, within_ratio: [1.0; 3] });
+        let block_s = c.block_s.max(super::BLOCK_MIN_ROWS as f64 * c.dt_s);
+        let rows = (block_s / c.dt_s - 1e-6).ceil() as usize;
+        let why = if c.accepts() { c.describe() } else { format!("{}; taken although {}", c.describe(), c.refusal()) };
+        self.block_note = Some(format!(
+            "more than {max_rows} rows: reduced to means over blocks of {block_s:.4} s ({rows} rows) for memory ({why}); the noise floor and held-out figures per row (every row: --block-s 0)"
+        ));
+        block_s
+    }
+
     /// Turns the rows kept so far into blocks of `block_s` and keeps blocks from now on.
     fn switch_to_blocks(&mut self, block_s: f64) {
         self.auto = None;
-        self.auto_blocked = true;
         self.block_s = Some(block_s);
         let line = std::mem::take(&mut self.line);
         let t = std::mem::take(&mut self.t);
@@ -535,6 +688,21 @@ impl Builder {
     /// The prepared pair: scale factors, residual, segments, temperature rate and white-noise
     /// levels from the rows kept.
     pub fn finish(mut self) -> Result<Prepared, DiagnoseError> {
+        if let Some((_, None)) = self.auto
+            && let Some(c) = self.block_choice()
+        {
+            if c.accepts() {
+                self.block_note = Some(format!(
+                    "reduced to means over blocks of {:.4} s ({} rows; {}); the noise floor and held-out figures per row (every row: --block-s 0)",
+                    c.block_s,
+                    c.rows,
+                    c.describe()
+                ));
+                self.switch_to_blocks(c.block_s);
+            } else if c.rows >= super::BLOCK_MIN_ROWS {
+                self.block_note = Some(format!("every row kept: {}", c.refusal()));
+            }
+        }
         self.flush();
         let rn = self.real_name.as_str();
         let Builder {
@@ -563,17 +731,12 @@ impl Builder {
             within_du,
             diff2,
             quiet_diff2,
-            auto_blocked,
+            block_note,
             ..
         } = self;
         let blocked = block_s.is_some();
         let mut notes = Vec::new();
-        if let (true, Some(b)) = (auto_blocked, block_s) {
-            notes.push(format!(
-                "more than {} rows: reduced to means over blocks of {b} s, the noise floor and held-out figures per row (every row: --block-s 0)",
-                super::AUTO_BLOCK_ROWS
-            ));
-        }
+        notes.extend(block_note);
         if !any_vib {
             notes.push("no vib_kind in the recordings: every row taken as without vibration".to_string());
         }
