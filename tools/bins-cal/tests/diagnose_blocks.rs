@@ -207,3 +207,41 @@ fn correlated_noise_keeps_every_row() {
         assert!((r - 2.29).abs() < 0.15, "within ratio {r}, expected about 2.29");
     }
 }
+
+/// A record longer than the most blocks allowed: the blocks taken on reaching the row count are
+/// merged at the end, k at a time, into at most that many. Merging keeps every row and the
+/// residual's total sum of squares (each block's spread plus its rows times its mean's squared
+/// distance from the merged mean) of the blocks it merges.
+#[test]
+fn a_record_longer_than_the_most_blocks_is_merged_into_longer_blocks() {
+    let (sim, real) = ramp_pair(100.0, 0.0);
+    let (s, r) = (Path::new("sim.csv"), Path::new("real.csv"));
+    let build = |b: prep::Builder| {
+        let mut b = b;
+        for (s, r) in sim.iter().zip(&real) {
+            b.push(s, r).expect("rows match");
+        }
+        b.finish().expect("prepared")
+    };
+    let merged = build(prep::Builder::new(s, r).blocks_from_data(20_001).max_blocks(500));
+    assert!(merged.weight.len() <= 500 && merged.weight.len() > 250, "{} blocks", merged.weight.len());
+    assert_eq!(merged.weight.iter().sum::<f64>() as usize, sim.len());
+    let note = merged.notes.iter().find(|n| n.contains("then merged")).expect("a note on the merge");
+    // 20 000 rows at 100 Hz span 200 s: 0.4 s blocks (over 500), merged three at a time.
+    assert!(note.contains("blocks of 0.4000 s") && note.contains("merged 3 at a time"), "{note}");
+    let unmerged = build(prep::Builder::new(s, r).with_blocks(Some(0.4)));
+    assert!(unmerged.weight.len() > 1_400, "{} blocks", unmerged.weight.len());
+    let total_ss = |p: &prep::Prepared, i: usize| {
+        let w: f64 = p.weight.iter().sum();
+        let mean = p.weight.iter().zip(&p.r[i]).map(|(w, r)| w * r).sum::<f64>() / w;
+        let between: f64 = p.weight.iter().zip(&p.r[i]).map(|(w, r)| w * (r - mean).powi(2)).sum();
+        between + p.within[i].iter().sum::<f64>()
+    };
+    for i in 0..3 {
+        let (a, b) = (total_ss(&merged, i), total_ss(&unmerged, i));
+        assert!((a - b).abs() <= 1e-6 * b, "axis {i}: total sum of squares {a} merged, {b} not");
+        let within_share = merged.within[i].iter().sum::<f64>() / a;
+        let unmerged_share = unmerged.within[i].iter().sum::<f64>() / b;
+        assert!(within_share > unmerged_share, "merging moves spread between blocks into the blocks");
+    }
+}

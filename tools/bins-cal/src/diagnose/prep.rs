@@ -181,6 +181,11 @@ pub struct Builder {
     auto: Option<(usize, Option<f64>)>,
     /// What the report says of the reduction (blocks, or every row and why).
     block_note: Option<String>,
+    /// Whether blocks taken on reaching the row count are merged at the end so that the
+    /// record needs at most `max_blocks` ([`Builder::blocks_from_data`]).
+    coarsen: bool,
+    /// The most blocks of the default reduction ([`super::MAX_BLOCKS`]; [`Builder::max_blocks`]).
+    max_blocks: usize,
     /// The block being filled.
     pending: Option<Pending>,
     /// Rows per block kept.
@@ -201,6 +206,12 @@ pub struct Builder {
 pub struct BlockChoice {
     /// The block length \[s\].
     pub block_s: f64,
+    /// The length the search's time scales allow \[s\] (a third of the shortest time constant
+    /// searched, within the temperature's smoothing); `block_s` is longer where the record
+    /// would otherwise need more than `max_blocks` blocks.
+    pub physics_s: f64,
+    /// The most blocks the reduction makes ([`super::MAX_BLOCKS`] by default).
+    pub max_blocks: usize,
     /// The rows' median spacing \[s\].
     pub dt_s: f64,
     /// Rows in a full block.
@@ -221,8 +232,16 @@ impl BlockChoice {
     /// What the length rests on, for the report's note.
     fn describe(&self) -> String {
         let [x, y, z] = self.within_ratio;
+        let why = if self.block_s > self.physics_s {
+            format!(
+                "the record's span over {} blocks; the shortest time constant searched is three blocks",
+                self.max_blocks
+            )
+        } else {
+            "a third of the shortest time constant searched and within the temperature's smoothing".to_string()
+        };
         format!(
-            "a third of the shortest time constant searched and within the temperature's smoothing; inside a block the residual spreads {x:.3} / {y:.3} / {z:.3}× what its consecutive differences predict"
+            "{why}; inside a block the residual spreads {x:.3} / {y:.3} / {z:.3}× what its consecutive differences predict"
         )
     }
 
@@ -310,6 +329,12 @@ impl Builder {
         self
     }
 
+    /// The most blocks the default reduction makes ([`super::MAX_BLOCKS`] unless set here).
+    pub fn max_blocks(mut self, max_blocks: usize) -> Self {
+        self.max_blocks = max_blocks;
+        self
+    }
+
     /// The block length the rows kept so far allow, and what it rests on. The length is the
     /// shorter of
     ///
@@ -335,11 +360,13 @@ impl Builder {
             return None;
         }
         let dt = median(&diffs);
-        let block_s = ((3.0 * dt).max(1.0) / 3.0).min((50.0 * dt).min(10.0));
+        let physics_s = ((3.0 * dt).max(1.0) / 3.0).min((50.0 * dt).min(10.0));
+        let span_s = self.t[self.t.len() - 1] - self.t[0];
+        let block_s = physics_s.max(span_s / self.max_blocks.max(1) as f64);
         // Rows `k` with `k·dt < block_s` (a block takes rows while `t − t0 < block_s`).
         let rows = (block_s / dt - 1e-6).ceil() as usize;
         let within_ratio = if rows >= 2 { self.within_ratio(block_s) } else { [1.0; 3] };
-        Some(BlockChoice { block_s, dt_s: dt, rows, within_ratio })
+        Some(BlockChoice { block_s, physics_s, max_blocks: self.max_blocks, dt_s: dt, rows, within_ratio })
     }
 
     /// Per accelerometer, over the rows kept cut into blocks of `block_s` as
@@ -415,6 +442,8 @@ impl Builder {
             block_s: None,
             auto: None,
             block_note: None,
+            coarsen: false,
+            max_blocks: super::MAX_BLOCKS,
             pending: None,
             weight: Vec::new(),
             within_du: Default::default(),
@@ -433,8 +462,9 @@ impl Builder {
     fn clear_used(&mut self) {
         let fresh = Builder::new(Path::new(""), Path::new(""));
         let (sim_name, real_name) = (std::mem::take(&mut self.sim_name), std::mem::take(&mut self.real_name));
-        let (n_total, any_vib, block_s, auto) = (self.n_total, self.any_vib, self.block_s, self.auto);
-        *self = Builder { sim_name, real_name, n_total, any_vib, block_s, auto, ..fresh };
+        let (n_total, any_vib, block_s, auto, max_blocks) =
+            (self.n_total, self.any_vib, self.block_s, self.auto, self.max_blocks);
+        *self = Builder { sim_name, real_name, n_total, any_vib, block_s, auto, max_blocks, ..fresh };
     }
 
     /// Checks one pair (SIM's row `s`, REAL's row `r`) and keeps what the diagnosis needs of it
@@ -560,7 +590,10 @@ impl Builder {
                         ));
                         b
                     }
-                    None => self.forced_blocks(max_rows),
+                    None => {
+                        self.coarsen = true;
+                        self.forced_blocks(max_rows)
+                    }
                 };
                 self.switch_to_blocks(block_s);
             }
@@ -624,7 +657,14 @@ impl Builder {
     /// [`Builder::block_choice`]'s, but at least [`super::BLOCK_MIN_ROWS`] rows, and taken
     /// even where the rows would rather stay whole (the note says so).
     fn forced_blocks(&mut self, max_rows: usize) -> f64 {
-        let c = self.block_choice().unwrap_or(BlockChoice { block_s: 1.0, dt_s: 1.0, rows: 1, within_ratio: [1.0; 3] });
+        let c = self.block_choice().unwrap_or(BlockChoice {
+            block_s: 1.0,
+            physics_s: 1.0,
+            max_blocks: self.max_blocks,
+            dt_s: 1.0,
+            rows: 1,
+            within_ratio: [1.0; 3],
+        });
         let block_s = c.block_s.max(super::BLOCK_MIN_ROWS as f64 * c.dt_s);
         let rows = (block_s / c.dt_s - 1e-6).ceil() as usize;
         let why = if c.accepts() { c.describe() } else { format!("{}; taken although {}", c.describe(), c.refusal()) };
@@ -662,6 +702,60 @@ impl Builder {
                 sim_u: [sim_u[0][k], sim_u[1][k], sim_u[2][k]],
             });
         }
+    }
+
+    /// Merges the blocks kept, `k` consecutive ones of one run at a time (one reference,
+    /// vibration and position, no gap in the lines): row-weighted means, summed rows, and the
+    /// spread about the merged mean (each block's spread plus its rows times its mean's
+    /// squared distance from the merged mean), as blocks `k` times longer would have kept.
+    fn merge_blocks(&mut self, k: usize) {
+        let n = self.weight.len();
+        let mut out = Builder::new(Path::new(""), Path::new(""));
+        let mut j = 0;
+        while j < n {
+            let mut e = j + 1;
+            while e < n
+                && e - j < k
+                && self.f[e] == self.f[j]
+                && self.vib[e] == self.vib[j]
+                && self.pos[e] == self.pos[j]
+                && self.line[e] == self.line[e - 1] + self.weight[e - 1] as u64
+            {
+                e += 1;
+            }
+            let w: f64 = self.weight[j..e].iter().sum();
+            let mean = |v: &[f64]| (j..e).map(|i| self.weight[i] * v[i]).sum::<f64>() / w;
+            out.line.push(self.line[j]);
+            out.t.push(mean(&self.t));
+            out.temp.push(mean(&self.temp));
+            out.power.push(mean(&self.power));
+            out.f.push(self.f[j]);
+            out.vib.push(self.vib[j]);
+            out.vib_class.push(self.vib_class[j]);
+            out.pos.push(self.pos[j]);
+            out.weight.push(w);
+            for a in 0..3 {
+                let m = mean(&self.du[a]);
+                let spread: f64 =
+                    (j..e).map(|i| self.within_du[a][i] + self.weight[i] * (self.du[a][i] - m).powi(2)).sum();
+                out.du[a].push(m);
+                out.sim_u[a].push(mean(&self.sim_u[a]));
+                out.within_du[a].push(spread);
+            }
+            j = e;
+        }
+        self.line = out.line;
+        self.t = out.t;
+        self.temp = out.temp;
+        self.power = out.power;
+        self.f = out.f;
+        self.vib = out.vib;
+        self.vib_class = out.vib_class;
+        self.pos = out.pos;
+        self.weight = out.weight;
+        self.du = out.du;
+        self.sim_u = out.sim_u;
+        self.within_du = out.within_du;
     }
 
     /// Closes the block being filled: its means, count and spread are kept.
@@ -704,6 +798,18 @@ impl Builder {
             }
         }
         self.flush();
+        if self.coarsen && self.weight.len() > self.max_blocks {
+            let k = self.weight.len().div_ceil(self.max_blocks.max(1));
+            let b = self.block_s.unwrap_or(0.0) * k as f64;
+            self.merge_blocks(k);
+            self.block_s = Some(b);
+            if let Some(note) = &mut self.block_note {
+                note.push_str(&format!(
+                    "; then merged {k} at a time into blocks of {b:.4} s, so that the record needs at most {} (the shortest time constant searched is three blocks)",
+                    self.max_blocks
+                ));
+            }
+        }
         let rn = self.real_name.as_str();
         let Builder {
             n_total,

@@ -8,8 +8,8 @@
 #[path = "gen.rs"]
 pub mod generator;
 
-use bins_cal::diagnose::diagnose;
 use bins_cal::diagnose::report::Report;
+use bins_cal::diagnose::{Options, diagnose_with};
 use generator::{Case, MECH_IDS, Mech};
 use plotters::prelude::*;
 use std::collections::BTreeMap;
@@ -201,10 +201,33 @@ fn combined_outcome(named: &[(bool, bool)], false_ids: &[String]) -> Outcome {
     }
 }
 
+/// The case as drawn, or sampled `BLIND_FASTER` times faster over the same span (that many
+/// times the rows; the dwells, profile and power-ons in seconds unchanged): the blind cases at
+/// rates where the diagnosis reduces the rows to blocks.
+fn sampled(case: &Case) -> Case {
+    let mut c = case.clone();
+    if let Some(k) = std::env::var("BLIND_FASTER").ok().and_then(|v| v.parse::<f64>().ok()) {
+        c.rate_hz *= k;
+        c.rows = (c.rows as f64 * k).round() as usize;
+    }
+    c
+}
+
+/// The diagnosis with the block length of `BLIND_BLOCK_S` (`diagnose --block-s`; unset: the
+/// default, the length the data allow).
+fn diagnose_env(
+    sim: &[bins_cal::recording::Row],
+    real: &[bins_cal::recording::Row],
+) -> Result<bins_cal::diagnose::Diagnosis, bins_cal::diagnose::DiagnoseError> {
+    let block_s = std::env::var("BLIND_BLOCK_S").ok().and_then(|v| v.parse::<f64>().ok());
+    diagnose_with(sim, real, Path::new("sim.csv"), Path::new("real.csv"), &Options { block_s, ..Options::default() })
+}
+
 /// The diagnosis's report of one case as JSON (or the error), for looking into a failure.
 pub fn report_json(case: &Case) -> String {
+    let case = &sampled(case);
     let (sim, real, _) = generator::generate(case);
-    match diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")) {
+    match diagnose_env(&sim, &real) {
         Ok(d) => serde_json::to_string_pretty(&d.report).unwrap_or_else(|e| e.to_string()),
         Err(e) => e.to_string(),
     }
@@ -212,9 +235,10 @@ pub fn report_json(case: &Case) -> String {
 
 /// Generates, diagnoses and classifies one case.
 pub fn run_case(case: &Case) -> CaseResult {
+    let case = &sampled(case);
     let (sim, real, truth) = generator::generate(case);
     let t0 = Instant::now();
-    let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv"));
+    let d = diagnose_env(&sim, &real);
     let secs = t0.elapsed().as_secs_f64();
     let mut res = CaseResult {
         case: case.clone(),
