@@ -245,3 +245,23 @@ fn a_record_longer_than_the_most_blocks_is_merged_into_longer_blocks() {
         assert!(within_share > unmerged_share, "merging moves spread between blocks into the blocks");
     }
 }
+
+/// A block never spans a power-on: its mean `power_s` would stand for neither side (a block of
+/// 0.33 s with one row 5 000 s after an earlier power-on and 33 rows just after a new one has a
+/// mean of 150 s, where a warm-up's `e^(−P/τ)` is at its largest).
+#[test]
+fn a_block_ends_at_a_power_on() {
+    let (mut sim, mut real) = ramp_pair(100.0, 0.0);
+    // Powered 5 000 s before the record starts, powered on again at 300.005 s (mid-block).
+    for rows in [&mut sim, &mut real] {
+        for r in rows.iter_mut() {
+            r.power_s = Some(if r.t_s < 300.0 { r.t_s + 5_000.0 } else { r.t_s - 300.0 });
+        }
+    }
+    let p = prepared(&sim, &real);
+    assert!(!p.weight.is_empty(), "blocks expected; notes {:?}", p.notes);
+    let power = p.power.as_ref().expect("power_s on every row");
+    let after = (0..p.t.len()).find(|&i| p.t[i] > 300.0).expect("blocks after the power-on");
+    assert!(power[after] < 1.0, "the first block after the power-on: power_s {} s", power[after]);
+    assert!(power[after - 1] > 5_000.0, "the last block before: power_s {} s", power[after - 1]);
+}

@@ -295,7 +295,8 @@ struct Pending {
 
 impl Builder {
     /// Reduces the rows to blocks of at most `block_s` seconds (means of consecutive rows with
-    /// one reference, vibration and position, lines without a gap), keeping per block the
+    /// one reference, vibration and position, lines without a gap, no power-on between them),
+    /// keeping per block the
     /// rows' count and the residual's spread about the mean; the white-noise level comes from
     /// every pair of consecutive rows as it does without blocks. `None`: every row is kept.
     pub fn with_blocks(mut self, block_s: Option<f64>) -> Self {
@@ -391,6 +392,7 @@ impl Builder {
                 && self.f[k - 1] == self.f[k]
                 && self.vib[k - 1] == self.vib[k]
                 && self.pos[k - 1] == self.pos[k]
+                && self.power[k] >= self.power[k - 1]
                 && self.t[k] - self.t[k0] < block_s;
             if joins {
                 for i in 0..3 {
@@ -600,11 +602,11 @@ impl Builder {
             return;
         };
         // The same run as the previous row: same reference, vibration and position, the next
-        // line, no longer gap than a block.
-        let run = self
-            .prev
-            .as_ref()
-            .is_some_and(|p| p.line + 1 == line && p.f == f && p.vib == vib && p.pos == pos && t - p.t <= block_s);
+        // line, no longer gap than a block, and no power-on between them (`power_s` does not
+        // go back): a block's mean `power_s` across a power-on would stand for neither side.
+        let run = self.prev.as_ref().is_some_and(|p| {
+            p.line + 1 == line && p.f == f && p.vib == vib && p.pos == pos && t - p.t <= block_s && power >= p.power
+        });
         if run && let Some(p) = &self.prev {
             while self.diff2.len() <= vib_class {
                 self.diff2.push(Default::default());
@@ -705,7 +707,7 @@ impl Builder {
     }
 
     /// Merges the blocks kept, `k` consecutive ones of one run at a time (one reference,
-    /// vibration and position, no gap in the lines): row-weighted means, summed rows, and the
+    /// vibration and position, no gap in the lines, no power-on): row-weighted means, summed rows, and the
     /// spread about the merged mean (each block's spread plus its rows times its mean's
     /// squared distance from the merged mean), as blocks `k` times longer would have kept.
     fn merge_blocks(&mut self, k: usize) {
@@ -719,6 +721,7 @@ impl Builder {
                 && self.f[e] == self.f[j]
                 && self.vib[e] == self.vib[j]
                 && self.pos[e] == self.pos[j]
+                && self.power[e] >= self.power[e - 1]
                 && self.line[e] == self.line[e - 1] + self.weight[e - 1] as u64
             {
                 e += 1;

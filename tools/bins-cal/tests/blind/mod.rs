@@ -223,9 +223,9 @@ fn diagnose_env(
     diagnose_with(sim, real, Path::new("sim.csv"), Path::new("real.csv"), &Options { block_s, ..Options::default() })
 }
 
-/// The diagnosis's report of one case as JSON (or the error), for looking into a failure.
+/// The diagnosis's report of one case as run ([`CaseResult::case`], already sampled at
+/// `BLIND_FASTER`) as JSON (or the error), for looking into a failure.
 pub fn report_json(case: &Case) -> String {
-    let case = &sampled(case);
     let (sim, real, _) = generator::generate(case);
     match diagnose_env(&sim, &real) {
         Ok(d) => serde_json::to_string_pretty(&d.report).unwrap_or_else(|e| e.to_string()),
