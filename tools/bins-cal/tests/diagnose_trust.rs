@@ -314,7 +314,8 @@ fn coloured_noise_is_neither_structure_nor_hides_it() {
         let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
         let r = &d.report;
         let summary = format!(
-            "seed {seed}: effects {:?}; ambiguous {:?}; held-out {:?} → {:?}; verdict {:?}; unexplained {:?} at {:?} s; floor {:?}; put in {put_in_mg:?}",
+            "seed {seed}: notes {:?}; effects {:?}; ambiguous {:?}; held-out {:?} → {:?}; verdict {:?}; unexplained {:?} at {:?} s; floor {:?}; put in {put_in_mg:?}",
+            r.notes,
             r.effects.iter().map(|e| (&e.id, &e.axes, &e.heldout_cut_mg)).collect::<Vec<_>>(),
             r.ambiguous.iter().map(|g| (&g.ids, &g.axes)).collect::<Vec<_>>(),
             r.heldout_rms_before_mg,
