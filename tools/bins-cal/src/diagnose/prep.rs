@@ -275,6 +275,45 @@ struct Kept {
     sim_u: [f64; 3],
 }
 
+impl Kept {
+    fn run_end(&self) -> RunEnd {
+        RunEnd {
+            first_line: self.line,
+            next_line: self.line + 1,
+            f: self.f,
+            vib: self.vib,
+            pos: self.pos,
+            power: self.power,
+        }
+    }
+}
+
+/// What decides whether a row or block continues the run of the one before it
+/// ([`RunEnd::continued_by`]): the rows in blocks, the blocks merged.
+#[derive(Clone, Copy)]
+struct RunEnd {
+    first_line: u64,
+    /// The line after its last row.
+    next_line: u64,
+    f: [f64; 3],
+    vib: Vibration<f64>,
+    pos: Option<usize>,
+    power: f64,
+}
+
+impl RunEnd {
+    /// The same reference, vibration and position, the next line, and no power-on between
+    /// (`power_s` does not go back): a mean `power_s` across a power-on would stand for
+    /// neither side.
+    fn continued_by(&self, next: &RunEnd) -> bool {
+        self.next_line == next.first_line
+            && self.f == next.f
+            && self.vib == next.vib
+            && self.pos == next.pos
+            && next.power >= self.power
+    }
+}
+
 /// A block being filled: sums over its rows.
 struct Pending {
     line: u64,
@@ -387,13 +426,7 @@ impl Builder {
             }
         };
         for k in 0..self.t.len() {
-            let joins = k > 0
-                && self.line[k - 1] + 1 == self.line[k]
-                && self.f[k - 1] == self.f[k]
-                && self.vib[k - 1] == self.vib[k]
-                && self.pos[k - 1] == self.pos[k]
-                && self.power[k] >= self.power[k - 1]
-                && self.t[k] - self.t[k0] < block_s;
+            let joins = k > 0 && self.run_end(k - 1).continued_by(&self.run_end(k)) && self.t[k] - self.t[k0] < block_s;
             if joins {
                 for i in 0..3 {
                     let d = self.du[i][k] - self.du[i][k - 1];
@@ -601,12 +634,8 @@ impl Builder {
             }
             return;
         };
-        // The same run as the previous row: same reference, vibration and position, the next
-        // line, no longer gap than a block, and no power-on between them (`power_s` does not
-        // go back): a block's mean `power_s` across a power-on would stand for neither side.
-        let run = self.prev.as_ref().is_some_and(|p| {
-            p.line + 1 == line && p.f == f && p.vib == vib && p.pos == pos && t - p.t <= block_s && power >= p.power
-        });
+        // The same run as the previous row, no longer gap than a block.
+        let run = self.prev.as_ref().is_some_and(|p| p.run_end().continued_by(&k.run_end()) && t - p.t <= block_s);
         if run && let Some(p) = &self.prev {
             while self.diff2.len() <= vib_class {
                 self.diff2.push(Default::default());
@@ -706,6 +735,19 @@ impl Builder {
         }
     }
 
+    /// The run end of row (or block) `i` kept.
+    fn run_end(&self, i: usize) -> RunEnd {
+        let rows = self.weight.get(i).map_or(1, |w| *w as u64);
+        RunEnd {
+            first_line: self.line[i],
+            next_line: self.line[i] + rows,
+            f: self.f[i],
+            vib: self.vib[i],
+            pos: self.pos[i],
+            power: self.power[i],
+        }
+    }
+
     /// Merges the blocks kept, `k` consecutive ones of one run at a time (one reference,
     /// vibration and position, no gap in the lines, no power-on): row-weighted means, summed rows, and the
     /// spread about the merged mean (each block's spread plus its rows times its mean's
@@ -716,14 +758,7 @@ impl Builder {
         let mut j = 0;
         while j < n {
             let mut e = j + 1;
-            while e < n
-                && e - j < k
-                && self.f[e] == self.f[j]
-                && self.vib[e] == self.vib[j]
-                && self.pos[e] == self.pos[j]
-                && self.power[e] >= self.power[e - 1]
-                && self.line[e] == self.line[e - 1] + self.weight[e - 1] as u64
-            {
+            while e < n && e - j < k && self.run_end(e - 1).continued_by(&self.run_end(e)) {
                 e += 1;
             }
             let w: f64 = self.weight[j..e].iter().sum();
