@@ -281,17 +281,20 @@ pub fn v2_columns(p: &Prepared, axis: usize) -> [Vec<f64>; 5] {
 }
 
 /// Fits SIM's temperature sensitivity of accelerometer `axis` (ordinary least squares of
-/// `sim_g` on `[1, f] ⊗ [1, ΔT, ΔT², ΔT³]` plus the V(2) columns). Falls back to the free form
+/// `sim_g` on `[1, f] ⊗ [1, ΔT, ΔT², ΔT³]` plus the V(2) columns, ΔT from SIM's own smoothed
+/// `temp_C`, [`Prepared::sim_temp_s`]). Falls back to the free form
 /// when SIM's temperature terms are not significant (F-test, p < 1e-6) or the temperature
 /// does not vary.
 pub fn fit_sensitivity(p: &Prepared, axis: usize) -> Sensitivity {
     let n = p.t.len();
-    let (tmin, tmax) = p.temp_s.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    // SIM's departure is a function of SIM's own temperature, not REAL's.
+    let temp = &p.sim_temp_s;
+    let (tmin, tmax) = temp.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
     if !(tmax - tmin > 0.5) || n < 50 {
         return Sensitivity::free();
     }
     let scale = 0.5 * (tmax - tmin).max(1.0);
-    let dtn: Vec<f64> = p.temp_s.iter().map(|t| (t - T0_C) / scale).collect();
+    let dtn: Vec<f64> = temp.iter().map(|t| (t - T0_C) / scale).collect();
     let base = |j: usize, k: usize| if j == 0 { 1.0 } else { p.f[k][j - 1] };
     let mut cols: Vec<Vec<f64>> = Vec::new();
     let mut tags: Vec<Option<(usize, usize)>> = Vec::new();
@@ -328,7 +331,7 @@ pub fn fit_sensitivity(p: &Prepared, axis: usize) -> Sensitivity {
     }
     let s = Sensitivity { from_sim: true, c };
     // Negligible sensitivity (below 1 µg over the range): free form.
-    let range = (0..n).map(|k| s.eval(p.temp_s[k], &p.f[k]).abs()).fold(0.0, f64::max);
+    let range = (0..n).map(|k| s.eval(temp[k], &p.f[k]).abs()).fold(0.0, f64::max);
     if range < 1e-6 { Sensitivity::free() } else { s }
 }
 

@@ -52,6 +52,11 @@ pub struct Prepared {
     /// turns of a ramp ([`smooth_temperature`]): the thermal terms are built from it, so the
     /// thermistor's own noise does not enter the regressors (errors in variables).
     pub temp_s: Vec<f64>,
+    /// SIM's own `temp_C` smoothed as `temp_s` is: SIM's temperature sensitivity is fitted
+    /// against it ([`super::mech::fit_sensitivity`]). The same as `temp_s` when SIM follows
+    /// REAL's temperature (`--calib`, or a simulation driven by REAL's `temp_C`); a simulation
+    /// of the same test with its own thermal path reads its own temperature.
+    pub sim_temp_s: Vec<f64>,
     /// Temperature rate (centred difference over about a minute) [°C/s].
     pub dtemp: Vec<f64>,
     /// White-noise variance of the residual at each row \[g²\], per accelerometer (of a block's
@@ -153,6 +158,7 @@ pub struct Builder {
     line: Vec<u64>,
     t: Vec<f64>,
     temp: Vec<f64>,
+    sim_temp: Vec<f64>,
     f: Vec<[f64; 3]>,
     vib: Vec<Vibration<f64>>,
     vib_class: Vec<usize>,
@@ -266,6 +272,7 @@ struct Kept {
     line: u64,
     t: f64,
     temp: f64,
+    sim_temp: f64,
     power: f64,
     f: [f64; 3],
     vib: Vibration<f64>,
@@ -322,6 +329,7 @@ struct Pending {
     n: usize,
     t: f64,
     temp: f64,
+    sim_temp: f64,
     power: f64,
     f: [f64; 3],
     vib: Vibration<f64>,
@@ -458,6 +466,7 @@ impl Builder {
             line: Vec::new(),
             t: Vec::new(),
             temp: Vec::new(),
+            sim_temp: Vec::new(),
             f: Vec::new(),
             vib: Vec::new(),
             vib_class: Vec::new(),
@@ -587,6 +596,7 @@ impl Builder {
             line: r.line,
             t: r.t_s,
             temp: r.temp_c,
+            sim_temp: s.temp_c,
             power: r.power_s.unwrap_or(0.0),
             f,
             vib,
@@ -601,7 +611,7 @@ impl Builder {
 
     /// Keeps one usable row: as it is, or into the block being filled.
     fn keep(&mut self, k: Kept) {
-        let Kept { line, t, temp, power, f, vib, vib_class, pos, du, sim_u } = k;
+        let Kept { line, t, temp, sim_temp, power, f, vib, vib_class, pos, du, sim_u } = k;
         let Some(block_s) = self.block_s else {
             for i in 0..3 {
                 self.du[i].push(du[i]);
@@ -611,6 +621,7 @@ impl Builder {
             self.line.push(line);
             self.t.push(t);
             self.temp.push(temp);
+            self.sim_temp.push(sim_temp);
             self.f.push(f);
             self.vib.push(vib);
             self.vib_class.push(vib_class);
@@ -662,6 +673,7 @@ impl Builder {
             n: 0,
             t: 0.0,
             temp: 0.0,
+            sim_temp: 0.0,
             power: 0.0,
             f,
             vib,
@@ -675,6 +687,7 @@ impl Builder {
         b.last_line = line;
         b.t += t;
         b.temp += temp;
+        b.sim_temp += sim_temp;
         b.power += power;
         for i in 0..3 {
             b.du[i] += du[i];
@@ -712,6 +725,7 @@ impl Builder {
         let line = std::mem::take(&mut self.line);
         let t = std::mem::take(&mut self.t);
         let temp = std::mem::take(&mut self.temp);
+        let sim_temp = std::mem::take(&mut self.sim_temp);
         let power = std::mem::take(&mut self.power);
         let f = std::mem::take(&mut self.f);
         let vib = std::mem::take(&mut self.vib);
@@ -724,6 +738,7 @@ impl Builder {
                 line: line[k],
                 t: t[k],
                 temp: temp[k],
+                sim_temp: sim_temp[k],
                 power: power[k],
                 f: f[k],
                 vib: vib[k],
@@ -766,6 +781,7 @@ impl Builder {
             out.line.push(self.line[j]);
             out.t.push(mean(&self.t));
             out.temp.push(mean(&self.temp));
+            out.sim_temp.push(mean(&self.sim_temp));
             out.power.push(mean(&self.power));
             out.f.push(self.f[j]);
             out.vib.push(self.vib[j]);
@@ -785,6 +801,7 @@ impl Builder {
         self.line = out.line;
         self.t = out.t;
         self.temp = out.temp;
+        self.sim_temp = out.sim_temp;
         self.power = out.power;
         self.f = out.f;
         self.vib = out.vib;
@@ -803,6 +820,7 @@ impl Builder {
         self.line.push(b.line);
         self.t.push(b.t / n);
         self.temp.push(b.temp / n);
+        self.sim_temp.push(b.sim_temp / n);
         self.power.push(b.power / n);
         self.f.push(b.f);
         self.vib.push(b.vib);
@@ -855,6 +873,7 @@ impl Builder {
             line,
             t,
             temp,
+            sim_temp,
             f,
             vib,
             vib_class,
@@ -1018,6 +1037,27 @@ impl Builder {
             ((10.0 / dt).round() as usize).clamp(1, 50)
         };
         let temp_s = smooth_temperature(&t, &temp, half);
+        // SIM's own temperature: what SIM's sensitivity is a function of. It is REAL's when SIM
+        // follows REAL's temperature; a simulation with its own thermal path reads its own.
+        let sim_temp_s = if sim_temp == temp {
+            temp_s.clone()
+        } else {
+            let s = smooth_temperature(&t, &sim_temp, half);
+            let (mut worst, mut at, mut ss) = (0.0f64, 0usize, 0.0);
+            for k in 0..n {
+                let d = temp_s[k] - s[k];
+                ss += d * d;
+                if d.abs() > worst.abs() {
+                    (worst, at) = (d, k);
+                }
+            }
+            notes.push(format!(
+                "SIM's temp_C is not REAL's: smoothed, REAL − SIM is {worst:+.3} °C at its largest (t = {:.0} s), {:.3} °C RMS; SIM's temperature sensitivity is fitted against SIM's own temp_C, the thermal terms are built from REAL's",
+                t[at],
+                (ss / n.max(1) as f64).sqrt()
+            ));
+            s
+        };
         // White noise per vibration class from within-segment differences (robust: median of
         // squared differences / (2·0.4549)).
         let mut r_white: [Vec<f64>; 3] = Default::default();
@@ -1098,6 +1138,7 @@ impl Builder {
             k_determined,
             dt,
             temp_s,
+            sim_temp_s,
             dtemp,
             r_white,
             weight,
