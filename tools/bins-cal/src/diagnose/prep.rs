@@ -52,6 +52,10 @@ pub struct Prepared {
     /// turns of a ramp ([`smooth_temperature`]): the thermal terms are built from it, so the
     /// thermistor's own noise does not enter the regressors (errors in variables).
     pub temp_s: Vec<f64>,
+    /// The resolution of REAL's `temp_C`: its smallest nonzero change between consecutive rows
+    /// [°C] (`None` when it never changes). A play narrower than two of these steps is not
+    /// resolved by the thermometer ([`super::report`] reports its width as undetermined).
+    pub temp_resolution_c: Option<f64>,
     /// SIM's own `temp_C` smoothed as `temp_s` is: SIM's temperature sensitivity is fitted
     /// against it ([`super::mech::fit_sensitivity`]). The same as `temp_s` when SIM follows
     /// REAL's temperature (`--calib`, or a simulation driven by REAL's `temp_C`); a simulation
@@ -179,6 +183,8 @@ pub struct Builder {
     temp_same: bool,
     /// The first kept row's `temp_C`.
     first_temp_c: Option<f64>,
+    /// The previous row's `temp_C` and the smallest nonzero change between consecutive rows.
+    temp_step: (Option<f64>, f64),
     /// Block length \[s\] when the rows are reduced to blocks.
     block_s: Option<f64>,
     /// Rows kept as they are until this many, then blocks of this length \[s\], or of the
@@ -483,6 +489,7 @@ impl Builder {
             temp_finite: true,
             temp_same: true,
             first_temp_c: None,
+            temp_step: (None, f64::INFINITY),
             block_s: None,
             auto: None,
             block_note: None,
@@ -506,15 +513,23 @@ impl Builder {
     fn clear_used(&mut self) {
         let fresh = Builder::new(Path::new(""), Path::new(""));
         let (sim_name, real_name) = (std::mem::take(&mut self.sim_name), std::mem::take(&mut self.real_name));
-        let (n_total, any_vib, block_s, auto, max_blocks) =
-            (self.n_total, self.any_vib, self.block_s, self.auto, self.max_blocks);
-        *self = Builder { sim_name, real_name, n_total, any_vib, block_s, auto, max_blocks, ..fresh };
+        let (n_total, any_vib, block_s, auto, max_blocks, temp_step) =
+            (self.n_total, self.any_vib, self.block_s, self.auto, self.max_blocks, self.temp_step);
+        *self = Builder { sim_name, real_name, n_total, any_vib, block_s, auto, max_blocks, temp_step, ..fresh };
     }
 
     /// Checks one pair (SIM's row `s`, REAL's row `r`) and keeps what the diagnosis needs of it
     /// when its reference is known. Errors name REAL's file and line and SIM's line.
     pub fn push(&mut self, s: &Row, r: &Row) -> Result<(), DiagnoseError> {
         self.n_total += 1;
+        let (prev, smallest) = &mut self.temp_step;
+        if let Some(p) = *prev {
+            let d = (r.temp_c - p).abs();
+            if d > 0.0 && d < *smallest {
+                *smallest = d;
+            }
+        }
+        *prev = Some(r.temp_c);
         let (sn, rn) = (&self.sim_name, &self.real_name);
         let bad = |col: &str, what: String| {
             DiagnoseError(format!(
@@ -895,8 +910,10 @@ impl Builder {
             diff2,
             quiet_diff2,
             block_note,
+            temp_step,
             ..
         } = self;
+        let temp_resolution_c = temp_step.1.is_finite().then_some(temp_step.1);
         let blocked = block_s.is_some();
         let mut notes = Vec::new();
         notes.extend(block_note);
@@ -1139,6 +1156,7 @@ impl Builder {
             dt,
             temp_s,
             sim_temp_s,
+            temp_resolution_c,
             dtemp,
             r_white,
             weight,
@@ -1172,7 +1190,10 @@ fn line_fit(t: &[f64], x: &[f64], lo: usize, hi: usize, t_at: f64) -> (f64, f64)
 /// line fits it; where it does not (a turn, a step) and a line through the rows on one side
 /// only fits at least four times better, that one-sided line's value is used. A centred
 /// average alone stays below the peak of a triangle by about the rate times half the window,
-/// and a play started from that lower peak is offset for the whole next leg.
+/// and a play started from that lower peak is offset for the whole next leg. Within `half` rows
+/// of either end, where no centred window fits, the line through the rows the window reaches
+/// is used: a window shrunk to the end row would pass its reading's noise whole, and a narrow
+/// play would flicker on it.
 pub fn smooth_temperature(t: &[f64], temp: &[f64], half: usize) -> Vec<f64> {
     let n = temp.len().min(t.len());
     let mut prefix = vec![0.0; n + 1];
@@ -1183,8 +1204,12 @@ pub fn smooth_temperature(t: &[f64], temp: &[f64], half: usize) -> Vec<f64> {
         .map(|k| {
             let h = half.min(k).min(n - 1 - k);
             let mean = (prefix[k + h + 1] - prefix[k - h]) / (2 * h + 1) as f64;
-            if h < 2 {
-                return mean;
+            if h < half {
+                // Within `half` of an end the centred window shrinks to the row itself: the line
+                // through the rows the whole half-width reaches on the other side, at this row's
+                // time, instead (unbiased on a ramp, and averaged as far as the window reaches).
+                let (lo, hi) = (k.saturating_sub(half), (k + half).min(n - 1));
+                return if hi - lo >= 2 { line_fit(t, temp, lo, hi, t[k]).1 } else { mean };
             }
             let (mse_c, _) = line_fit(t, temp, k - h, k + h, t[k]);
             let (mse_l, at_l) = line_fit(t, temp, k - h, k, t[k]);

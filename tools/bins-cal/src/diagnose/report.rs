@@ -450,6 +450,20 @@ pub struct Inputs<'a> {
 /// Accelerometers, the mechanism modelled, deviance differences per accelerometer.
 type AmbGroup = (Vec<String>, String, PerAxis<BTreeMap<String, f64>>);
 
+/// Whether `m` is a play whose width `theta` is below [`PLAY_MIN_STEPS`] steps of REAL's
+/// `temp_C` ([`Prepared::temp_resolution_c`]). A stepped reading shows a reversal only once the
+/// temperature has come back by somewhere between zero and one step, so where a play engages is
+/// known to within a step: a width under two steps is known to no better than ±50 %, and below
+/// one step such a play is ±1 wherever the temperature moves, a sign of the rate.
+fn unresolved_play(p: &Prepared, m: Mech, theta: Option<f64>) -> bool {
+    matches!(m, Mech::ThermalHysteresis | Mech::BiasHysteresis)
+        && matches!((theta, p.temp_resolution_c), (Some(w), Some(res)) if w < PLAY_MIN_STEPS * res)
+}
+
+/// A play's width is reported only from this many steps of REAL's temperature reading up
+/// ([`Prepared::temp_resolution_c`]): below, it is undetermined and not flown.
+pub const PLAY_MIN_STEPS: f64 = 2.0;
+
 /// Builds the report.
 pub fn build(
     p: &Prepared,
@@ -547,6 +561,7 @@ pub fn build(
                 let amb = ambiguous_member[fit.axis].contains(&m);
                 let undetermined: Vec<String> = match (m.theta(), t.theta_ci) {
                     (Some(name), Some((lo, hi))) if !(hi < UNDETERMINED_RATIO * lo) => vec![name.to_string()],
+                    (Some(name), _) if unresolved_play(p, m, t.theta) => vec![name.to_string()],
                     _ => Vec::new(),
                 };
                 terms.push(ModelTerm {
@@ -605,6 +620,17 @@ pub fn build(
             .collect()
     });
     let mut notes = p.notes.clone();
+    for (fit, t) in axes.iter().flat_map(|f| f.terms.iter().map(move |t| (f, t))) {
+        if unresolved_play(p, t.mech, t.theta) {
+            notes.push(format!(
+                "accelerometer {}: {}'s width {:.4} °C is under {PLAY_MIN_STEPS} steps of REAL's temp_C (a step is {:.4} °C): reported as undetermined, a heating/cooling difference rather than a measured play",
+                AXES[fit.axis],
+                t.mech.id(),
+                t.theta.unwrap_or(0.0),
+                p.temp_resolution_c.unwrap_or(0.0)
+            ));
+        }
+    }
     for (i, s) in sens.iter().enumerate() {
         if !s.from_sim {
             notes.push(format!(
