@@ -185,6 +185,19 @@ fn diagnose_prepared(
         .enumerate()
         .flat_map(|(axis, found)| found.iter().map(move |s| report::StepReport::new(pr, axis, s)))
         .collect();
+    let turns = steps::reversals(&p.t, &p.temp_s);
+    for (axis, found) in bias_steps.iter().enumerate() {
+        let mut located: Vec<(f64, f64)> = found.iter().map(|s| (s.time_s, s.size_g)).collect();
+        located.sort_by(|a, b| a.0.total_cmp(&b.0));
+        if steps::at_reversals(&located, &turns) {
+            report.notes.push(format!(
+                "accelerometer {}: the {} bias steps located are each within {:.0} s of a temperature reversal and alternate in sign: a heating/cooling difference of the bias that switches within a sample at each reversal (a play narrower than the thermometer resolves) shows so; read them together before reading them as steps",
+                prep::AXES[axis],
+                located.len(),
+                steps::REVERSAL_WINDOW_S
+            ));
+        }
+    }
     Ok(Diagnosis { prepared: p, sensitivity, axes, report })
 }
 

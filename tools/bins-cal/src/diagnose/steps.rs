@@ -315,9 +315,117 @@ pub fn fit_sizes(t: &[f64], r: &[f64], y: &[f64], cols: &[&[f64]], q: f64, found
         .collect()
 }
 
+/// Temperature turns taken as reversals by [`at_reversals`]: the temperature moves at least this
+/// far [°C] away from an extreme on both sides of it.
+pub const REVERSAL_C: f64 = 0.5;
+/// A step within this long \[s\] of a reversal is at it ([`at_reversals`]).
+pub const REVERSAL_WINDOW_S: f64 = 300.0;
+
+/// The temperature's reversals, `(time [s], a maximum)`: the extremes of the smoothed
+/// temperature `temp` between which it moves by at least [`REVERSAL_C`] (a zigzag: an extreme is
+/// confirmed once the temperature has come [`REVERSAL_C`] back from it).
+pub fn reversals(t: &[f64], temp: &[f64]) -> Vec<(f64, bool)> {
+    let mut out = Vec::new();
+    let Some(&first) = temp.first() else { return out };
+    // Direction not yet known (0), rising (1) or falling (−1); the extreme of the current leg.
+    let (mut dir, mut ext, mut ext_t, mut lo, mut hi) = (0i8, first, t[0], (first, t[0]), (first, t[0]));
+    for (&ti, &x) in t.iter().zip(temp) {
+        match dir {
+            0 => {
+                if x < lo.0 {
+                    lo = (x, ti);
+                }
+                if x > hi.0 {
+                    hi = (x, ti);
+                }
+                if x - lo.0 >= REVERSAL_C {
+                    (dir, ext, ext_t) = (1, x, ti);
+                } else if hi.0 - x >= REVERSAL_C {
+                    (dir, ext, ext_t) = (-1, x, ti);
+                }
+            }
+            1 if x > ext => (ext, ext_t) = (x, ti),
+            1 if ext - x >= REVERSAL_C => {
+                out.push((ext_t, true));
+                (dir, ext, ext_t) = (-1, x, ti);
+            }
+            -1 if x < ext => (ext, ext_t) = (x, ti),
+            -1 if x - ext >= REVERSAL_C => {
+                out.push((ext_t, false));
+                (dir, ext, ext_t) = (1, x, ti);
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+/// Whether the steps located on one accelerometer (time \[s\], size) look like a heating/cooling
+/// difference rather than steps: at least three, each within [`REVERSAL_WINDOW_S`] of a
+/// temperature reversal ([`reversals`]), at maxima and at minima both, those at maxima of one
+/// sign and those at minima of the other. A bias play narrower than the thermometer resolves
+/// switches within a sample at each reversal, and the step search takes it as steps
+/// (docs/diagnosis.md, "Limits"); the report says so in a note.
+pub fn at_reversals(steps: &[(f64, f64)], turns: &[(f64, bool)]) -> bool {
+    if steps.len() < 3 {
+        return false;
+    }
+    // The kind of reversal each step is at (the nearest within the window), or none.
+    let kinds: Vec<Option<bool>> = steps
+        .iter()
+        .map(|(ts, _)| {
+            turns
+                .iter()
+                .filter(|(tr, _)| (ts - tr).abs() <= REVERSAL_WINDOW_S)
+                .min_by(|a, b| (ts - a.0).abs().total_cmp(&(ts - b.0).abs()))
+                .map(|&(_, max)| max)
+        })
+        .collect();
+    if kinds.iter().any(Option::is_none) {
+        return false;
+    }
+    let sign_at = |max: bool| -> Vec<f64> {
+        steps.iter().zip(&kinds).filter(|(_, k)| **k == Some(max)).map(|(s, _)| s.1.signum()).collect()
+    };
+    let (at_max, at_min) = (sign_at(true), sign_at(false));
+    !at_max.is_empty()
+        && !at_min.is_empty()
+        && at_max.iter().all(|&v| v == at_max[0])
+        && at_min.iter().all(|&v| v == -at_max[0])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn reversals_are_the_extremes_between_moves_of_half_a_degree() {
+        // Up 2 °C, down 3 °C, up 1 °C, with a 0.2 °C wiggle on the way down (not a reversal).
+        let t: Vec<f64> = (0..700).map(|k| k as f64).collect();
+        let temp: Vec<f64> = t
+            .iter()
+            .map(|&x| {
+                if x <= 200.0 {
+                    20.0 + 0.01 * x
+                } else if x <= 500.0 {
+                    let w = if (300.0..=320.0).contains(&x) { 0.01 * (x - 300.0) } else { 0.0 };
+                    22.0 - 0.01 * (x - 200.0) + w
+                } else {
+                    19.0 + 0.005 * (x - 500.0)
+                }
+            })
+            .collect();
+        assert_eq!(reversals(&t, &temp), vec![(200.0, true), (500.0, false)]);
+        // Steps of one sign at the maxima and the other at the minima are a heating/cooling
+        // difference (one reversal may lack its step); of one sign throughout, at one kind of
+        // reversal only, fewer than three, or one far from any reversal, they are not.
+        let turns = [(200.0, true), (500.0, false), (900.0, true), (1200.0, false)];
+        assert!(at_reversals(&[(230.0, -1.0), (520.0, 1.0), (1230.0, 1.0)], &turns));
+        assert!(!at_reversals(&[(230.0, -1.0), (520.0, -1.0), (1230.0, -1.0)], &turns));
+        assert!(!at_reversals(&[(230.0, -1.0), (920.0, -1.0), (210.0, -1.0)], &turns));
+        assert!(!at_reversals(&[(230.0, -1.0), (520.0, 1.0)], &turns));
+        assert!(!at_reversals(&[(230.0, -1.0), (520.0, 1.0), (3000.0, -1.0)], &turns));
+    }
 
     #[test]
     fn the_scan_is_the_gls_t_of_a_heaviside_column() {
