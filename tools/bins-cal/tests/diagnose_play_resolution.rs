@@ -17,6 +17,7 @@
 //! nothing is named (docs/diagnosis.md, "Limits"): the report then says, per accelerometer, that
 //! its steps sit at the temperature reversals and alternate in sign.
 
+use bins_cal::diagnose::report::Report;
 use bins_cal::diagnose::{Options, diagnose_with};
 use bins_cal::recording::Row;
 use rand::SeedableRng;
@@ -75,12 +76,16 @@ fn pair(amp_g: f64) -> (Vec<Row>, Vec<Row>) {
     (sim, real)
 }
 
+/// The diagnosis of the pair with a difference of ±`amp_g`, by default.
+fn diagnosed(amp_g: f64) -> Report {
+    let (sim, real) = pair(amp_g);
+    let (s, r) = (Path::new("sim.csv"), Path::new("real.csv"));
+    diagnose_with(&sim, &real, s, r, &Options::default()).expect("diagnosed").report
+}
+
 #[test]
 fn a_play_narrower_than_the_thermometer_resolves_is_undetermined_and_not_flown() {
-    let (sim, real) = pair(10e-6);
-    let rep = diagnose_with(&sim, &real, Path::new("sim.csv"), Path::new("real.csv"), &Options::default())
-        .expect("diagnosed")
-        .report;
+    let rep = diagnosed(10e-6);
     println!("named {:?}", rep.effects.iter().map(|e| (&e.id, &e.axes, &e.params)).collect::<Vec<_>>());
     println!("ambiguous {:?}", rep.ambiguous.iter().map(|a| (&a.ids, &a.modelled_as)).collect::<Vec<_>>());
     let play = rep.effects.iter().find(|e| e.id == "bias_hysteresis").expect("the heating/cooling difference is named");
@@ -102,10 +107,7 @@ fn a_play_narrower_than_the_thermometer_resolves_is_undetermined_and_not_flown()
 
 #[test]
 fn steps_that_alternate_at_the_reversals_are_reported_as_such() {
-    let (sim, real) = pair(30e-6);
-    let rep = diagnose_with(&sim, &real, Path::new("sim.csv"), Path::new("real.csv"), &Options::default())
-        .expect("diagnosed")
-        .report;
+    let rep = diagnosed(30e-6);
     println!("named {:?}; {} steps", rep.effects.iter().map(|e| (&e.id, &e.axes)).collect::<Vec<_>>(), rep.steps.len());
     for ax in ["x", "y", "z"] {
         let on: Vec<_> = rep.steps.iter().filter(|s| s.axis == ax).collect();

@@ -191,7 +191,7 @@ fn diagnose_prepared(
         located.sort_by(|a, b| a.0.total_cmp(&b.0));
         if steps::at_reversals(&located, &turns) {
             report.notes.push(format!(
-                "accelerometer {}: the {} bias steps located are each within {:.0} s of a temperature reversal and alternate in sign: a heating/cooling difference of the bias that switches within a sample at each reversal (a play narrower than the thermometer resolves) shows so; read them together before reading them as steps",
+                "accelerometer {}: the {} bias steps located are each within {:.0} s of a temperature reversal, of one sign at its maxima and the other at its minima: a heating/cooling difference of the bias that switches within a sample at each reversal (a play narrower than the thermometer resolves) shows so; read them together before reading them as steps",
                 prep::AXES[axis],
                 located.len(),
                 steps::REVERSAL_WINDOW_S

@@ -370,8 +370,9 @@ pub fn at_reversals(steps: &[(f64, f64)], turns: &[(f64, bool)]) -> bool {
     if steps.len() < 3 {
         return false;
     }
-    // The kind of reversal each step is at (the nearest within the window), or none.
-    let kinds: Vec<Option<bool>> = steps
+    // The kind of reversal each step is at (the nearest within the window); none if one is at
+    // no reversal.
+    let kinds: Option<Vec<bool>> = steps
         .iter()
         .map(|(ts, _)| {
             turns
@@ -381,17 +382,12 @@ pub fn at_reversals(steps: &[(f64, f64)], turns: &[(f64, bool)]) -> bool {
                 .map(|&(_, max)| max)
         })
         .collect();
-    if kinds.iter().any(Option::is_none) {
+    let Some(kinds) = kinds else { return false };
+    // The sign every step at a maximum has; those at a minimum have the other.
+    let Some(up) = steps.iter().zip(&kinds).find(|(_, max)| **max).map(|(s, _)| s.1 > 0.0) else {
         return false;
-    }
-    let sign_at = |max: bool| -> Vec<f64> {
-        steps.iter().zip(&kinds).filter(|(_, k)| **k == Some(max)).map(|(s, _)| s.1.signum()).collect()
     };
-    let (at_max, at_min) = (sign_at(true), sign_at(false));
-    !at_max.is_empty()
-        && !at_min.is_empty()
-        && at_max.iter().all(|&v| v == at_max[0])
-        && at_min.iter().all(|&v| v == -at_max[0])
+    kinds.contains(&false) && steps.iter().zip(&kinds).all(|(s, &max)| (s.1 > 0.0) == (up == max))
 }
 
 #[cfg(test)]
