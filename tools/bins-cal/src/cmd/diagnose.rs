@@ -132,6 +132,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             a.modelled_as,
             a.separating_test
         );
+        for (ax, sep) in &a.separability {
+            if sep.is_empty() {
+                continue;
+            }
+            let list: Vec<String> = sep.iter().map(|(id, d)| format!("{id} {d:.1}")).collect();
+            let thr = a.naming_threshold.get(ax).copied().unwrap_or(f64::NAN);
+            println!(
+                "    {ax}: what {} predicts here, each alternative refitted cannot absorb: {} (naming needs {thr:.1})",
+                a.modelled_as,
+                list.join(", ")
+            );
+        }
+    }
+    if !r.negligible.is_empty() {
+        let list: Vec<String> = r
+            .negligible
+            .iter()
+            .map(|n| {
+                format!(
+                    "{} on {} (cuts {:.4} ± {:.4} mg of a {:.4} mg floor)",
+                    n.id, n.axis, n.heldout_cut_mg, n.heldout_cut_se_mg, n.noise_floor_mg
+                )
+            })
+            .collect();
+        println!(
+            "negligible (significant, but the held-out cut is under {:.0} % of the noise floor or {} standard errors): {}",
+            100.0 * bins_cal::diagnose::report::MATERIAL_FLOOR_SHARE,
+            bins_cal::diagnose::report::MATERIAL_SE,
+            list.join("; ")
+        );
     }
     for s in &r.steps {
         println!(
