@@ -347,6 +347,18 @@ impl AtomicFile {
     }
 }
 
+/// Writes go to the temporary file (or the device or FIFO given as the output), so that a
+/// streaming writer can own the file until it is committed.
+impl Write for AtomicFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.writer().write(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.writer().flush()
+    }
+}
+
 impl Drop for AtomicFile {
     fn drop(&mut self) {
         if self.out.is_some() {

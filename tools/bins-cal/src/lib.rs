@@ -11,6 +11,7 @@
 //! | [`diagnose`] | sim-vs-real mismatch: residual, strata, mechanism library, selection, report |
 //! | [`ihex`] | Intel HEX output |
 //! | [`memmap`] | the CALIB region's address, read from `memory.x` |
+//! | [`fclog`] | flight-controller logs (PX4 ULog, ArduPilot DataFlash): streaming readers, import into recordings |
 //! | [`fsio`] | writing outputs atomically (temporary file + rename) |
 //! | [`recording`] | recording format v1: streaming reader and writer |
 //! | [`progress`] | a pass over a recording with a progress bar by bytes read |
@@ -22,6 +23,7 @@ pub mod calib;
 pub mod constants_table;
 pub mod diagnose;
 pub mod exact;
+pub mod fclog;
 pub mod fsio;
 pub mod ihex;
 pub mod memmap;
