@@ -5,6 +5,7 @@
 //!
 //! | module | owns |
 //! |---|---|
+//! | [`autopilot`] | a calibration's bias against temperature as PX4 / ArduPilot parameters, evaluated as their firmware does |
 //! | [`calib`] | calibration algorithms: dwells, per-temperature constants and temperature model, shake-table fits |
 //! | [`calfile`] | the calibration file (TOML): types, checks naming the key, conversion to and from the core's parameters and the blob |
 //! | [`constants_table`] | tables of the constants at several temperatures (CSV) |
@@ -18,6 +19,7 @@
 //! | [`sim`] | the simulator: the unit's truth model on its rigs, scenario files |
 #![deny(missing_docs)]
 
+pub mod autopilot;
 pub mod calfile;
 pub mod calib;
 pub mod constants_table;
