@@ -7,7 +7,6 @@
 //!
 //! `cargo run --release -p bins-cal --example fc_log_gen -- OUT.bin 100` (size in MB, 10⁶ B)
 
-#[allow(dead_code)]
 #[path = "../tests/common/fclog_writer.rs"]
 mod fclog_writer;
 

@@ -105,16 +105,26 @@ pub fn fit_cubic(p: &CalibrationParams, raw: Raw) -> (Cubic, f64) {
     let (lo, hi) = p.temp_range_c;
     let (mid, half) = (0.5 * (lo + hi), 0.5 * (hi - lo));
     let temps: Vec<f64> = (0..FIT_POINTS).map(|k| lo + (hi - lo) * k as f64 / (FIT_POINTS - 1) as f64).collect();
+    // A polynomial model of order below 3 is fitted with its own degree: the terms above it
+    // are zero, not rounding noise.
+    let degree = match p.model {
+        bins_comp::TempModel::Poly { order, .. } => (order as usize).min(3),
+        bins_comp::TempModel::Pwl { .. } => 3,
+    };
     let mut c = [[0.0; 4]; 3];
     for (axis, ca) in c.iter_mut().enumerate() {
-        // In s = (T − mid)/half ∈ [−1, 1]: normal equations of a well-conditioned basis.
+        // In s = (T − mid)/half ∈ [−1, 1]: normal equations of a well-conditioned basis
+        // (the unused powers pinned to zero by a unit diagonal).
         let mut a = Matrix4::<f64>::zeros();
         let mut y = Vector4::<f64>::zeros();
         for &t in &temps {
             let s = (t - mid) / half;
-            let x = Vector4::new(1.0, s, s * s, s * s * s);
+            let x = Vector4::from_fn(|k, _| if k <= degree { s.powi(k as i32) } else { 0.0 });
             a += x * x.transpose();
             y += x * bias_g(p, raw, t)[axis];
+        }
+        for k in degree + 1..4 {
+            a[(k, k)] = 1.0;
         }
         let sol = a.lu().solve(&y).unwrap_or_else(Vector4::zeros);
         for k in 0..4 {

@@ -147,7 +147,7 @@ fn bad_logs_are_refused_naming_the_message_and_offset_and_nothing_is_written() {
     let mut c = old.clone();
     let pos = c.windows(4).position(|w| w == b"Temp").unwrap();
     c[pos..pos + 4].copy_from_slice(b"Tmpr");
-    refused(&c, &["FMT", "of IMU", "no temperature field"]);
+    refused(&c, &["byte 178", "FMT of IMU", "no temperature field"]);
     // No accelerometer at all: the FMTs and the PARM alone.
     refused(&old[..head], &["no `IMU` sample", "no accelerometer"]);
     // Not a log, an empty file.
@@ -289,4 +289,37 @@ fn sample_log_small_matches_pyulog() {
     let t: Vec<f64> = per[0].iter().map(|x| x.temp_c).collect();
     assert_eq!(t.iter().cloned().fold(f64::INFINITY, f64::min), 40.02537155151367);
     assert_eq!(t.iter().cloned().fold(f64::NEG_INFINITY, f64::max), 40.3608283996582);
+}
+
+/// log171's three IMUs come out with their temperatures, and `diagnose` runs on IMU2 and IMU3
+/// against IMU1 (`--reference 0`) over the static period on the ground (31–70 s of the log's
+/// clock) with the nominal calibration of an imported log.
+#[test]
+fn log171_imus_import_and_diagnose_runs_on_them() {
+    let Some(log) = public_log("log171.bin") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("st.csv");
+    let o = run_import(&log, &out, &["--reference", "0", "--from-s", "31", "--to-s", "70"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cal = common::repo("calibrations/imported-nominal.toml");
+    for (k, temp) in [(1u8, (27.75, 28.88)), (2, (28.26, 32.39))] {
+        let rec = bins_cal::fclog::import::output_for(&out, k);
+        let (r, _) = rows(&rec);
+        assert_eq!(r.len(), 1928);
+        assert!(r.iter().all(|x| (31.0..=70.0).contains(&x.0)));
+        let lo = r.iter().map(|x| x.2).fold(f64::INFINITY, f64::min);
+        let hi = r.iter().map(|x| x.2).fold(f64::NEG_INFINITY, f64::max);
+        assert!((lo - temp.0).abs() < 0.005 && (hi - temp.1).abs() < 0.005, "{lo} … {hi}");
+        let report = dir.path().join(format!("d{k}.json"));
+        let o = bin()
+            .args(["diagnose", "--calib", cal.to_str().unwrap(), "--real"])
+            .arg(&rec)
+            .arg("--report")
+            .arg(&report)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        assert_eq!(v["rows"], 1928);
+    }
 }

@@ -25,6 +25,12 @@ pub struct Args {
     /// messages do).
     #[arg(long, value_name = "N")]
     reference: Option<u8>,
+    /// Only the samples from this time of the log's clock on [s since boot].
+    #[arg(long, value_name = "S", value_parser = bins_cal::numarg::finite)]
+    from_s: Option<f64>,
+    /// Only the samples up to this time of the log's clock [s since boot].
+    #[arg(long, value_name = "S", value_parser = bins_cal::numarg::finite)]
+    to_s: Option<f64>,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -42,7 +48,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (summary, files) = import(
         &args.log,
         &args.output,
-        &Options { instance: args.instance, reference: args.reference, progress: !args.quiet },
+        &Options {
+            instance: args.instance,
+            reference: args.reference,
+            span_s: (args.from_s, args.to_s),
+            progress: !args.quiet,
+        },
     )?;
     println!(
         "{}: {}, {} messages, {} bytes, read in {:.2} s",

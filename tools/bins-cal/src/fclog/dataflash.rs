@@ -222,7 +222,11 @@ pub(crate) fn read<R: Read>(
             let format = text(&payload[6..22]);
             let columns_text = text(&payload[22..86]);
             if len < 3 || (t == FMT_TYPE && len != FMT_LENGTH) {
-                return Err(src.error(Some(at), Some("FMT"), format!("of {name}: length {len} (corrupted log)")));
+                return Err(src.error(
+                    Some(at),
+                    Some(&format!("FMT of {name}")),
+                    format!("length {len} (corrupted log)"),
+                ));
             }
             let imu = if imu_name(&name).is_some() {
                 let columns: Vec<&str> = columns_text.split(',').collect();
@@ -230,9 +234,9 @@ pub(crate) fn read<R: Read>(
                 if size.is_none_or(|s| s + 3 != len) || columns.len() != format.len() {
                     return Err(src.error(
                         Some(at),
-                        Some("FMT"),
+                        Some(&format!("FMT of {name}")),
                         format!(
-                            "of {name}: format `{format}` ({} columns) does not fill its length {len} (corrupted log)",
+                            "format `{format}` ({} columns) does not fill its length {len} (corrupted log)",
                             columns.len()
                         ),
                     ));
@@ -241,7 +245,7 @@ pub(crate) fn read<R: Read>(
                 match imu_layout(&name, &format, &columns, has_i) {
                     Ok(l) => Some(l),
                     Err(e) if e.starts_with("no field Acc") => None,
-                    Err(e) => return Err(src.error(Some(at), Some("FMT"), format!("of {name}: {e}"))),
+                    Err(e) => return Err(src.error(Some(at), Some(&format!("FMT of {name}")), e)),
                 }
             } else {
                 None

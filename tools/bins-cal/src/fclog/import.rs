@@ -4,7 +4,7 @@
 //! Each sample becomes a row: `t_s` the log's clock \[s since the autopilot's boot\] (the same
 //! clock for every instance, so the files line up row for row where the log samples the
 //! instances together); `ux_V`, `uy_V`, `uz_V` the logged acceleration divided by
-//! [`G_M_S2`](super::G_M_S2), in g at a nominal 1 V/g, in the log's own axes and signs;
+//! [`G_M_S2`], in g at a nominal 1 V/g, in the log's own axes and signs;
 //! `temp_C` the temperature logged with it. The header's comments say the source, the
 //! message, the fields and the frame. What a log cannot say — the rig's reference, the
 //! position label — is left out, as the format allows. The files are written to temporary
@@ -27,6 +27,9 @@ pub struct Options {
     /// another. Meaningful where the log's instances share their axes (ArduPilot's IMU
     /// messages are all in the body frame; PX4's sensor_accel each in its own sensor frame).
     pub reference: Option<u8>,
+    /// Only the samples of this span of the log's clock \[s\] (`None`: from the start, to the
+    /// end): a static period on the ground, say, rather than the flight.
+    pub span_s: (Option<f64>, Option<f64>),
     /// Show a progress bar on standard error (indicatif draws nothing when it is not a
     /// terminal).
     pub progress: bool,
@@ -119,7 +122,11 @@ pub fn import(log: &Path, out: &Path, opt: &Options) -> anyhow::Result<(Summary,
         if is_reference {
             reference = Some(s.accel_m_s2.map(|a| a / G_M_S2));
         }
-        if opt.instance.is_some_and(|k| k != s.instance) {
+        let t_s = s.time_us as f64 / 1e6;
+        if opt.instance.is_some_and(|k| k != s.instance)
+            || opt.span_s.0.is_some_and(|a| t_s < a)
+            || opt.span_s.1.is_some_and(|b| t_s > b)
+        {
             return Ok(());
         }
         // Rows before the reference's first sample have no reference: left out.
@@ -159,7 +166,7 @@ pub fn import(log: &Path, out: &Path, opt: &Options) -> anyhow::Result<(Summary,
             }
         };
         let o = &mut outs[k];
-        row.t_s = s.time_us as f64 / 1e6;
+        row.t_s = t_s;
         row.u_v = s.accel_m_s2.map(|a| a / G_M_S2);
         row.temp_c = s.temp_c;
         row.f_g = match reference {
@@ -185,6 +192,14 @@ pub fn import(log: &Path, out: &Path, opt: &Options) -> anyhow::Result<(Summary,
             let have: Vec<String> = summary.instances.iter().map(|i| format!("{} ({})", i.index, i.message)).collect();
             anyhow::bail!("{}: no accelerometer instance {k}{what}; the log has {}", log.display(), have.join(", "));
         }
+    }
+    if outs.is_empty() {
+        anyhow::bail!(
+            "{}: no accelerometer sample in {} … {} s of the log's clock",
+            log.display(),
+            opt.span_s.0.map_or("the start".into(), |a| a.to_string()),
+            opt.span_s.1.map_or("the end".into(), |b| b.to_string())
+        );
     }
     let mut files = Vec::with_capacity(outs.len());
     let mut imported = Vec::with_capacity(outs.len());
