@@ -82,18 +82,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         outputs.push((m, text.as_bytes()));
     }
     outputs.extend(plots.iter().map(|(p, png)| (p.as_path(), png.as_slice())));
-    let created = match &args.plots {
-        Some(dir) if !dir.exists() => {
-            std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
-            Some(dir)
-        }
-        _ => None,
-    };
-    if let Err(e) = fsio::write_all_or_nothing(&outputs) {
-        if let Some(dir) = created {
-            let _ = std::fs::remove_dir(dir);
-        }
-        return Err(e);
+    // A plot directory this run creates goes again with the outputs when they do not appear
+    // (an error, or a signal before the renames: fsio::OutputDir).
+    let created = args.plots.as_deref().map(fsio::OutputDir::create).transpose()?;
+    fsio::write_all_or_nothing(&outputs)?;
+    if let Some(d) = created {
+        d.keep();
     }
     let plots: Vec<PathBuf> = plots.into_iter().map(|p| p.0).collect();
     println!("diagnosed {} rows ({} used) in {:.1} s", r.rows, r.rows_used, t0.elapsed().as_secs_f64());
