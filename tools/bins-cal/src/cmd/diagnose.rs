@@ -131,9 +131,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 continue;
             }
             let list: Vec<String> = sep.iter().map(|(id, d)| format!("{id} {d:.1}")).collect();
-            let thr = a.naming_threshold.get(ax).copied().unwrap_or(f64::NAN);
+            let thr = a.separation_needed.get(ax).copied().unwrap_or(f64::NAN);
             println!(
-                "    {ax}: what {} predicts here, each alternative refitted cannot absorb: {} (naming needs {thr:.1})",
+                "    {ax}: of what {} predicts here, each alternative refitted cannot absorb: {} (a name needs {thr:.1})",
                 a.modelled_as,
                 list.join(", ")
             );

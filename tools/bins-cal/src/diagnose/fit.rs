@@ -811,8 +811,8 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                         .iter()
                         .find(|t| t.mech == *m)
                         .map_or(1, |t| t.coef.len() + usize::from(t.theta.is_some()));
-                    let threshold = naming_threshold(alpha, df);
-                    for &(b, _) in rivals.iter().filter(|r| r.1 < threshold) {
+                    let needed = super::separate::separation_needed(naming_threshold(alpha, df), df);
+                    for &(b, _) in rivals.iter().filter(|r| r.1 < needed) {
                         // The rival's deviance difference on the data, where the search has it.
                         let on_data = all_dev
                             .iter()
@@ -873,10 +873,60 @@ fn separability_of(ctx: &Context, fit: &AxisFit, _alpha: f64) -> Vec<(Mech, Vec<
             .filter(|&m| !fit.terms.iter().any(|t| t.mech == m) || second_copy(m))
             .filter_map(|m| separability(ctx, fit.q, fit.deviance_scale, &a, m, &shared).map(|s| (m, s.deviance)))
             .collect();
+        // A turn-on term beside a temperature form may be that form acting through a die that
+        // runs warmer than the thermistor after power-on: `∂A/∂T · (1 − e^(−P/τ))`, A the other
+        // term's fitted contribution.
+        if matches!(term.mech, Mech::Warmup | Mech::SelfHeating) {
+            for (j, other) in fit.terms.iter().enumerate() {
+                if j == k || !other.mech.temperature_form() {
+                    continue;
+                }
+                if let Some(d) = through_self_heating(ctx, fit, &a, &shared, other) {
+                    match rivals.iter_mut().find(|r| r.0 == other.mech) {
+                        Some(r) => r.1 = r.1.min(d),
+                        None => rivals.push((other.mech, d)),
+                    }
+                }
+            }
+        }
         rivals.sort_by(|x, y| x.1.total_cmp(&y.1));
         out.push((term.mech, rivals));
     }
     out
+}
+
+/// The separability of a turn-on term's prediction `a` from the temperature form `other` acting
+/// through a self-heated die: the rival column `∂A/∂T · (1 − e^(−P/τ))` (A: `other`'s fitted
+/// contribution, its derivative by a difference of 0.1 °C of the smoothed temperature), τ on
+/// the turn-on grid.
+fn through_self_heating(
+    ctx: &Context,
+    fit: &AxisFit,
+    a: &[super::separate::Fitted],
+    shared: &[Vec<f64>],
+    other: &Term,
+) -> Option<f64> {
+    let power = ctx.p.power.as_deref()?;
+    let delta = 0.1;
+    let mut shifted = ctx.p.clone();
+    shifted.temp_s.iter_mut().for_each(|v| *v += delta);
+    let ctx2 = Context::new(&shifted, ctx.axis);
+    let cols2 = ctx2.columns(other.mech, other.theta.unwrap_or(0.0));
+    let n = ctx.p.t.len();
+    let mut slope = vec![0.0; n];
+    for (c, b) in cols2.iter().zip(&other.coef) {
+        for (s, v) in slope.iter_mut().zip(c) {
+            *s += b * v;
+        }
+    }
+    for (s, v) in slope.iter_mut().zip(&other.contribution) {
+        *s = (*s - v) / delta;
+    }
+    let grid = ctx.grid(Mech::Warmup);
+    let offered = |th: f64| ctx.offered(Mech::Warmup, th);
+    let columns = |tau: f64| vec![(0..n).map(|r| slope[r] * -(-power[r] / tau).exp_m1()).collect()];
+    super::separate::separability_of_columns(ctx, fit.q, fit.deviance_scale, a, shared, &grid, &offered, &columns)
+        .map(|s| s.deviance)
 }
 
 /// For each member of `model`, every mechanism that can replace it (θ re-searched on the grid)

@@ -62,11 +62,13 @@ pub struct Ambiguous {
     /// an alternative joined on its separability alone).
     pub deviance_difference: PerAxis<BTreeMap<String, f64>>,
     /// Per accelerometer, the deviance each alternative, refitted, cannot absorb of what the
-    /// modelled member predicts on this recording ([`super::separate`]); below the naming
-    /// threshold the two are one group whatever the data's ranking says.
+    /// modelled member predicts on this recording ([`super::separate`]); below the separation
+    /// a name needs the two are one group whatever the data's ranking says.
     pub separability: PerAxis<BTreeMap<String, f64>>,
-    /// The naming threshold those deviances are compared with, per accelerometer.
-    pub naming_threshold: PerAxis<f64>,
+    /// The separation a name needs, per accelerometer: the expected deviance at which data
+    /// drawn from the modelled member pass its naming threshold against the rival with 95 %
+    /// probability ([`super::separate::separation_needed`]).
+    pub separation_needed: PerAxis<f64>,
 }
 
 /// A term the selection keeps (it passes the tests) whose held-out cut is not material: below
@@ -507,12 +509,13 @@ fn separability_of(fit: &AxisFit, m: Mech, b: Mech) -> Option<f64> {
     fit.separability.iter().find(|(a, _)| *a == m).and_then(|(_, r)| r.iter().find(|x| x.0 == b)).map(|x| x.1)
 }
 
-/// The naming threshold of term `m` of `fit` ([`super::fit::naming_threshold`] at the
-/// selection's per-test level).
+/// The separation term `m` of `fit` needs from a rival to be named alone
+/// ([`super::separate::separation_needed`] of its naming threshold,
+/// [`super::fit::naming_threshold`] at the selection's per-test level).
 fn threshold_of(fit: &AxisFit, m: Mech) -> f64 {
     let alpha = super::fit::ALPHA / (Mech::ALL.len() * 3) as f64;
     let df = fit.terms.iter().find(|t| t.mech == m).map_or(1, |t| t.coef.len() + usize::from(t.theta.is_some()));
-    super::fit::naming_threshold(alpha, df)
+    super::separate::separation_needed(super::fit::naming_threshold(alpha, df), df)
 }
 
 /// Whether `m` is a play whose width `theta` is below [`PLAY_MIN_STEPS`] steps of REAL's
@@ -676,7 +679,7 @@ pub fn build(
                 modelled_as,
                 deviance_difference: dev,
                 separability: sep,
-                naming_threshold: thr,
+                separation_needed: thr,
             }
         })
         .collect();

@@ -70,13 +70,35 @@ pub fn separability(
     rival: Mech,
     shared: &[Vec<f64>],
 ) -> Option<Separation> {
+    let grid: Vec<f64> = if rival.theta().is_some() {
+        ctx.grid(rival).into_iter().filter(|&th| ctx.offered(rival, th)).collect()
+    } else {
+        Vec::new()
+    };
+    let offered = |th: f64| ctx.offered(rival, th);
+    separability_of_columns(ctx, q, scale, a, shared, &grid, &offered, &|th| ctx.columns(rival, th))
+}
+
+/// [`separability`] of a rival given by its columns at θ (`columns(θ)`), θ searched on `grid`
+/// where `offered` (a rival without θ: `grid` empty, `columns` called once with 0).
+#[allow(clippy::too_many_arguments)]
+pub fn separability_of_columns(
+    ctx: &Context,
+    q: f64,
+    scale: f64,
+    a: &[Fitted],
+    shared: &[Vec<f64>],
+    grid: &[f64],
+    offered: &dyn Fn(f64) -> bool,
+    columns: &dyn Fn(f64) -> Vec<Vec<f64>>,
+) -> Option<Separation> {
     let p = ctx.p;
     let filt = Filter::new(&p.t, &p.r_white[ctx.axis], q, |_| true);
     let eta = predict(ctx, a);
     let part = PartialLs::new(&filt, &eta, shared);
     let scale = scale.max(1e-300);
     let sse_at = |theta: f64| -> f64 {
-        let cols = ctx.columns(rival, theta);
+        let cols = columns(theta);
         if cols.iter().all(|c| c.iter().all(|v| *v == 0.0)) {
             return f64::INFINITY;
         }
@@ -94,13 +116,12 @@ pub fn separability(
             })
             .fold(f64::INFINITY, f64::min)
     };
-    if rival.theta().is_none() {
+    if grid.is_empty() {
         let sse = sse_at(0.0);
         return sse.is_finite().then_some(Separation { deviance: sse / scale, rival_theta: None });
     }
-    let grid: Vec<f64> = ctx.grid(rival).into_iter().filter(|&th| ctx.offered(rival, th)).collect();
     let mut best: Option<(f64, f64)> = None;
-    for &th in &grid {
+    for &th in grid {
         let s = sse_at(th);
         if s.is_finite() && best.is_none_or(|b| s < b.1) {
             best = Some((th, s));
@@ -112,7 +133,7 @@ pub fn separability(
     // in T under another name, not a rival play).
     let step = if grid.len() > 1 { (grid[1] / grid[0]).ln() } else { 0.3 };
     let (g_lo, g_hi) = (grid[0].ln(), grid[grid.len() - 1].ln());
-    let eval = |lt: f64| if ctx.offered(rival, lt.exp()) { sse_at(lt.exp()) } else { f64::INFINITY };
+    let eval = |lt: f64| if offered(lt.exp()) { sse_at(lt.exp()) } else { f64::INFINITY };
     let phi = 0.618_033_988_749_894_9;
     let (mut lo, mut hi) = ((th0.ln() - step).max(g_lo), (th0.ln() + step).min(g_hi));
     let (mut c, mut d) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
@@ -134,4 +155,24 @@ pub fn separability(
     }
     let (th, s) = if fc.min(fd) < s0 { if fc < fd { (c.exp(), fc) } else { (d.exp(), fd) } } else { (th0, s0) };
     Some(Separation { deviance: s / scale, rival_theta: Some(th) })
+}
+
+/// The separation a name needs from a rival: the expected deviance `T` at which data drawn from
+/// the named explanation exceed the naming threshold `thr` with 95 % probability (the
+/// likelihood-ratio statistic is then about a noncentral χ² of `df` degrees of freedom and
+/// noncentrality `T`: mean `df + T`, variance `2(df + 2T)`). Below it a recording of this design
+/// names the wrong one of the two too often, and they are one group.
+pub fn separation_needed(thr: f64, df: usize) -> f64 {
+    let k = df.max(1) as f64;
+    let power_ok = |t: f64| k + t - 1.645 * (2.0 * (k + 2.0 * t)).sqrt() >= thr;
+    let (mut lo, mut hi) = (0.0, thr.max(1.0) * 4.0 + 100.0);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if power_ok(mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    hi
 }

@@ -1355,7 +1355,16 @@ fn generate_user(c: &Case, u: &UserPlan) -> (Vec<Row>, Vec<Row>, Truth) {
         let mut r = ChaCha8Rng::seed_from_u64(c.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (0x05E2_0000 + m as u64));
         let pa = draw_per_axis(&mut r);
         let con = contribution(&member.mech, &ctx, &pa);
-        let (g, _) = scale_to_size(&member.mech, member.size_sigma, &member.axis_weight, &con, &pa, kd, sigma_g);
+        let (mut g, _) = scale_to_size(&member.mech, member.size_sigma, &member.axis_weight, &con, &pa, kd, sigma_g);
+        // A contribution this profile holds constant (a scale-factor term in one orientation)
+        // has only rounding about its mean: nothing to scale up.
+        for i in 0..3 {
+            let v: Vec<f64> = con.iter().map(|row| row[i]).collect();
+            let peak = v.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+            if !(std_about_mean(&v) > 1e-9 * peak) {
+                g[i] = 0.0;
+            }
+        }
         let mut visible = [0.0; 3];
         for i in 0..3 {
             let v: Vec<f64> = con.iter().map(|row| g[i] * row[i] / kd[i]).collect();
