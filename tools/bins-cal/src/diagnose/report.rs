@@ -671,7 +671,14 @@ pub fn build(
             let separating_test = if ms.len() == 2 {
                 separating_test(ms[0], ms[1])
             } else {
-                ms.windows(2).map(|w| separating_test(w[0], w[1])).collect::<Vec<_>>().join("; ")
+                // Each test once: several neighbours are separated by the same one.
+                let mut tests: Vec<String> = Vec::new();
+                for t in ms.windows(2).map(|w| separating_test(w[0], w[1])) {
+                    if !tests.contains(&t) {
+                        tests.push(t);
+                    }
+                }
+                tests.join("; ")
             };
             Ambiguous {
                 ids,
