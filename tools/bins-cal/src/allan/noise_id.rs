@@ -48,6 +48,44 @@ impl Series {
         self.prev = Some(x);
     }
 
+    /// [`Series::push`] of every value of `vs`, in one loop.
+    fn push_slice(&mut self, vs: &[f64]) {
+        let Some(&first) = vs.first() else { return };
+        let shift = *self.shift.get_or_insert(first);
+        let (mut s1, mut s2, mut sxy, mut sx, mut sy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        let mut prev = self.prev;
+        let mut pairs = 0u64;
+        if let Some(p) = prev {
+            let x = first - shift;
+            sxy += p * x;
+            sx += p;
+            sy += x;
+            pairs += 1;
+        }
+        let xs = vs.iter().map(|v| v - shift);
+        let mut last = first - shift;
+        for (k, x) in xs.enumerate() {
+            s1 += x;
+            s2 += x * x;
+            if k > 0 {
+                sxy += last * x;
+                sx += last;
+                sy += x;
+            }
+            last = x;
+        }
+        pairs += vs.len() as u64 - 1;
+        prev = Some(last);
+        self.n += vs.len() as u64;
+        self.s1 += s1;
+        self.s2 += s2;
+        self.sxy += sxy;
+        self.sx += sx;
+        self.sy += sy;
+        self.pairs += pairs;
+        self.prev = prev;
+    }
+
     /// `r₁ = Σ(x_k − x̄)(x_{k+1} − x̄) / Σ(x_k − x̄)²`, pairs within segments.
     fn r1(&self) -> Option<f64> {
         if self.n < 3 || self.pairs < 2 {
@@ -98,6 +136,34 @@ impl Lag1 {
                     return;
                 }
             }
+        }
+    }
+
+    /// Cluster means in time order within a segment, as [`Lag1::push`] of each; `scratch`
+    /// holds the differences between calls (no allocation once it has grown).
+    pub fn push_slice(&mut self, zs: &[f64], scratch: &mut [Vec<f64>; 2]) {
+        if zs.is_empty() {
+            return;
+        }
+        let [a, b] = scratch;
+        a.clear();
+        a.extend_from_slice(zs);
+        let (mut cur, mut next) = (a, b);
+        for d in 0..4 {
+            self.series[d].push_slice(cur);
+            if d == 3 {
+                break;
+            }
+            next.clear();
+            if let Some(p) = self.prev[d] {
+                next.push(cur[0] - p);
+            }
+            next.extend(cur.windows(2).map(|w| w[1] - w[0]));
+            self.prev[d] = cur.last().copied();
+            if next.is_empty() {
+                return;
+            }
+            std::mem::swap(&mut cur, &mut next);
         }
     }
 
@@ -156,6 +222,17 @@ mod tests {
             }
             assert_eq!(l.identify(2).map(|i| i.alpha), Some(alpha), "{name}");
         }
+        // In slices of any length, the same sums.
+        let mut one = Lag1::default();
+        let mut many = Lag1::default();
+        let mut scratch = [Vec::new(), Vec::new()];
+        white.iter().for_each(|&z| one.push(z));
+        for chunk in white.chunks(7).chain(std::iter::empty()) {
+            many.push_slice(chunk, &mut scratch);
+        }
+        let (a, b) = (one.identify(2).unwrap(), many.identify(2).unwrap());
+        assert_eq!(a.alpha, b.alpha);
+        assert!((a.delta - b.delta).abs() < 1e-12, "{a:?} {b:?}");
         let mut short = Lag1::default();
         white[..29].iter().for_each(|&z| short.push(z));
         assert_eq!(short.identify(2), None);

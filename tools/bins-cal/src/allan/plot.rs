@@ -61,6 +61,8 @@ where
         .x_desc("τ [s]")
         .y_desc(format!("Allan deviation [{}]", c.unit))
         .y_label_formatter(&|v| format!("{v:.1e}"))
+        .x_max_light_lines(1)
+        .y_max_light_lines(1)
         .x_label_formatter(&|v| format!("{v:.3}"))
         .draw()
         .map_err(drawing_error)?;
