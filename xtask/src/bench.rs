@@ -1,7 +1,8 @@
 //! `cargo xtask bench`: instructions per sample and stack depth in QEMU, flash and static RAM
 //! of the images against their budgets, host samples per second, the diagnosis's speed, the
-//! CPU time and peak memory of `calibrate` and `verify` on a day at 100 Hz, and the Allan
-//! deviation's speed against the streaming reader and allantools.
+//! CPU time and peak memory of `calibrate` and `verify` on a day at 100 Hz, of `import` on
+//! 100 MB flight-controller logs, and the Allan deviation's speed against the streaming reader
+//! and allantools.
 
 use std::path::Path;
 use std::process::Stdio;
@@ -108,6 +109,16 @@ pub(crate) const DAY_RUNS: [(&str, &[&str]); 5] = [
         ],
     ),
 ];
+
+/// CPU budget of `bins-cal import` of a 100 MB log \[s\].
+pub(crate) const LOG_CPU_BUDGET_S: f64 = 10.0;
+
+/// Peak-memory budget of `bins-cal import` of a 100 MB log \[MB\]: a stream, bounded by
+/// its buffers and the log's definitions, not by the file.
+pub(crate) const LOG_RSS_BUDGET_MB: f64 = 50.0;
+
+/// Size of the benchmark's logs \[MB\].
+pub(crate) const LOG_MB: &str = "100";
 
 /// A bench step: its number, its title and what it runs.
 type BenchStep = (usize, &'static str, StepFn);
@@ -225,6 +236,58 @@ impl Xtask {
     }
 }
 
+impl Xtask {
+    /// Bench step 8: writes a 100 MB ArduPilot DataFlash log and a 100 MB PX4 ULog (three
+    /// accelerometers at 1 kHz, the `fc_log_gen` example) into a temporary directory and
+    /// measures `bins-cal import` of each (release): CPU time and peak resident set against
+    /// [`LOG_CPU_BUDGET_S`] and [`LOG_RSS_BUDGET_MB`].
+    fn bench_logs(&mut self) -> Result {
+        self.run(self.host_cargo([
+            "build",
+            "--release",
+            "-q",
+            "-p",
+            "bins-cal",
+            "--bin",
+            "bins-cal",
+            "--example",
+            "fc_log_gen",
+        ]))?;
+        let bin = self.root.join("target/release/bins-cal");
+        let gen_bin = self.root.join("target/release/examples/fc_log_gen");
+        let dir = std::env::temp_dir().join(format!("bins-cal-bench-logs-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let r = self.bench_logs_in(&bin, &gen_bin, &dir);
+        let _ = std::fs::remove_dir_all(&dir);
+        r
+    }
+
+    fn bench_logs_in(&self, bin: &Path, gen_bin: &Path, dir: &Path) -> Result {
+        let mut missed = Vec::new();
+        for log in ["log.bin", "log.ulg"] {
+            let path = dir.join(log);
+            let mut c = self.command(gen_bin);
+            c.arg(&path).arg(LOG_MB);
+            self.run(c)?;
+            let mut c = self.command(bin);
+            c.arg("import").arg(&path).arg("-o").arg(dir.join("rec.csv")).arg("--quiet").stdout(Stdio::null());
+            let u = measured(c)?;
+            let met = u.cpu_s < LOG_CPU_BUDGET_S && u.peak_rss_mb < LOG_RSS_BUDGET_MB;
+            if !met {
+                missed.push(log);
+            }
+            println!(
+                "  import {log} ({LOG_MB} MB) {:>7.2} s CPU {:>8.1} MB peak {:>7.2} s wall  {}",
+                u.cpu_s,
+                u.peak_rss_mb,
+                u.wall_s,
+                if met { "met" } else { "MISSED" }
+            );
+        }
+        if missed.is_empty() { Ok(()) } else { Err(format!("over budget: import {}", missed.join(", "))) }
+    }
+}
+
 /// Peak memory budget of `bins-cal allan` on the day at 100 Hz \[MB\].
 const ALLAN_RSS_BUDGET_MB: f64 = 200.0;
 
@@ -233,7 +296,7 @@ const ALLAN_RSS_BUDGET_MB: f64 = 200.0;
 const ALLANTOOLS: &str = "allantools==2024.6";
 
 impl Xtask {
-    /// Bench step 8: the `allan_speed` example (10⁷ samples against the `allan` crate and
+    /// Bench step 9: the `allan_speed` example (10⁷ samples against the `allan` crate and
     /// against allantools' octave `oadev`, which it needs ≥ 10× faster than; the day's curves
     /// against the streaming reader alone, ≤ 1.5×) and the peak memory of `bins-cal allan` on
     /// the day (< 200 MB). allantools is installed from pip into a virtual environment under
@@ -317,7 +380,7 @@ impl Xtask {
 }
 
 /// The bench's steps in order.
-const BENCH_STEPS: [BenchStep; 8] = [
+const BENCH_STEPS: [BenchStep; 9] = [
     (1, "toolchain", Xtask::setup_toolchain),
     (2, "build", |x| {
         x.build_firmware()?;
@@ -359,6 +422,11 @@ const BENCH_STEPS: [BenchStep; 8] = [
     ),
     (
         8,
+        "bins-cal import of a 100 MB ArduPilot DataFlash log and a 100 MB PX4 ULog: < 10 s CPU, < 50 MB peak each (release)",
+        Xtask::bench_logs,
+    ),
+    (
+        9,
         "bins-cal allan: 10^7 samples ≥ 10× faster than allantools' octave oadev; a day at 100 Hz ≤ 1.5× the streaming reader alone, < 200 MB peak (release, one thread)",
         Xtask::bench_allan,
     ),

@@ -1,4 +1,4 @@
-//! Speed and exactness of `bins-cal allan` (run by `cargo xtask bench`, step 8), in release,
+//! Speed and exactness of `bins-cal allan` (run by `cargo xtask bench`, step 9), in release,
 //! on one thread (CPU time of the thread; wall time beside it):
 //!
 //! 1. 10⁷ samples of one channel (0.98 V offset, white noise, a random walk), octave τ: the

@@ -655,12 +655,12 @@ pub fn suite() -> Vec<Case> {
         },
         Case {
             name: "warmup_vs_self_heating",
-            description: "the die self-heats by 1.5 °C (τ = 400 s) after power-on at constant chamber temperature in one position: indistinguishable from a warm-up transient",
+            description: "the die self-heats by 1.5 °C (τ = 1500 s) after the only power-on, at the record's start, at constant chamber temperature in one position: indistinguishable from a warm-up transient, and both from a drift in time",
             plan: plan(vec![pos("TP1", [0.0, 0.0, 1.0], 60.0)], vec![(0.0, 20.0)], vec![0.0]),
             noise: Noise::default(),
-            effects: vec![Effect::SelfHeating(1.5, 400.0)],
+            effects: vec![Effect::SelfHeating(1.5, 1500.0)],
             seed: 116,
-            expected: ambiguous(&[SelfHeating, Warmup], xyz),
+            expected: ambiguous(&[Drift, SelfHeating, Warmup], xyz),
         },
         Case {
             name: "lag_plus_asymmetry",
