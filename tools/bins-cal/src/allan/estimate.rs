@@ -68,8 +68,8 @@ pub enum Grid {
 pub const BLOCK: usize = 4096;
 
 /// The largest cluster size \[samples\] of the fully overlapping estimate by default:
-/// 4 096 samples, 41 s at 100 Hz, 68 min at 1 Hz. Its phase buffer (`order·M` entries of 16
-/// bytes, half again for sliding: 192 KB for the Allan variance) stays in the processor's
+/// 4 096 samples, 41 s at 100 Hz, 68 min at 1 Hz. Its phase buffer (`order·M` entries of 8
+/// bytes and two blocks for sliding: 128 KB for the Allan variance) stays in the processor's
 /// second-level cache, which is what makes the pass fast; beyond it the estimate is partially
 /// overlapping with [`PARTIAL_POSITIONS`] cluster starts a cluster length, which changes its
 /// degrees of freedom by less than 1 part in 1000.
@@ -79,6 +79,10 @@ pub const EXACT_MAX_M: usize = 1 << 12;
 /// first `ID_RUN` of each block of [`BLOCK`] samples, a run of adjacent means (1/64 of the
 /// `m = 1` means, spread evenly through the record; every mean from `m = 64` on).
 pub const ID_RUN: usize = 64;
+
+/// Phase entries a tile of the fully overlapping sums covers (2 KB: a tile and the lagged
+/// tiles of the octave sizes fit the first-level cache).
+const TILE: usize = 256;
 
 /// Cluster start positions a cluster length beyond the exact range (`s = m/P`).
 pub const PARTIAL_POSITIONS: usize = 4096;
@@ -162,7 +166,7 @@ struct Hist {
 
 impl Hist {
     fn new(keep: usize, block: usize) -> Self {
-        Hist { x: Vec::new(), base: 0, keep, cap: keep + (keep / 2).max(block) }
+        Hist { x: Vec::new(), base: 0, keep, cap: keep + (keep / 2).max(2 * block) }
     }
 
     fn clear(&mut self) {
@@ -198,42 +202,47 @@ fn sum_sq_diff(x: &[f64], from: usize, to: usize, lag: usize, order: usize) -> f
     }
     let n = to - from;
     let s = |j: usize| &x[from - j * lag..from - j * lag + n];
-    let (mut a0, mut a1, mut a2, mut a3) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    let mut k = 0;
     if order == 2 {
         let (x0, x1, x2) = (s(0), s(1), s(2));
-        let e = |k: usize| (x0[k] - x1[k]) - (x1[k] - x2[k]);
-        while k + 4 <= n {
-            let (e0, e1, e2, e3) = (e(k), e(k + 1), e(k + 2), e(k + 3));
-            a0 += e0 * e0;
-            a1 += e1 * e1;
-            a2 += e2 * e2;
-            a3 += e3 * e3;
-            k += 4;
-        }
-        while k < n {
-            let v = e(k);
-            a0 += v * v;
-            k += 1;
-        }
+        lanes(n, |k| (x0[k] - x1[k]) - (x1[k] - x2[k]), |k, acc: &mut [f64; LANES]| {
+            let (a, b, c) = (&x0[k..k + LANES], &x1[k..k + LANES], &x2[k..k + LANES]);
+            for j in 0..LANES {
+                let e = (a[j] - b[j]) - (b[j] - c[j]);
+                acc[j] += e * e;
+            }
+        })
     } else {
         let (x0, x1, x2, x3) = (s(0), s(1), s(2), s(3));
-        let e = |k: usize| (x0[k] - x3[k]) - 3.0 * (x1[k] - x2[k]);
-        while k + 4 <= n {
-            let (e0, e1, e2, e3) = (e(k), e(k + 1), e(k + 2), e(k + 3));
-            a0 += e0 * e0;
-            a1 += e1 * e1;
-            a2 += e2 * e2;
-            a3 += e3 * e3;
-            k += 4;
-        }
-        while k < n {
-            let v = e(k);
-            a0 += v * v;
-            k += 1;
-        }
+        lanes(n, |k| (x0[k] - x3[k]) - 3.0 * (x1[k] - x2[k]), |k, acc: &mut [f64; LANES]| {
+            let (a, b, c, d) = (&x0[k..k + LANES], &x1[k..k + LANES], &x2[k..k + LANES], &x3[k..k + LANES]);
+            for j in 0..LANES {
+                let e = (a[j] - d[j]) - 3.0 * (b[j] - c[j]);
+                acc[j] += e * e;
+            }
+        })
     }
-    (a0 + a1) + (a2 + a3)
+}
+
+/// Independent accumulators of [`sum_sq_diff`] (the loop vectorises into as many lanes).
+const LANES: usize = 8;
+
+/// `Σ_k e(k)²` for `k < n`: `chunk(k, acc)` adds `LANES` terms from `k` into `acc`, `e` the
+/// tail's one by one.
+#[inline(always)]
+fn lanes(n: usize, e: impl Fn(usize) -> f64, chunk: impl Fn(usize, &mut [f64; LANES])) -> f64 {
+    let mut acc = [0.0f64; LANES];
+    let mut k = 0;
+    while k + LANES <= n {
+        chunk(k, &mut acc);
+        k += LANES;
+    }
+    let mut tail = 0.0;
+    while k < n {
+        let v = e(k);
+        tail += v * v;
+        k += 1;
+    }
+    ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])) + tail
 }
 
 /// The state of one cluster size.
@@ -329,9 +338,14 @@ impl Estimator {
     }
 
     /// Adds samples.
-    pub fn extend(&mut self, ys: &[f64]) {
-        for &y in ys {
-            self.push(y);
+    pub fn extend(&mut self, mut ys: &[f64]) {
+        while !ys.is_empty() {
+            let k = (BLOCK - self.block.len()).min(ys.len());
+            self.block.extend_from_slice(&ys[..k]);
+            ys = &ys[k..];
+            if self.block.len() == BLOCK {
+                self.process_block();
+            }
         }
     }
 
@@ -382,19 +396,28 @@ impl Estimator {
         self.samples += n_new as u64;
         self.block.clear();
         let hist = &self.hist;
+        // The fully overlapping sizes' terms over the new phases, tile by tile with every size
+        // in a tile, so the tile's phases (and the lagged ones the sizes share) stay in the
+        // first-level cache from one size to the next.
+        let mut a = p0;
+        while a <= p1 {
+            let b = (a + TILE as u64 - 1).min(p1);
+            for t in self.taus.iter_mut().filter(|t| t.stride == 1) {
+                let first = a.max(order as u64 * t.m as u64);
+                if first <= b {
+                    t.seg_sum += sum_sq_diff(&hist.x, hist.at(first), hist.at(b) + 1, t.m, order);
+                    t.seg_n += b + 1 - first;
+                }
+            }
+            a = b + 1;
+        }
         for t in &mut self.taus {
             let (m, s) = (t.m as u64, t.stride as u64);
-            let span = order as u64 * m;
             let inv = 1.0 / t.m as f64;
             self.zbuf.clear();
             if s == 1 {
                 if m > p1 {
                     continue;
-                }
-                let first = p0.max(span);
-                if first <= p1 {
-                    t.seg_sum += sum_sq_diff(&hist.x, hist.at(first), hist.at(p1) + 1, t.m, order);
-                    t.seg_n += p1 + 1 - first;
                 }
                 let q = p0.div_ceil(m).max(1) * m;
                 if q <= p1 {
