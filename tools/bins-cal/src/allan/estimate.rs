@@ -204,22 +204,30 @@ fn sum_sq_diff(x: &[f64], from: usize, to: usize, lag: usize, order: usize) -> f
     let s = |j: usize| &x[from - j * lag..from - j * lag + n];
     if order == 2 {
         let (x0, x1, x2) = (s(0), s(1), s(2));
-        lanes(n, |k| (x0[k] - x1[k]) - (x1[k] - x2[k]), |k, acc: &mut [f64; LANES]| {
-            let (a, b, c) = (&x0[k..k + LANES], &x1[k..k + LANES], &x2[k..k + LANES]);
-            for j in 0..LANES {
-                let e = (a[j] - b[j]) - (b[j] - c[j]);
-                acc[j] += e * e;
-            }
-        })
+        lanes(
+            n,
+            |k| (x0[k] - x1[k]) - (x1[k] - x2[k]),
+            |k, acc: &mut [f64; LANES]| {
+                let (a, b, c) = (&x0[k..k + LANES], &x1[k..k + LANES], &x2[k..k + LANES]);
+                for j in 0..LANES {
+                    let e = (a[j] - b[j]) - (b[j] - c[j]);
+                    acc[j] += e * e;
+                }
+            },
+        )
     } else {
         let (x0, x1, x2, x3) = (s(0), s(1), s(2), s(3));
-        lanes(n, |k| (x0[k] - x3[k]) - 3.0 * (x1[k] - x2[k]), |k, acc: &mut [f64; LANES]| {
-            let (a, b, c, d) = (&x0[k..k + LANES], &x1[k..k + LANES], &x2[k..k + LANES], &x3[k..k + LANES]);
-            for j in 0..LANES {
-                let e = (a[j] - d[j]) - 3.0 * (b[j] - c[j]);
-                acc[j] += e * e;
-            }
-        })
+        lanes(
+            n,
+            |k| (x0[k] - x3[k]) - 3.0 * (x1[k] - x2[k]),
+            |k, acc: &mut [f64; LANES]| {
+                let (a, b, c, d) = (&x0[k..k + LANES], &x1[k..k + LANES], &x2[k..k + LANES], &x3[k..k + LANES]);
+                for j in 0..LANES {
+                    let e = (a[j] - d[j]) - 3.0 * (b[j] - c[j]);
+                    acc[j] += e * e;
+                }
+            },
+        )
     }
 }
 
