@@ -804,7 +804,7 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                     model.remove(k);
                     continue;
                 }
-                let sep = separability_of(ctx, &fit, alpha);
+                let sep = separability_of(ctx, &fit);
                 for (m, rivals) in &sep {
                     let df = fit
                         .terms
@@ -852,8 +852,8 @@ pub fn naming_threshold(alpha: f64, df: usize) -> f64 {
 /// orientation is a bias tempco), the drift in time, and a second time constant of each other
 /// term with one (the term may be only the rest of that one's shape: a second-order lag fitted
 /// by first-order terms leaves a remainder that a play or a turn-on term takes).
-fn separability_of(ctx: &Context, fit: &AxisFit, _alpha: f64) -> Vec<(Mech, Vec<(Mech, f64)>)> {
-    use super::separate::{Fitted, separability};
+fn separability_of(ctx: &Context, fit: &AxisFit) -> Vec<(Mech, Vec<(Mech, f64)>)> {
+    use super::separate::{Fitted, Refit, predict};
     let mut out = Vec::new();
     for (k, term) in fit.terms.iter().enumerate() {
         let a = [Fitted { mech: term.mech, theta: term.theta, coef: term.coef.clone() }];
@@ -863,6 +863,7 @@ fn separability_of(ctx: &Context, fit: &AxisFit, _alpha: f64) -> Vec<(Mech, Vec<
             .cloned()
             .chain(fit.terms.iter().enumerate().filter(|(j, _)| *j != k).flat_map(|(_, t)| t.columns.iter().cloned()))
             .collect();
+        let refit = Refit::new(ctx, fit.q, fit.deviance_scale, &predict(ctx, &a), &shared);
         let second_copy =
             |m: Mech| m.theta().is_some() && fit.terms.iter().enumerate().any(|(j, t)| j != k && t.mech == m);
         let mut rivals: Vec<(Mech, f64)> = Mech::ALL
@@ -871,22 +872,60 @@ fn separability_of(ctx: &Context, fit: &AxisFit, _alpha: f64) -> Vec<(Mech, Vec<
             .copied()
             .filter(|&m| m != term.mech && ctx.rival_possible(m))
             .filter(|&m| !fit.terms.iter().any(|t| t.mech == m) || second_copy(m))
-            .filter_map(|m| separability(ctx, fit.q, fit.deviance_scale, &a, m, &shared).map(|s| (m, s.deviance)))
+            .filter_map(|m| refit.mechanism(m).map(|s| (m, s.deviance)))
             .collect();
-        // A turn-on term beside a temperature form may be that form acting through a die that
-        // runs warmer than the thermistor after power-on: `∂A/∂T · (1 − e^(−P/τ))`, A the other
-        // term's fitted contribution.
         if matches!(term.mech, Mech::Warmup | Mech::SelfHeating) {
+            let mut add = |m: Mech, d: f64| match rivals.iter_mut().find(|r| r.0 == m) {
+                Some(r) => r.1 = r.1.min(d),
+                None => rivals.push((m, d)),
+            };
+            // A turn-on term beside a temperature form may be that form acting through a die
+            // that runs warmer than the thermistor after power-on: `∂A/∂T · (1 − e^(−P/τ))`, A
+            // the other term's fitted contribution.
             for (j, other) in fit.terms.iter().enumerate() {
                 if j == k || !other.mech.temperature_form() {
                     continue;
                 }
-                if let Some(d) = through_self_heating(ctx, fit, &a, &shared, other) {
-                    match rivals.iter_mut().find(|r| r.0 == other.mech) {
-                        Some(r) => r.1 = r.1.min(d),
-                        None => rivals.push((other.mech, d)),
-                    }
+                if let Some(d) = through_self_heating(ctx, &refit, other) {
+                    add(other.mech, d);
                 }
+            }
+            // Or a temperature form the model lacks, acting through a die that self-heats
+            // after power-on unseen by the thermistor (a tempco on a soak is a turn-on
+            // transient).
+            for m in [
+                Mech::BiasTempOrder,
+                Mech::ScaleTemp,
+                Mech::CrossCouplingTemp,
+                Mech::BiasHysteresis,
+                Mech::ThermalHysteresis,
+            ] {
+                if !fit.terms.iter().any(|t| t.mech == m)
+                    && let Some(d) = refit.through_die_rise(m)
+                {
+                    add(m, d);
+                }
+            }
+        }
+        let mut add = |m: Mech, d: f64| match rivals.iter_mut().find(|r| r.0 == m) {
+            Some(r) => r.1 = r.1.min(d),
+            None => rivals.push((m, d)),
+        };
+        // A temperature form may be the die heating after power-on, acting through a
+        // sensitivity SIM does not have, `(1 − e^(−P/τ))·(c0 + c1 ΔT + c2 ΔT²)`; or a die
+        // running steadily warmer than the thermistor, through SIM's own (`S'(T)`).
+        if term.mech.temperature_form() {
+            for d in [refit.self_heating_free(), refit.self_heating_settled()].into_iter().flatten() {
+                add(Mech::SelfHeating, d);
+            }
+        }
+        // Beside a lag, any term may be the rest of a second lag stage.
+        for (j, other) in fit.terms.iter().enumerate() {
+            if j != k
+                && other.mech == Mech::ThermalLag
+                && let Some(d) = other.theta.and_then(|tau| refit.second_lag_stage(tau))
+            {
+                add(Mech::ThermalLag, d);
             }
         }
         rivals.sort_by(|x, y| x.1.total_cmp(&y.1));
@@ -895,23 +934,15 @@ fn separability_of(ctx: &Context, fit: &AxisFit, _alpha: f64) -> Vec<(Mech, Vec<
     out
 }
 
-/// The separability of a turn-on term's prediction `a` from the temperature form `other` acting
-/// through a self-heated die: the rival column `∂A/∂T · (1 − e^(−P/τ))` (A: `other`'s fitted
-/// contribution, its derivative by a difference of 0.1 °C of the smoothed temperature), τ on
-/// the turn-on grid.
-fn through_self_heating(
-    ctx: &Context,
-    fit: &AxisFit,
-    a: &[super::separate::Fitted],
-    shared: &[Vec<f64>],
-    other: &Term,
-) -> Option<f64> {
+/// The separability of a turn-on term (what `refit` holds) from the temperature form `other`
+/// acting through a self-heated die: the rival column `∂A/∂T · (1 − e^(−P/τ))` (A: `other`'s
+/// fitted contribution, its derivative by a difference of 0.1 °C of the smoothed temperature),
+/// τ on the turn-on grid.
+fn through_self_heating(ctx: &Context, refit: &super::separate::Refit, other: &Term) -> Option<f64> {
     let power = ctx.p.power.as_deref()?;
     let delta = 0.1;
-    let mut shifted = ctx.p.clone();
-    shifted.temp_s.iter_mut().for_each(|v| *v += delta);
-    let ctx2 = Context::new(&shifted, ctx.axis);
-    let cols2 = ctx2.columns(other.mech, other.theta.unwrap_or(0.0));
+    let shifted: Vec<f64> = ctx.p.temp_s.iter().map(|v| v + delta).collect();
+    let cols2 = ctx.columns_at(other.mech, other.theta.unwrap_or(0.0), &shifted);
     let n = ctx.p.t.len();
     let mut slope = vec![0.0; n];
     for (c, b) in cols2.iter().zip(&other.coef) {
@@ -925,8 +956,7 @@ fn through_self_heating(
     let grid = ctx.grid(Mech::Warmup);
     let offered = |th: f64| ctx.offered(Mech::Warmup, th);
     let columns = |tau: f64| vec![(0..n).map(|r| slope[r] * -(-power[r] / tau).exp_m1()).collect()];
-    super::separate::separability_of_columns(ctx, fit.q, fit.deviance_scale, a, shared, &grid, &offered, &columns)
-        .map(|s| s.deviance)
+    refit.deviance(&grid, &offered, &columns).map(|s| s.deviance)
 }
 
 /// For each member of `model`, every mechanism that can replace it (θ re-searched on the grid)

@@ -632,28 +632,38 @@ impl<'a> Context<'a> {
 
     /// The columns of mechanism `m` at `theta` (ignored for linear mechanisms).
     pub fn columns(&self, m: Mech, theta: f64) -> Vec<Vec<f64>> {
+        self.columns_at(m, theta, &self.p.temp_s)
+    }
+
+    /// [`Context::columns`] with the temperature the thermal and temperature terms are built
+    /// from given (one value a row; [`Context::columns`] gives the smoothed `temp_C`): a rival
+    /// acting on a die warmer than the thermistor ([`super::separate`]).
+    pub fn columns_at(&self, m: Mech, theta: f64, temp: &[f64]) -> Vec<Vec<f64>> {
         let p = self.p;
         let n = p.t.len();
         let i = self.axis;
         let (j, k) = ((i + 1) % 3, (i + 2) % 3);
-        let dtc = |r: usize| p.temp_s[r] - T0_C;
+        let dtc = |r: usize| temp[r] - T0_C;
+        let s_now = |r: usize| {
+            if std::ptr::eq(temp, p.temp_s.as_slice()) { self.s_now[r] } else { self.s.eval(temp[r], &p.f[r]) }
+        };
         match m {
             Mech::ThermalLag => {
-                let te = by_session(p, |r| lagged(&p.t[r.clone()], &p.temp_s[r], theta));
-                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - self.s_now[r]).collect()]
+                let te = by_session(p, |r| lagged(&p.t[r.clone()], &temp[r], theta));
+                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - s_now(r)).collect()]
             }
             Mech::ThermalHysteresis => {
-                let te = by_session(p, |r| play(&p.temp_s[r], theta));
-                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - self.s_now[r]).collect()]
+                let te = by_session(p, |r| play(&temp[r], theta));
+                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - s_now(r)).collect()]
             }
             Mech::BiasHysteresis => {
-                let te = by_session(p, |r| play(&p.temp_s[r], theta));
-                let d: Vec<f64> = (0..n).map(|r| (te[r] - p.temp_s[r]) / (0.5 * theta)).collect();
+                let te = by_session(p, |r| play(&temp[r], theta));
+                let d: Vec<f64> = (0..n).map(|r| (te[r] - temp[r]) / (0.5 * theta)).collect();
                 vec![d.clone(), (0..n).map(|r| d[r] * dtc(r)).collect()]
             }
             Mech::SelfHeating => {
                 let pw = p.power.as_deref().unwrap_or(&[]);
-                vec![(0..n).map(|r| self.s.deriv(p.temp_s[r], &p.f[r]) * -(-pw[r] / theta).exp_m1()).collect()]
+                vec![(0..n).map(|r| self.s.deriv(temp[r], &p.f[r]) * -(-pw[r] / theta).exp_m1()).collect()]
             }
             Mech::Warmup => {
                 let pw = p.power.as_deref().unwrap_or(&[]);

@@ -168,7 +168,10 @@ pub fn render_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<(PathBuf, Vec<u8>)>
         if let Some(png) = allan_plot(d, dir, ax)? {
             out.push(png);
         }
-        for term in fit.terms.iter() {
+        // A term whose held-out cut is not material gets no plot of its own (the report lists
+        // it as negligible).
+        let negligible = |id: &str| d.report.model.term.iter().any(|t| t.id == id && t.axis == *ax && t.negligible);
+        for term in fit.terms.iter().filter(|t| !negligible(t.mech.id())) {
             let partial: Vec<f64> = (0..y.len()).map(|i| y[i] - fit.prediction[i] + term.contribution[i]).collect();
             let off = mean(&partial) - mean(&term.contribution);
             let xs: Vec<f64> = term.contribution.iter().map(|v| v * 1e3).collect();

@@ -696,7 +696,8 @@ pub fn build(
             ids.dedup();
             ambiguous_member[fit.axis].extend(members.iter().copied());
             if members.iter().all(|m| immaterial(fit.axis, *m)) {
-                add_negligible(fit.axis, ids.join("/"), members[0]);
+                let names: Vec<&str> = members.iter().map(|m| m.id()).collect();
+                add_negligible(fit.axis, names.join(" + "), members[0]);
                 continue;
             }
             let modelled: Vec<&str> = members.iter().map(|m| m.id()).collect();

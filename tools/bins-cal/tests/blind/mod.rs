@@ -1171,6 +1171,36 @@ pub fn summarize_user(res: &[CaseResult]) -> UserSummary {
         s.visible_ambiguous
     );
     let _ = writeln!(w, "cases with a definite false name: {}", frac(s.false_cases));
+    // Held-out figures: no axis made worse; several members: every one the profile shows named
+    // and every axis down to 1.25× its floor.
+    let ok = || res.iter().filter(|r| r.error.is_none());
+    let axes = ok().count() * 3;
+    let worse: Vec<(u64, usize, f64)> = ok()
+        .flat_map(|r| (0..3).map(move |i| (r.case.seed, i, r.heldout_mg[i].1 / r.heldout_mg[i].0)))
+        .filter(|x| x.2 > 1.0)
+        .collect();
+    let worst = worse.iter().map(|x| x.2).fold(1.0, f64::max);
+    let _ = writeln!(
+        w,
+        "axes whose held-out RMS the answer made worse: {}/{axes} (worst {worst:.3}×{})",
+        worse.len(),
+        worse.iter().map(|(seed, i, q)| format!(" seed {seed} {}: {q:.3}×", ["x", "y", "z"][*i])).collect::<String>()
+    );
+    let multi: Vec<&CaseResult> = ok().filter(|r| r.members.len() > 1).collect();
+    if !multi.is_empty() {
+        let full = multi
+            .iter()
+            .filter(|r| {
+                r.members.iter().filter(|m| m.visible()).all(|m| m.named)
+                    && (0..3).all(|i| r.heldout_mg[i].1 <= 1.25 * r.floor_mg[i])
+            })
+            .count();
+        let _ = writeln!(
+            w,
+            "cases of several members with every visible member named and every axis within 1.25× its floor: {}",
+            frac((full, multi.len()))
+        );
+    }
     s.text = w;
     s
 }
