@@ -1,7 +1,8 @@
 //! `cargo xtask bench`: instructions per sample and stack depth in QEMU, flash and static RAM
 //! of the images against their budgets, host samples per second, the diagnosis's speed, the
-//! CPU time and peak memory of `calibrate` and `verify` on a day at 100 Hz, and of `import` on
-//! 100 MB flight-controller logs.
+//! CPU time and peak memory of `calibrate` and `verify` on a day at 100 Hz, of `import` on
+//! 100 MB flight-controller logs, and the Allan deviation's speed against the streaming reader
+//! and allantools.
 
 use std::path::Path;
 use std::process::Stdio;
@@ -287,8 +288,99 @@ impl Xtask {
     }
 }
 
+/// Peak memory budget of `bins-cal allan` on the day at 100 Hz \[MB\].
+const ALLAN_RSS_BUDGET_MB: f64 = 200.0;
+
+/// allantools as the bench installs it (the version the figures and the tests' reference
+/// values were taken with).
+const ALLANTOOLS: &str = "allantools==2024.6";
+
+impl Xtask {
+    /// Bench step 9: the `allan_speed` example (10⁷ samples against the `allan` crate and
+    /// against allantools' octave `oadev`, which it needs ≥ 10× faster than; the day's curves
+    /// against the streaming reader alone, ≤ 1.5×) and the peak memory of `bins-cal allan` on
+    /// the day (< 200 MB). allantools is installed from pip into a virtual environment under
+    /// `target/`; where that fails the comparison is skipped and the step says so.
+    fn bench_allan(&mut self) -> Result {
+        self.run(self.host_cargo([
+            "build",
+            "--release",
+            "-q",
+            "-p",
+            "bins-cal",
+            "--bins",
+            "--example",
+            "allan_speed",
+        ]))?;
+        let bin = self.root.join("target/release/bins-cal");
+        let example = self.root.join("target/release/examples/allan_speed");
+        let python = self.allantools_python();
+        let dir = std::env::temp_dir().join(format!("bins-cal-bench-allan-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let r = (|| {
+            let day = dir.join("day.csv");
+            let mut c = self.command(&bin);
+            c.arg("simulate").arg(self.root.join("scenarios/day-100hz.toml")).arg("-o").arg(&day).arg("--quiet");
+            measured(c)?;
+            let mut c = self.command(&example);
+            c.arg("--day").arg(&day);
+            if let Some(py) = &python {
+                c.arg("--python").arg(py);
+            }
+            self.run(c)?;
+            let mut c = self.command(&bin);
+            c.arg("allan").arg(&day).arg("--json").arg(dir.join("allan.json")).stdout(Stdio::null());
+            let u = measured(c)?;
+            let met = u.peak_rss_mb < ALLAN_RSS_BUDGET_MB;
+            println!(
+                "bins-cal allan on the day (ux_V, uy_V, uz_V, temp_C; reading included): {:.1} s CPU, {:.1} MB peak, {:.1} s wall (budget < {ALLAN_RSS_BUDGET_MB} MB: {})",
+                u.cpu_s,
+                u.peak_rss_mb,
+                u.wall_s,
+                if met { "met" } else { "MISSED" }
+            );
+            if met { Ok(()) } else { Err("bins-cal allan over its memory budget".to_string()) }
+        })();
+        let _ = std::fs::remove_dir_all(&dir);
+        r
+    }
+
+    /// A Python with allantools: a virtual environment in `target/bench-allantools` with
+    /// [`ALLANTOOLS`] from pip, or `None` (said) where Python, venv or pip cannot provide it.
+    fn allantools_python(&self) -> Option<std::path::PathBuf> {
+        let venv = self.root.join("target/bench-allantools");
+        let py = venv.join("bin/python");
+        let has = |py: &Path| {
+            std::process::Command::new(py)
+                .args(["-c", "import allantools"])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .status()
+                .is_ok_and(|s| s.success())
+        };
+        if has(&py) {
+            return Some(py);
+        }
+        let mut c = self.command("python3");
+        c.arg("-m").arg("venv").arg(&venv);
+        let mut pip = self.command(venv.join("bin/pip"));
+        pip.args(["install", "-q", ALLANTOOLS]);
+        match self.run(c).and_then(|_| self.run(pip)) {
+            Ok(()) if has(&py) => Some(py),
+            Ok(()) => {
+                println!("allantools: skipped (installed, but {} cannot import it)", py.display());
+                None
+            }
+            Err(e) => {
+                println!("allantools: skipped (pip could not install {ALLANTOOLS}: {e})");
+                None
+            }
+        }
+    }
+}
+
 /// The bench's steps in order.
-const BENCH_STEPS: [BenchStep; 8] = [
+const BENCH_STEPS: [BenchStep; 9] = [
     (1, "toolchain", Xtask::setup_toolchain),
     (2, "build", |x| {
         x.build_firmware()?;
@@ -332,6 +424,11 @@ const BENCH_STEPS: [BenchStep; 8] = [
         8,
         "bins-cal import of a 100 MB ArduPilot DataFlash log and a 100 MB PX4 ULog: < 10 s CPU, < 50 MB peak each (release)",
         Xtask::bench_logs,
+    ),
+    (
+        9,
+        "bins-cal allan: 10^7 samples ≥ 10× faster than allantools' octave oadev; a day at 100 Hz ≤ 1.5× the streaming reader alone, < 200 MB peak (release, one thread)",
+        Xtask::bench_allan,
     ),
 ];
 

@@ -5,6 +5,7 @@
 //!
 //! | module | owns |
 //! |---|---|
+//! | [`allan`] | the noise at every time scale: streaming overlapping Allan deviation, intervals, IEEE terms, the twin's noise |
 //! | [`autopilot`] | a calibration's bias against temperature as PX4 / ArduPilot parameters, evaluated as their firmware does |
 //! | [`calib`] | calibration algorithms: dwells, per-temperature constants and temperature model, shake-table fits |
 //! | [`calfile`] | the calibration file (TOML): types, checks naming the key, conversion to and from the core's parameters and the blob |
@@ -19,6 +20,7 @@
 //! | [`sim`] | the simulator: the unit's truth model on its rigs, scenario files |
 #![deny(missing_docs)]
 
+pub mod allan;
 pub mod autopilot;
 pub mod calfile;
 pub mod calib;

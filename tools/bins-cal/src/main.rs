@@ -3,6 +3,7 @@
 //!
 //! | subcommand | module | does |
 //! |---|---|---|
+//! | `allan` | [`cmd::allan`] | any recording → overlapping Allan deviation with intervals, IEEE noise terms, plot; the twin's `[noise]` table, Kalibr `imu.yaml` |
 //! | `blob encode\|decode\|check` | [`cmd::blob`] | calibration file (TOML) ⇄ calibration blob, checks |
 //! | `calibrate` | [`cmd::calibrate`], [`cmd::shaker`] | tilter (and shake-table) recordings, or holds placed by hand (`--free`, `--tilt`) → calibration file, blob |
 //! | `verify` | [`cmd::verify`] | check recordings + calibration → \|g\| errors, table, plots |
@@ -33,6 +34,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// The noise at every time scale: overlapping Allan deviation, intervals, IEEE terms.
+    Allan(Box<cmd::allan::Args>),
     /// The calibration blob flashed into the CALIB region.
     Blob(cmd::blob::Args),
     /// Calibrate from tilter recordings: constants per temperature, temperature model; with
@@ -65,6 +68,7 @@ fn main() -> ExitCode {
     bins_cal::fsio::remove_temporaries_on_signals();
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Allan(args) => cmd::allan::run(*args),
         Command::Blob(args) => cmd::blob::run(args),
         Command::Calibrate(args) => cmd::calibrate::run(*args),
         Command::Verify(args) => cmd::verify::run(args),

@@ -80,7 +80,38 @@ fn command_writes_report_model_and_plots() {
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{}", p.display());
         n += 1;
     }
-    assert_eq!(n, 3 + 3 + 1, "residual x/y/z, lag x/y/z, asymmetry y");
+    assert_eq!(n, 3 + 3 + 3 + 1, "residual x/y/z, Allan x/y/z, lag x/y/z, asymmetry y");
+    // The Allan curve before and after the named terms, with the noise model's line: white
+    // noise at the floor plus the random walk tested against, the exact Allan variance of a
+    // sampled random walk written here, σ² = σ_w²/m + q·τ₀(2m² + 1)/(6m).
+    let allan = v["allan"].as_array().unwrap();
+    assert!(allan.len() >= 4, "{}", allan.len());
+    let tau0 = allan[0]["tau_s"].as_f64().unwrap();
+    for ax in ["x", "y", "z"] {
+        let floor = v["noise_floor_mg"][ax].as_f64().unwrap();
+        let q = (v["random_walk_mg_per_sqrt_h"][ax].as_f64().unwrap()).powi(2) / 3600.0; // mg²/s
+        for pt in allan {
+            let tau = pt["tau_s"].as_f64().unwrap();
+            let m = (tau / tau0).round();
+            let want = (floor * floor / m + q * tau0 * (2.0 * m * m + 1.0) / (6.0 * m)).sqrt();
+            let got = pt["model_mg"][ax].as_f64().unwrap();
+            assert!((got - want).abs() <= 1e-9 * want, "{ax} τ = {tau}: model {got} against {want}");
+            assert!(pt["after_mg"][ax].as_f64().unwrap() > 0.0);
+        }
+        // At one row the named terms change little; where the mismatch lives (the longest
+        // τ) they take it out: after is below before.
+        let (first, last) = (&allan[0], &allan[allan.len() - 1]);
+        let ratio = |pt: &serde_json::Value| pt["after_mg"][ax].as_f64().unwrap() / pt["adev_mg"][ax].as_f64().unwrap();
+        eprintln!(
+            "{ax}: after/before at τ = {} s: {:.3}, at τ = {} s: {:.3}",
+            first["tau_s"],
+            ratio(first),
+            last["tau_s"],
+            ratio(last)
+        );
+        assert!((ratio(first) - 1.0).abs() < 0.05, "{ax}: {}", ratio(first));
+        assert!(ratio(last) < 0.7, "{ax}: {}", ratio(last));
+    }
     let m: toml::Value = toml::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
     let terms = m["term"].as_array().unwrap();
     assert!(terms.iter().any(|t| t["id"].as_str() == Some("sf_asymmetry") && t["axis"].as_str() == Some("y")));

@@ -633,3 +633,55 @@ dwell_s = 1.0
     }
     assert_eq!((last.chamber_c, last.temp_c, last.pos.as_deref()), (Some(-40.0), -40.0, Some("TP2")));
 }
+
+/// FNV-1a (64 bit) of a file's bytes.
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3))
+}
+
+#[test]
+fn scenarios_written_before_the_per_axis_and_second_noise_terms_simulate_as_before() {
+    // The files the simulator wrote for these scenarios (seed 7) before `bias_tau_s` took a
+    // value per axis and the second Gauss–Markov term came: their length and FNV-1a hash.
+    let dir = tempfile::tempdir().unwrap();
+    for (name, len, hash) in [
+        ("test-tilter-3t.toml", 478_458, 0xae26_ae55_df16_d7cd_u64),
+        ("hand-40.toml", 1_313_792, 0xaaf3_6262_ffa2_1d48),
+        ("diagnose-ramps.toml", 1_040_486, 0xef78_9995_65c1_6902),
+    ] {
+        let out = dir.path().join("out.csv");
+        let o = Command::new(bin())
+            .args(["simulate", "--quiet", "--seed", "7", "-o"])
+            .arg(&out)
+            .arg(scenario_path(name))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let bytes = std::fs::read(&out).unwrap();
+        assert_eq!((bytes.len(), fnv1a(&bytes)), (len, hash), "{name}");
+    }
+    // One correlation time for all axes and the same three times; no second term and a second
+    // term of 0: the same rows.
+    let base = "[recording]\nrate_Hz = 50.0\n[unit]\npreset = \"paper\"\n[noise]\nwhite_V = 1.0e-5\nrandom_walk_V_per_sqrt_s = 1.0e-7\nbias_instability_V = [3.0e-6, 2.0e-6, 1.0e-6]\nadc_lsb_V = 1.0e-7\n";
+    let step = "[[step]]\nkind = \"hold\"\nposition = \"TP1\"\ndwell_s = 40.0\n";
+    let rows_of = |extra: &str| {
+        let sim = load(dir.path(), "v.toml", &format!("{base}{extra}{step}"));
+        let mut g = sim.rows(9);
+        let (mut row, mut v) = (Row::default(), Vec::new());
+        while g.next_row(&mut row) {
+            v.push(row.clone());
+        }
+        v
+    };
+    let one = rows_of("bias_tau_s = 30.0\n");
+    assert_eq!(one.len(), 2000);
+    assert_eq!(one, rows_of("bias_tau_s = [30.0, 30.0, 30.0]\n"));
+    assert_eq!(one, rows_of("bias_tau_s = 30.0\nbias_instability2_V = 0.0\nbias_tau2_s = 5.0\n"));
+    assert_ne!(one, rows_of("bias_tau_s = [30.0, 30.0, 10.0]\n"));
+    assert_ne!(one, rows_of("bias_tau_s = 30.0\nbias_instability2_V = [0.0, 0.0, 1.0e-6]\nbias_tau2_s = 5.0\n"));
+    // A second term needs its time where it is given.
+    let e = bad(&format!(
+        "{base}bias_tau_s = 30.0\nbias_instability2_V = [0.0, 1.0e-6, 0.0]\nbias_tau2_s = [1.0, 0.0, 1.0]\n{step}"
+    ));
+    assert!(e.contains("bias_tau2_s[1]"), "{e}");
+}

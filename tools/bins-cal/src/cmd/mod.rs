@@ -1,5 +1,6 @@
 //! The subcommands, one module each.
 
+pub mod allan;
 pub mod blob;
 pub mod calibrate;
 pub mod diagnose;

@@ -4,6 +4,8 @@
 //! - `residual_<axis>.png`: the raw residual (one offset removed) over time, before and after
 //!   the model, and the drift the noise model sees in what the model leaves, as its own curve
 //!   (block means, at most 2000 points);
+//! - `allan_<axis>.png`: the Allan deviation of the residual in the static segments before and
+//!   after the named terms, with the noise model's line (white floor and random walk), log–log;
 //! - `effect_<id>_<axis>.png`: the partial residual (residual − the rest of the model, offset
 //!   removed) against the term's fitted contribution, with the line y = x and binned means.
 //!
@@ -163,6 +165,9 @@ pub fn render_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<(PathBuf, Vec<u8>)>
                 .draw()
                 .map_err(drawing_error)
         })?);
+        if let Some(png) = allan_plot(d, dir, ax)? {
+            out.push(png);
+        }
         // A term whose held-out cut is not material gets no plot of its own (the report lists
         // it as negligible).
         let negligible = |id: &str| d.report.model.term.iter().any(|t| t.id == id && t.axis == *ax && t.negligible);
@@ -227,6 +232,72 @@ pub fn render_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<(PathBuf, Vec<u8>)>
         }
     }
     Ok(out)
+}
+
+/// `allan_<ax>.png` of [`render_plots`] (`None` when the static segments give no curve).
+fn allan_plot(d: &Diagnosis, dir: &Path, ax: &str) -> Result<Option<(PathBuf, Vec<u8>)>, DiagnoseError> {
+    let series = |get: fn(&super::report::AllanPoint) -> &super::report::PerAxis<f64>| -> Vec<(f64, f64)> {
+        d.report
+            .allan
+            .iter()
+            .filter_map(|pt| get(pt).get(ax).map(|&v| (pt.tau_s, v)))
+            .filter(|&(t, v)| t > 0.0 && v > 0.0 && v.is_finite())
+            .collect()
+    };
+    let before = series(|pt| &pt.adev_mg);
+    let after = series(|pt| &pt.after_mg);
+    let model = series(|pt| &pt.model_mg);
+    if before.is_empty() && after.is_empty() {
+        return Ok(None);
+    }
+    let all = || before.iter().chain(&after).chain(&model);
+    let (t0, t1) = all().fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let (y0, y1) = all().fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    let title = format!("accelerometer {ax}: Allan deviation of REAL − SIM in the static segments");
+    draw(dir, &format!("allan_{ax}.png"), |root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(title, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(80)
+            .build_cartesian_2d((t0 / 1.5..t1 * 1.5).log_scale(), (y0 / 1.5..y1 * 1.5).log_scale())
+            .map_err(drawing_error)?;
+        chart
+            .configure_mesh()
+            .x_desc("averaging time τ [s]")
+            .y_desc("Allan deviation [mg]")
+            .x_max_light_lines(1)
+            .y_max_light_lines(1)
+            .x_label_formatter(&|v| format!("{v}"))
+            .y_label_formatter(&|v| format!("{v:.3}"))
+            .label_style(("sans-serif", 14))
+            .draw()
+            .map_err(drawing_error)?;
+        let cb = RGBColor(214, 39, 40);
+        let ca = RGBColor(31, 119, 180);
+        for (pts, c, label) in [(&before, cb, "before (REAL − SIM)"), (&after, ca, "after the named terms")] {
+            chart
+                .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))
+                .map_err(drawing_error)?
+                .label(label)
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], c.stroke_width(2)));
+            chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled()))).map_err(drawing_error)?;
+        }
+        chart
+            .draw_series(DashedLineSeries::new(model.iter().copied(), 6, 4, BLACK.stroke_width(2)))
+            .map_err(drawing_error)?
+            .label("noise model (white floor + random walk)")
+            .legend(|(x, y)| PathElement::new([(x, y), (x + 14, y)], BLACK.stroke_width(2)));
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 14))
+            .draw()
+            .map_err(drawing_error)
+    })
+    .map(Some)
 }
 
 /// θ with its symbol and unit, as a plot title gives it (`τ = 167 s`, `h = 0.98 °C`).

@@ -100,13 +100,20 @@ pub fn material(cut: (f64, f64), floor_g: f64) -> bool {
     cut.0 >= MATERIAL_FLOOR_SHARE * floor_g && cut.0 >= MATERIAL_SE * cut.1
 }
 
-/// One point of the Allan deviation.
+/// One point of the Allan deviation of the residual in the static segments
+/// ([`crate::allan`]'s overlapping estimator).
 #[derive(Clone, Debug, Serialize)]
 pub struct AllanPoint {
     /// Averaging time \[s\].
     pub tau_s: f64,
-    /// Allan deviation per accelerometer \[mg\] (absent where no segment is long enough).
+    /// Allan deviation per accelerometer before the named terms (REAL − SIM) \[mg\] (absent
+    /// where no segment is long enough).
     pub adev_mg: PerAxis<f64>,
+    /// After the named terms (and located bias steps) \[mg\].
+    pub after_mg: PerAxis<f64>,
+    /// The noise model's line: white noise at the floor and the random walk the mechanisms
+    /// were tested against ([`allan_curves`]) \[mg\].
+    pub model_mg: PerAxis<f64>,
 }
 
 /// One averaging time of [`Report::scales`].
@@ -344,18 +351,25 @@ pub struct Report {
     pub model: AugmentedModel,
 }
 
-/// Noise floor per accelerometer \[g\] and the Allan curve, from the static segments without
-/// vibration (all segments when there are none).
-pub fn noise_floor(p: &Prepared) -> ([f64; 3], Vec<AllanPoint>) {
-    let n = p.t.len();
-    let use_runs = p.static_runs();
-    let longest = use_runs.iter().map(|(a, b)| b - a).max().unwrap_or(0);
+/// Cluster sizes of the diagnosis's Allan curve: octaves while two clusters fit the longest of
+/// `runs`.
+fn curve_sizes(runs: &[(usize, usize)]) -> Vec<usize> {
+    let longest = runs.iter().map(|(a, b)| b - a).max().unwrap_or(0);
     let mut ms = Vec::new();
     let mut m = 1;
     while 2 * m < longest {
         ms.push(m);
         m *= 2;
     }
+    ms
+}
+
+/// Noise floor per accelerometer \[g\] and the Allan curve before the model, from the static
+/// segments without vibration (all segments when there are none).
+pub fn noise_floor(p: &Prepared) -> ([f64; 3], Vec<AllanPoint>) {
+    let n = p.t.len();
+    let use_runs = p.static_runs();
+    let ms = curve_sizes(&use_runs);
     let mut floor = [0.0; 3];
     let mut curve: BTreeMap<usize, PerAxis<f64>> = BTreeMap::new();
     for axis in 0..3 {
@@ -370,8 +384,42 @@ pub fn noise_floor(p: &Prepared) -> ([f64; 3], Vec<AllanPoint>) {
             None => ad.first().map_or_else(|| p.r_white[axis].iter().sum::<f64>().sqrt() / (n as f64).sqrt(), |x| x.1),
         };
     }
-    let allan = curve.into_iter().map(|(m, a)| AllanPoint { tau_s: m as f64 * p.dt, adev_mg: a }).collect();
+    let allan = curve
+        .into_iter()
+        .map(|(m, a)| AllanPoint {
+            tau_s: m as f64 * p.dt,
+            adev_mg: a,
+            after_mg: PerAxis::new(),
+            model_mg: PerAxis::new(),
+        })
+        .collect();
     (floor, allan)
+}
+
+/// The Allan curve `before` ([`noise_floor`]'s) completed with the deviation after the named
+/// terms (the residual less each axis's prediction, in the same static segments) and the noise
+/// model's line, `σ²(m) = σ_w²/m + q·τ₀(2m² + 1)/(6m)`: the white floor `σ_w` of a row and the
+/// random walk `q` \[g²/s\] the mechanisms were tested against
+/// ([`crate::allan::twin::rw_avar`], the exact Allan variance of a sampled random walk).
+pub fn allan_curves(p: &Prepared, floor: &[f64; 3], before: Vec<AllanPoint>, axes: &[AxisFit]) -> Vec<AllanPoint> {
+    let runs = p.static_runs();
+    let ms = curve_sizes(&runs);
+    let mut out = before;
+    for fit in axes {
+        let ax = AXES[fit.axis];
+        let e: Vec<f64> = p.r[fit.axis].iter().zip(&fit.prediction).map(|(a, b)| a - b).collect();
+        let segs: Vec<&[f64]> = runs.iter().map(|&(a, b)| &e[a..b]).collect();
+        for (m, a, _) in allan_dev(&segs, &ms) {
+            let tau_s = m as f64 * p.dt;
+            let model =
+                (floor[fit.axis].powi(2) / m as f64 + fit.q * crate::allan::twin::rw_avar(m as f64, p.dt)).sqrt();
+            if let Some(pt) = out.iter_mut().find(|pt| (pt.tau_s - tau_s).abs() <= 1e-9 * tau_s) {
+                pt.after_mg.insert(ax.into(), a * 1e3);
+                pt.model_mg.insert(ax.into(), model * 1e3);
+            }
+        }
+    }
+    out
 }
 
 fn per_axis<T>(f: impl Fn(usize) -> T) -> PerAxis<T> {
@@ -827,7 +875,7 @@ pub fn build(
         scale_v_per_g: per_axis(|i| p.k_diag[i]),
         notes,
         noise_floor_mg: per_axis(|i| floor.0[i] * 1e3),
-        allan: floor.1,
+        allan: allan_curves(p, &floor.0, floor.1, axes),
         random_walk_mg_per_sqrt_h: per_axis(|i| (axes[i].q * 3600.0).sqrt() * 1e3),
         random_walk_source: if input.opt.random_walk_mg_per_sqrt_h.is_some() { "given" } else { "estimated" }.into(),
         sensor_random_walk_mg_per_sqrt_h: sensor_rw,

@@ -1,7 +1,7 @@
 //! Small numerical helpers of the diagnosis: a Cholesky solver and log-determinant for the
 //! few-column least-squares problems (normal equations of columns scaled to unit norm), Gram
 //! matrices in row blocks, the χ² tail probability, the overlapping Allan deviation and
-//! Hadamard variance.
+//! Hadamard variance (of [`crate::allan`]).
 
 /// The Cholesky factor `L` (row-major, lower) of a symmetric positive-definite `A` (`p×p`);
 /// `None` when a pivot is not above `rel_tol` times its diagonal element or that element is
@@ -179,55 +179,23 @@ pub fn chi2_isf(p: f64, k: f64) -> f64 {
     0.5 * (lo + hi)
 }
 
-/// Sum and number of the squared first (`order` 1) or second (`order` 2) differences of the
-/// overlapping cluster means of `m` samples, pooled over `segments` (prefix sums: the cluster
-/// means are `ȳ_k = (S[k+m] − S[k])/m`).
-fn cluster_difference_sums(segments: &[&[f64]], m: usize, order: usize) -> (f64, usize) {
-    let (mut sum, mut n) = (0.0, 0usize);
-    let span = (order + 1) * m;
-    for seg in segments {
-        if seg.len() < span + 1 {
-            continue;
-        }
-        let mut s = Vec::with_capacity(seg.len() + 1);
-        s.push(0.0);
-        for v in seg.iter() {
-            s.push(s.last().copied().unwrap_or(0.0) + v);
-        }
-        let mf = m as f64;
-        for k in 0..=seg.len() - span {
-            let mean = |j: usize| (s[k + (j + 1) * m] - s[k + j * m]) / mf;
-            let d = if order == 1 { mean(1) - mean(0) } else { mean(2) - 2.0 * mean(1) + mean(0) };
-            sum += d * d;
-            n += 1;
-        }
-    }
-    (sum, n)
-}
-
 /// Overlapping Allan deviation at cluster sizes `ms` (samples), pooled over `segments` (each a
 /// run of equally spaced samples). Returns `(m, adev, n_terms)` for every `m` with at least
-/// one term.
+/// two terms in a segment ([`crate::allan::pooled`]).
 pub fn allan_dev(segments: &[&[f64]], ms: &[usize]) -> Vec<(usize, f64, usize)> {
-    ms.iter()
-        .filter_map(|&m| {
-            let (sum, n) = cluster_difference_sums(segments, m, 1);
-            (n > 0).then(|| (m, (0.5 * sum / n as f64).sqrt(), n))
-        })
+    crate::allan::pooled(crate::allan::Kind::Allan, segments, ms)
+        .into_iter()
+        .map(|(m, v, n)| (m, v.sqrt(), n))
         .collect()
 }
 
 /// Overlapping Hadamard variance at cluster sizes `ms`, pooled over `segments`:
 /// `⅙⟨(ȳ_{k+2} − 2ȳ_{k+1} + ȳ_k)²⟩` of the cluster means. Blind to a constant slope (a
 /// temperature ramp's share of the residual), `σ²/m` for white noise of variance `σ²` and
-/// `q·τ/6` for a random walk of intensity `q`. Returns `(m, hvar, n_terms)`.
+/// `q·τ/6` for a random walk of intensity `q`. Returns `(m, hvar, n_terms)`
+/// ([`crate::allan::pooled`]).
 pub fn hadamard_var(segments: &[&[f64]], ms: &[usize]) -> Vec<(usize, f64, usize)> {
-    ms.iter()
-        .filter_map(|&m| {
-            let (sum, n) = cluster_difference_sums(segments, m, 2);
-            (n > 0).then(|| (m, sum / (6.0 * n as f64), n))
-        })
-        .collect()
+    crate::allan::pooled(crate::allan::Kind::Hadamard, segments, ms)
 }
 
 /// Rows per block of [`gram_blocked`]: the block of every column stays in cache while all

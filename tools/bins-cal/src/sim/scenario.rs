@@ -295,9 +295,15 @@ pub struct NoiseSpec {
     /// Bias instability [V RMS].
     #[serde(default, rename = "bias_instability_V")]
     pub bias_instability: PerAxis,
-    /// Bias instability correlation time \[s\].
+    /// Bias instability correlation time \[s\] (one value or one per axis).
     #[serde(default)]
-    pub bias_tau_s: f64,
+    pub bias_tau_s: PerAxis,
+    /// A second Gauss–Markov bias [V RMS] (one value or one per axis).
+    #[serde(default, rename = "bias_instability2_V")]
+    pub bias_instability2: PerAxis,
+    /// Its correlation time \[s\].
+    #[serde(default)]
+    pub bias_tau2_s: PerAxis,
     /// ADC step \[V\].
     #[serde(default, rename = "adc_lsb_V")]
     pub adc_lsb_v: f64,
@@ -1154,16 +1160,31 @@ impl NoiseSpec {
             }
             Ok(a)
         };
-        let bias_instability_v = per("bias_instability_V", self.bias_instability)?;
-        let bias_tau_s = within("noise.bias_tau_s", self.bias_tau_s, 0.0, MAX_TAU_S, "s")?;
-        if bias_instability_v.iter().any(|&b| b > 0.0) && bias_tau_s == 0.0 {
-            return Err(kerr("noise.bias_tau_s", "must be > 0 when bias_instability_V is given"));
-        }
+        // A Gauss–Markov term: its RMS per axis and its correlation time, > 0 where the RMS is.
+        let gauss_markov =
+            |sigma_key: &str, sigma: PerAxis, tau_key: &str, tau: PerAxis| -> Check<([f64; 3], [f64; 3])> {
+                let sigma = per(sigma_key, sigma)?;
+                let (one, taus) = (matches!(tau, PerAxis::One(_)), tau.get());
+                for i in 0..3 {
+                    let key = if one { format!("noise.{tau_key}") } else { format!("noise.{tau_key}[{i}]") };
+                    within(&key, taus[i], 0.0, MAX_TAU_S, "s")?;
+                    if sigma[i] > 0.0 && taus[i] == 0.0 {
+                        return Err(kerr(&key, format!("must be > 0 when {sigma_key} is given")));
+                    }
+                }
+                Ok((sigma, taus))
+            };
+        let (bias_instability_v, bias_tau_s) =
+            gauss_markov("bias_instability_V", self.bias_instability, "bias_tau_s", self.bias_tau_s)?;
+        let (bias_instability2_v, bias_tau2_s) =
+            gauss_markov("bias_instability2_V", self.bias_instability2, "bias_tau2_s", self.bias_tau2_s)?;
         Ok(NoiseParams {
             white_v: per("white_V", self.white_v)?,
             random_walk_v_per_sqrt_s: per("random_walk_V_per_sqrt_s", self.random_walk)?,
             bias_instability_v,
             bias_tau_s,
+            bias_instability2_v,
+            bias_tau2_s,
             adc_lsb_v: match within("noise.adc_lsb_V", self.adc_lsb_v, 0.0, MAX_NOISE_V, "V")? {
                 v if v > 0.0 && v < MIN_ADC_LSB_V => {
                     return Err(kerr(

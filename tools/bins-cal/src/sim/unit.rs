@@ -10,7 +10,8 @@
 //! - `K_ii(T)·b_i·d`: the additive bias play ([`BiasPlay`]), a heating/cooling difference of
 //!   the bias independent of the temperature sensitivity;
 //! - `w_i`: the warm-up transient after power-on, `A_i·e^(−t_p/τ)`;
-//! - `b_i`: bias random walk plus bias instability (first-order Gauss–Markov);
+//! - `b_i`: bias random walk plus bias instability (one or two first-order Gauss–Markov
+//!   terms, each with its own correlation time per axis);
 //! - `n_i`: white noise per sample, then ADC quantisation.
 
 use bins_comp::CalibrationParams;
@@ -27,8 +28,14 @@ pub struct NoiseParams {
     pub random_walk_v_per_sqrt_s: [f64; 3],
     /// Bias instability: stationary RMS of a first-order Gauss–Markov bias \[V\], per axis.
     pub bias_instability_v: [f64; 3],
-    /// Its correlation time \[s\].
-    pub bias_tau_s: f64,
+    /// Its correlation time \[s\], per axis.
+    pub bias_tau_s: [f64; 3],
+    /// A second Gauss–Markov bias: stationary RMS \[V\], per axis (0 = none). With the first,
+    /// white noise and the random walk it follows a real unit's Allan curve, which one
+    /// Gauss–Markov term seldom does (`docs/noise.md`).
+    pub bias_instability2_v: [f64; 3],
+    /// Its correlation time \[s\], per axis.
+    pub bias_tau2_s: [f64; 3],
     /// ADC step \[V\]; 0 = no quantisation.
     pub adc_lsb_v: f64,
     /// Thermistor white noise per sample, RMS [°C].
@@ -126,35 +133,51 @@ pub struct NoiseState {
     rw: [f64; 3],
     gm: [f64; 3],
     rw_step: [f64; 3],
-    gm_decay: f64,
+    gm_decay: [f64; 3],
     gm_drive: [f64; 3],
+    gm2: [f64; 3],
+    gm2_decay: [f64; 3],
+    gm2_drive: [f64; 3],
     adc: Quantiser,
     temp_q: Quantiser,
 }
 
 impl NoiseState {
-    /// Zero biases; the Gauss–Markov bias starts from its stationary distribution at the
+    /// Zero biases; the Gauss–Markov biases start from their stationary distributions at the
     /// first draw.
     pub fn new(p: NoiseParams, dt: f64) -> Self {
-        let gm_decay = if p.bias_tau_s > 0.0 { (-dt / p.bias_tau_s).exp() } else { 0.0 };
+        let decay = |tau: [f64; 3]| tau.map(|t| if t > 0.0 { (-dt / t).exp() } else { 0.0 });
+        let drive =
+            |sigma: [f64; 3], decay: [f64; 3]| std::array::from_fn(|i| sigma[i] * (1.0 - decay[i] * decay[i]).sqrt());
+        let (gm_decay, gm2_decay) = (decay(p.bias_tau_s), decay(p.bias_tau2_s));
         NoiseState {
             p,
             rw: [0.0; 3],
             gm: [0.0; 3],
             rw_step: p.random_walk_v_per_sqrt_s.map(|q| q * dt.sqrt()),
             gm_decay,
-            gm_drive: p.bias_instability_v.map(|s| s * (1.0 - gm_decay * gm_decay).sqrt()),
+            gm_drive: drive(p.bias_instability_v, gm_decay),
+            gm2: [0.0; 3],
+            gm2_decay,
+            gm2_drive: drive(p.bias_instability2_v, gm2_decay),
             adc: Quantiser::new(p.adc_lsb_v),
             temp_q: Quantiser::new(p.temp_resolution_c),
         }
     }
 
-    /// Initialises the Gauss–Markov bias from its stationary distribution.
+    /// Initialises the Gauss–Markov biases from their stationary distributions (the second
+    /// term's draws after the first's, so a scenario without it draws as before).
     pub fn start<R: Rng>(&mut self, rng: &mut R) {
         for i in 0..3 {
             if self.p.bias_instability_v[i] > 0.0 {
                 let z: f64 = rng.sample(StandardNormal);
                 self.gm[i] = self.p.bias_instability_v[i] * z;
+            }
+        }
+        for i in 0..3 {
+            if self.p.bias_instability2_v[i] > 0.0 {
+                let z: f64 = rng.sample(StandardNormal);
+                self.gm2[i] = self.p.bias_instability2_v[i] * z;
             }
         }
     }
@@ -169,9 +192,14 @@ impl NoiseState {
             }
             if self.gm_drive[i] > 0.0 {
                 let z: f64 = rng.sample(StandardNormal);
-                self.gm[i] = self.gm_decay * self.gm[i] + self.gm_drive[i] * z;
+                self.gm[i] = self.gm_decay[i] * self.gm[i] + self.gm_drive[i] * z;
             }
             let mut v = u[i] + self.rw[i] + self.gm[i];
+            if self.gm2_drive[i] > 0.0 {
+                let z: f64 = rng.sample(StandardNormal);
+                self.gm2[i] = self.gm2_decay[i] * self.gm2[i] + self.gm2_drive[i] * z;
+                v += self.gm2[i];
+            }
             if self.p.white_v[i] > 0.0 {
                 let z: f64 = rng.sample(StandardNormal);
                 v += self.p.white_v[i] * z;
