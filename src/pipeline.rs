@@ -327,12 +327,28 @@ impl<F: Float> Pipeline<F> {
             }
         };
         let mut s = self.cal.apply(u_v, state.temps.get(&self.cal, temp_c));
-        let usable = self.cal.is_valid() && !s.status.contains(Status::NONFINITE_INPUT);
-        if let (true, Some((bias_g, d))) = (usable, play) {
+        if let (true, Some((bias_g, d))) = (usable(&self.cal, &s), play) {
             for (a, b) in s.accel_g.iter_mut().zip(bias_g) {
                 *a -= *b * d;
             }
         }
+        let ve = self.subtract_ve(state, &mut s, source);
+        (s, ve)
+    }
+
+    /// The VE stage of [`step`](Self::step): the VE for `source` subtracted from the
+    /// compensated sample `s` (the window fed with it, for the online source), the VE's flags
+    /// set; returns the VE \[g\] subtracted from each axis. Nothing is subtracted from a sample
+    /// of an invalid calibration or with a non-finite input, and it does not enter the window.
+    /// Public so that the benchmark can time it alone.
+    #[inline]
+    pub fn subtract_ve<const W: usize>(
+        &self,
+        state: &mut PipelineState<F, W>,
+        s: &mut Sample<F>,
+        source: VibrationSource,
+    ) -> Vec3<F> {
+        let usable = usable(&self.cal, s);
         if source != VibrationSource::Online {
             // The window serves the online source only: a block must not span a time when
             // it was not selected.
@@ -387,6 +403,12 @@ impl<F: Float> Pipeline<F> {
         for (a, e) in s.accel_g.iter_mut().zip(ve) {
             *a -= e;
         }
-        (s, ve)
+        ve
     }
+}
+
+/// A sample the bias play and the VE apply to: a valid calibration and finite inputs.
+#[inline(always)]
+fn usable<F: Float>(cal: &Calibration<F>, s: &Sample<F>) -> bool {
+    cal.is_valid() && !s.status.contains(Status::NONFINITE_INPUT)
 }
