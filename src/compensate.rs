@@ -278,12 +278,17 @@ fn apply_delta<F: Float>(c: &Constants<F>, d: &CoefDelta<F>) -> Constants<F> {
 
 /// A validated calibration: everything the per-sample step needs, immutable after boot.
 ///
+/// Every method is an affine map of the signals at a given temperature, `a = A(T)·U − c(T)`
+/// (method 1: `A = K(T)⁻¹`, `c = A·U0(T)`; method 2: T(5)…T(8) are linear in `U − U0`; see
+/// [`at_temperature`](Self::at_temperature)). A and c are computed once per temperature
+/// reading, so the per-sample work is one 3×3 product and an offset.
+///
 /// Precision: N = K⁻¹ is computed in `f64` at load time and its diagonal kept as a
-/// double-word (hi + lo) pair, and `N·(U − U0)` is evaluated with error-free transformations
-/// on the diagonal (TwoSum, Veltkamp/Dekker TwoProduct). All temperature-dependent parts are
-/// small corrections to that product. In `f32` the result is then within about one rounding
-/// of the output (≈0.5 µg at 10 g) of the `f64` reference, instead of the several µg a plain
-/// `f32` inverse and product would lose.
+/// double-word (hi + lo) pair; A is N plus a small temperature-dependent part, which joins the
+/// low part of the diagonal. Per sample the dominant product `hi·U_i` is evaluated exactly
+/// (TwoProduct by one fused multiply-add) and every other term is small beside it. In `f32`
+/// the result is then within about one rounding of the output (≈0.5 µg at 10 g) of the `f64`
+/// reference, instead of the several µg a plain `f32` inverse and product would lose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Calibration<F> {
     params: CalibrationParams,
@@ -291,8 +296,6 @@ pub struct Calibration<F> {
     constants: Constants<F>,
     /// N = K⁻¹ at T0, rounded (diagonal = hi part).
     n_g_per_v: Mat3<F>,
-    /// Veltkamp split of the diagonal's hi part.
-    n_diag_split: [(F, F); 3],
     /// Low part of the diagonal: N_ii − hi.
     n_diag_lo: Vec3<F>,
     /// 1/K_ii at T0 ([`float::recip`] in `f64`, rounded).
@@ -388,7 +391,6 @@ impl<F: Float> Calibration<F> {
             t0_c: F::from_f64(p.t0_c),
             constants: constants.cast(),
             n_g_per_v: n_f,
-            n_diag_split: [float::split(n_f[0][0]), float::split(n_f[1][1]), float::split(n_f[2][2])],
             n_diag_lo,
             inv_diag: [0, 1, 2].map(|i| F::from_f64(float::recip(k[i][i]))),
             model: p.model.cast(),
@@ -417,7 +419,6 @@ impl<F: Float> Calibration<F> {
             t0_c: F::ZERO,
             constants: Constants { k_v_per_g: one, u0_v: [F::ZERO; 3] },
             n_g_per_v: one,
-            n_diag_split: [float::split(F::ONE); 3],
             n_diag_lo: [F::ZERO; 3],
             inv_diag: [F::ONE; 3],
             model: TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] },
@@ -465,91 +466,45 @@ impl<F: Float> Calibration<F> {
         apply_delta(&self.constants, &self.model.delta(temp_c, self.t0_c))
     }
 
-    /// `N·(U − U0')` with N at T0 and any offsets `u0_v`, accurate to about one rounding of
-    /// the result (see the type's note on precision).
+    /// The affine map `A·U − c` of [`AtTemperature`] applied to the signals `u`: per axis the
+    /// dominant `hi_i·U_i` (hi = N_ii rounded) exactly as a product and its rounding error
+    /// ([`float::two_prod`]), the small terms (the diagonal's low part, the off-diagonal
+    /// terms, the offset) fused into one sum, and the two added last. Non-finite when a signal
+    /// is (its own axis at least).
     #[inline(always)]
-    fn apply_n(&self, u_v: &Vec3<F>, u0_v: &Vec3<F>) -> Vec3<F> {
-        let v = [0, 1, 2].map(|i| float::two_sum(u_v[i], -u0_v[i]));
+    fn affine(&self, u: &Vec3<F>, at: &AtTemperature<F>) -> Vec3<F> {
         let n = &self.n_g_per_v;
-        let mut a = [F::ZERO; 3];
-        for i in 0..3 {
-            let (p, pe) = float::two_prod_split(v[i].0, self.n_diag_split[i]);
-            let mut small = pe + n[i][i] * v[i].1 + self.n_diag_lo[i] * v[i].0;
-            for j in 0..3 {
-                if j != i {
-                    small += n[i][j] * (v[j].0 + v[j].1);
-                }
-            }
-            a[i] = p + small;
-        }
-        a
+        let l = &at.lin;
+        let c = &at.offset_g;
+        let row = |i: usize, j: usize, k: usize| {
+            let (p, e) = float::two_prod(n[i][i], u[i]);
+            let small = l[i][k].mul_add(u[k], l[i][j].mul_add(u[j], l[i][i].mul_add(u[i], e)));
+            p + (small - c[i])
+        };
+        [row(0, 1, 2), row(1, 2, 0), row(2, 0, 1)]
     }
 
-    /// Method 1's correction matrix at a temperature: with X = N·ΔK(T),
-    /// `K(T)⁻¹ = (I + X)⁻¹·N`, so `a = a₀ + M·a₀` with `M = −(I + X)⁻¹·X` and
-    /// `a₀ = N·(U − U0(T))`. M is small (|X| ≲ 10⁻²), so its rounding errors are negligible
-    /// beside a₀'s. `None` when K(T) is not invertible.
+    /// The status and temperature [°C] the model is evaluated at: the reading, or clamped to
+    /// the calibrated range, or T0 for a non-finite reading (see the module's policies).
     #[inline(always)]
-    fn method1_matrix(&self, d: &CoefDelta<F>) -> Option<Mat3<F>> {
-        let k = &self.constants.k_v_per_g;
-        let mut dk = [[F::ZERO; 3]; 3];
-        for i in 0..3 {
-            for j in 0..3 {
-                dk[i][j] = k[i][j] * d.rel_k[i][j];
-            }
+    fn clamped(&self, temp_c: F) -> (F, Status) {
+        let mut status = Status::OK;
+        if !self.valid {
+            status.insert(Status::INVALID_CALIBRATION);
         }
-        let x = linalg::mat_mul(&self.n_g_per_v, &dk);
-        let mut y = x;
-        for (i, row) in y.iter_mut().enumerate() {
-            row[i] += F::ONE;
-        }
-        let inv = linalg::inverse_checked(&y, F::from_f64(linalg::MIN_HADAMARD_RATIO))?;
-        let mut m = linalg::mat_mul(&inv, &x);
-        for row in m.iter_mut() {
-            for v in row.iter_mut() {
-                *v = -*v;
-            }
-        }
-        Some(m)
-    }
-
-    /// The output correction Δa_T of T(5)/T(6) (full) or T(7)/T(8) (simplified) for signals
-    /// `u_v` and coefficient changes `d`: the amount to **add** to `N·(U − U0)` (see the
-    /// module's note on the sign). With `v = U − U0`, per axis i:
-    ///
-    /// `Δa_i = −v_i/K_ii·β_ii − α_i/K_ii` (simplified), plus in the full form
-    /// `− Σ_{j≠i} v_j·K_ij·γ_ij/(K_ii·K_jj) + Σ_{j≠i} K_ij·α_j/(K_ii·K_jj)`.
-    ///
-    /// [`Form::Linearized`] is `−N·(ΔK·â + ΔU0)` with `â = N·v`.
-    #[inline(always)]
-    pub fn output_correction(&self, v: &Vec3<F>, d: &CoefDelta<F>, form: Form) -> Vec3<F> {
-        let k = &self.constants.k_v_per_g;
-        let r = &self.inv_diag;
-        if form == Form::Linearized {
-            let n = &self.n_g_per_v;
-            let a_hat = linalg::mat_vec(n, v);
-            let mut w = d.du0_v;
-            for (i, wi) in w.iter_mut().enumerate() {
-                for j in 0..3 {
-                    *wi += k[i][j] * d.rel_k[i][j] * a_hat[j];
-                }
-            }
-            let c = linalg::mat_vec(n, &w);
-            return [-c[0], -c[1], -c[2]];
-        }
-        let mut out = [F::ZERO; 3];
-        for i in 0..3 {
-            let mut c = -(v[i] * d.rel_k[i][i] + d.du0_v[i]) * r[i];
-            if form == Form::Full {
-                for j in 0..3 {
-                    if j != i {
-                        c += k[i][j] * r[i] * r[j] * (d.du0_v[j] - v[j] * d.rel_k[i][j]);
-                    }
-                }
-            }
-            out[i] = c;
-        }
-        out
+        let t = if !temp_c.is_finite() {
+            status.insert(Status::NONFINITE_INPUT | Status::TEMP_CLAMPED);
+            self.t0_c
+        } else if temp_c < self.temp_min_c {
+            status.insert(Status::TEMP_CLAMPED);
+            self.temp_min_c
+        } else if temp_c > self.temp_max_c {
+            status.insert(Status::TEMP_CLAMPED);
+            self.temp_max_c
+        } else {
+            temp_c
+        };
+        (t, status)
     }
 
     /// The per-sample step: signals `u_v` \[V\] and the unit's temperature `temp_c` [°C] to
@@ -585,51 +540,104 @@ impl<F: Float> Calibration<F> {
         self.apply(u_v, &self.at_temperature(temp_c))
     }
 
-    /// The temperature-dependent half of the step: everything [`apply`](Self::apply) needs
-    /// that depends on `temp_c` alone (the clamped temperature's flags; method 1's
-    /// `U0(T)` and correction matrix M; method 2's coefficient changes). A pure function of
-    /// `temp_c`, so a caller may keep it while the temperature reading does not change
-    /// ([`TempCache`]) without changing any result.
+    /// The temperature-dependent half of the step: the affine map `a = A·U − c` every method
+    /// reduces to at `temp_c` (clamped to the range, with its flags), with
+    ///
+    /// - no correction: `A = N`, `c = N·U0`;
+    /// - method 1: `A = K(T)⁻¹`, `c = A·U0(T)`. With `X = N·ΔK(T)`,
+    ///   `K(T)⁻¹ = (I + X)⁻¹·N = N − (I + X)⁻¹·X·N`: the correction to N is small
+    ///   (|X| ≲ 10⁻²), so its rounding errors are negligible beside N's. K(T) not invertible
+    ///   (the Hadamard test of [`linalg::inverse_checked`] on I + X): N, flagged
+    ///   [`Status::SINGULAR_AT_TEMP`];
+    /// - method 2: `a = N·(U − U0) + Δa_T` with Δa_T of T(5)…T(8) linear in `v = U − U0`:
+    ///   per axis i, `Δa_i = −v_i/K_ii·β_ii − α_i/K_ii` (simplified, T(7)/T(8)), plus in the
+    ///   full form T(5)/T(6) `− Σ_{j≠i} v_j·K_ij·γ_ij/(K_ii·K_jj) + Σ_{j≠i} K_ij·α_j/(K_ii·K_jj)`;
+    ///   linearised, `Δa_T = −N·(ΔK·N·v + ΔU0)`. So `A = N + D`, `c = A·U0 − b` with D the
+    ///   terms in v and b the others (see the module's note on the sign).
+    ///
+    /// A pure function of `temp_c`, so a caller may keep it while the temperature reading does
+    /// not change ([`TempCache`]) without changing any result.
     #[inline]
     pub fn at_temperature(&self, temp_c: F) -> AtTemperature<F> {
-        let mut status = Status::OK;
-        if !self.valid {
-            status.insert(Status::INVALID_CALIBRATION);
+        let (t, mut status) = self.clamped(temp_c);
+        let n = &self.n_g_per_v;
+        let k = &self.constants.k_v_per_g;
+        // The linear part minus the diagonal's hi part: N's off-diagonal and low parts, plus
+        // the method's temperature terms below.
+        let mut lin = *n;
+        for i in 0..3 {
+            lin[i][i] = self.n_diag_lo[i];
         }
-        let t = if !temp_c.is_finite() {
-            status.insert(Status::NONFINITE_INPUT | Status::TEMP_CLAMPED);
-            self.t0_c
-        } else if temp_c < self.temp_min_c {
-            status.insert(Status::TEMP_CLAMPED);
-            self.temp_min_c
-        } else if temp_c > self.temp_max_c {
-            status.insert(Status::TEMP_CLAMPED);
-            self.temp_max_c
-        } else {
-            temp_c
-        };
-        let terms = match self.method {
-            Method::Uncorrected => TempTerms::None,
+        let mut u0 = self.constants.u0_v;
+        // Added after the linear part (method 2's terms without v).
+        let mut b = [F::ZERO; 3];
+        match self.method {
+            Method::Uncorrected => {}
             Method::CoefficientCorrection => {
                 let d = self.model.delta(t, self.t0_c);
-                let u0 = &self.constants.u0_v;
-                let u0_t = [u0[0] + d.du0_v[0], u0[1] + d.du0_v[1], u0[2] + d.du0_v[2]];
-                let m = self.method1_matrix(&d);
-                if m.is_none() {
-                    status.insert(Status::SINGULAR_AT_TEMP);
+                for i in 0..3 {
+                    u0[i] += d.du0_v[i];
                 }
-                TempTerms::Method1 { u0_t, m }
+                let x = linalg::mat_mul_fused(n, &delta_k(k, &d));
+                let mut y = x;
+                for (i, row) in y.iter_mut().enumerate() {
+                    row[i] += F::ONE;
+                }
+                match linalg::inverse_checked(&y, F::from_f64(linalg::MIN_HADAMARD_RATIO)) {
+                    Some(inv) => lin = linalg::mat_mul_sub(&inv, &linalg::mat_mul_fused(&x, n), &lin),
+                    None => status.insert(Status::SINGULAR_AT_TEMP),
+                }
             }
-            Method::OutputCorrection(form) => TempTerms::Method2 { d: self.model.delta(t, self.t0_c), form },
+            Method::OutputCorrection(Form::Linearized) => {
+                let d = self.model.delta(t, self.t0_c);
+                // D = −N·ΔK·N, b = −N·ΔU0.
+                let x = linalg::mat_mul_fused(n, &delta_k(k, &d));
+                lin = linalg::mat_mul_sub(&x, n, &lin);
+                let nd = linalg::mat_vec_fused(n, &d.du0_v);
+                b = [-nd[0], -nd[1], -nd[2]];
+            }
+            Method::OutputCorrection(form) => {
+                let d = self.model.delta(t, self.t0_c);
+                let r = &self.inv_diag;
+                for i in 0..3 {
+                    lin[i][i] -= d.rel_k[i][i] * r[i];
+                    b[i] = -(d.du0_v[i] * r[i]);
+                    if form == Form::Full {
+                        for j in 0..3 {
+                            if j != i {
+                                let q = k[i][j] * r[i] * r[j];
+                                lin[i][j] -= q * d.rel_k[i][j];
+                                b[i] = q.mul_add(d.du0_v[j], b[i]);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // c = A·U0' − b, the diagonal's hi part last.
+        let row = |i: usize, j: usize, k: usize| {
+            let small = lin[i][k].mul_add(u0[k], lin[i][j].mul_add(u0[j], lin[i][i].mul_add(u0[i], -b[i])));
+            n[i][i].mul_add(u0[i], small)
         };
-        AtTemperature { status, terms }
+        AtTemperature { status, lin, offset_g: [row(0, 1, 2), row(1, 2, 0), row(2, 0, 1)] }
     }
 
     /// The signal-dependent half of the step: signals `u_v` \[V\] to specific force \[g\] with
-    /// the temperature terms `at` of [`at_temperature`](Self::at_temperature) (T(1) with
-    /// method 1 or 2 of §5).
+    /// the affine map `at` of [`at_temperature`](Self::at_temperature) (T(1) with method 1 or
+    /// 2 of §5). Non-finite signals, and results that overflow, take the policies' path out
+    /// of line.
     #[inline]
     pub fn apply(&self, u_v: Vec3<F>, at: &AtTemperature<F>) -> Sample<F> {
+        let a = self.affine(&u_v, at);
+        if all_finite(&a) { Sample { accel_g: a, status: at.status } } else { self.apply_nonfinite(u_v, at) }
+    }
+
+    /// [`apply`](Self::apply) for signals whose result is not finite: each non-finite signal
+    /// replaced by its zero offset at T0, and a result still not finite (an overflow) zero,
+    /// both flagged [`Status::NONFINITE_INPUT`].
+    #[cold]
+    #[inline(never)]
+    fn apply_nonfinite(&self, u_v: Vec3<F>, at: &AtTemperature<F>) -> Sample<F> {
         let mut status = at.status;
         let mut u = u_v;
         for i in 0..3 {
@@ -638,22 +646,8 @@ impl<F: Float> Calibration<F> {
                 status.insert(Status::NONFINITE_INPUT);
             }
         }
-        // One N·(U − U0) for every method (method 1 with U0(T)), then the method's correction.
-        let u0 = match &at.terms {
-            TempTerms::Method1 { u0_t, .. } => u0_t,
-            TempTerms::None | TempTerms::Method2 { .. } => &self.constants.u0_v,
-        };
-        let a0 = self.apply_n(&u, u0);
-        let correction = match &at.terms {
-            TempTerms::None | TempTerms::Method1 { m: None, .. } => None,
-            TempTerms::Method1 { m: Some(m), .. } => Some(linalg::mat_vec(m, &a0)),
-            TempTerms::Method2 { d, form } => Some(self.output_correction(&linalg::vec_sub(&u, u0), d, *form)),
-        };
-        let mut a = match correction {
-            Some(c) => [a0[0] + c[0], a0[1] + c[1], a0[2] + c[2]],
-            None => a0,
-        };
-        if !(a[0].is_finite() && a[1].is_finite() && a[2].is_finite()) {
+        let mut a = self.affine(&u, at);
+        if !all_finite(&a) {
             a = [F::ZERO; 3];
             status.insert(Status::NONFINITE_INPUT);
         }
@@ -661,23 +655,36 @@ impl<F: Float> Calibration<F> {
     }
 }
 
-/// What the step needs at one temperature, by method.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum TempTerms<F> {
-    /// No temperature correction.
-    None,
-    /// Method 1: `U0(T)` \[V\] and M (`None` when K(T) is singular: the T0 inverse is used).
-    Method1 { u0_t: Vec3<F>, m: Option<Mat3<F>> },
-    /// Method 2: the coefficient changes of T(3)/T(4) and the form of the correction.
-    Method2 { d: CoefDelta<F>, form: Form },
+/// True when the three numbers are finite: `x − x` is 0 for a finite x and NaN otherwise.
+#[inline(always)]
+fn all_finite<F: Float>(a: &Vec3<F>) -> bool {
+    (a[0] - a[0]) + (a[1] - a[1]) + (a[2] - a[2]) == F::ZERO
 }
 
-/// The temperature-dependent half of the per-sample step
-/// ([`Calibration::at_temperature`]): the temperature's status flags and the method's terms.
+/// ΔK(T) = K ∘ (ΔK/K): the elementwise product of the constants at T0 and the relative
+/// changes of T(3)/T(4).
+#[inline(always)]
+fn delta_k<F: Float>(k: &Mat3<F>, d: &CoefDelta<F>) -> Mat3<F> {
+    let mut dk = [[F::ZERO; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            dk[i][j] = k[i][j] * d.rel_k[i][j];
+        }
+    }
+    dk
+}
+
+/// The temperature-dependent half of the per-sample step ([`Calibration::at_temperature`]):
+/// the temperature's status flags and the affine map `a = A·U − c` of the method at that
+/// temperature.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AtTemperature<F> {
     status: Status,
-    terms: TempTerms<F>,
+    /// A without the hi part of N's diagonal (off the diagonal: A_ij; on it: A_ii − hi_i, the
+    /// low part of N_ii plus the method's change) \[g/V\].
+    lin: Mat3<F>,
+    /// c \[g\].
+    offset_g: Vec3<F>,
 }
 
 impl<F: Float> AtTemperature<F> {
@@ -695,9 +702,11 @@ impl<F: Float> AtTemperature<F> {
 /// bit for bit, as without the cache.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TempCache<F> {
-    /// The calibration's fingerprint and the reading the terms were computed for (`None`:
-    /// nothing cached yet).
-    key: Option<(u64, F)>,
+    /// The reading the terms were computed for (NaN: nothing cached yet; a NaN reading never
+    /// equals it, so it is never reused).
+    key_c: F,
+    /// The fingerprint of the calibration they were computed with.
+    key_fingerprint: u64,
     at: AtTemperature<F>,
 }
 
@@ -710,24 +719,35 @@ impl<F: Float> Default for TempCache<F> {
 impl<F: Float> TempCache<F> {
     /// Empty: the first lookup computes.
     pub const fn new() -> Self {
-        TempCache { key: None, at: AtTemperature { status: Status::OK, terms: TempTerms::None } }
+        TempCache {
+            key_c: F::NAN,
+            key_fingerprint: 0,
+            at: AtTemperature { status: Status::OK, lin: [[F::ZERO; 3]; 3], offset_g: [F::ZERO; 3] },
+        }
     }
 
     /// The terms of `cal` at `temp_c`, recomputed only when `temp_c` differs from the last
-    /// reading or `cal` from the last calibration (by fingerprint); a non-finite reading is
-    /// never reused.
+    /// reading or `cal` from the last calibration (by fingerprint); a NaN reading is never
+    /// reused.
     #[inline]
     pub fn get(&mut self, cal: &Calibration<F>, temp_c: F) -> &AtTemperature<F> {
-        let key = Some((cal.fingerprint, temp_c));
-        if self.key != key {
-            self.at = cal.at_temperature(temp_c);
-            self.key = key;
+        if !(temp_c == self.key_c) || self.key_fingerprint != cal.fingerprint {
+            self.refresh(cal, temp_c);
         }
         &self.at
     }
 
+    /// The terms recomputed: once per temperature reading, so out of line (the per-sample
+    /// path keeps its registers).
+    #[inline(never)]
+    fn refresh(&mut self, cal: &Calibration<F>, temp_c: F) {
+        self.at = cal.at_temperature(temp_c);
+        self.key_c = temp_c;
+        self.key_fingerprint = cal.fingerprint;
+    }
+
     /// Forgets the cached terms.
     pub fn invalidate(&mut self) {
-        self.key = None;
+        self.key_c = F::NAN;
     }
 }

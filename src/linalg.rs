@@ -37,6 +37,36 @@ pub fn mat_mul<F: Float>(a: &Mat3<F>, b: &Mat3<F>) -> Mat3<F> {
     c
 }
 
+/// `a · b` with fused multiply-adds ([`Float::mul_add`]): each element rounded about once.
+#[inline(always)]
+pub fn mat_mul_fused<F: Float>(a: &Mat3<F>, b: &Mat3<F>) -> Mat3<F> {
+    let mut c = [[F::ZERO; 3]; 3];
+    for (i, row) in c.iter_mut().enumerate() {
+        for (j, cell) in row.iter_mut().enumerate() {
+            *cell = a[i][2].mul_add(b[2][j], a[i][1].mul_add(b[1][j], a[i][0] * b[0][j]));
+        }
+    }
+    c
+}
+
+/// `c − a · b` with fused multiply-adds ([`Float::mul_add`]).
+#[inline(always)]
+pub fn mat_mul_sub<F: Float>(a: &Mat3<F>, b: &Mat3<F>, c: &Mat3<F>) -> Mat3<F> {
+    let mut out = *c;
+    for (i, row) in out.iter_mut().enumerate() {
+        for (j, cell) in row.iter_mut().enumerate() {
+            *cell = (-a[i][2]).mul_add(b[2][j], (-a[i][1]).mul_add(b[1][j], (-a[i][0]).mul_add(b[0][j], *cell)));
+        }
+    }
+    out
+}
+
+/// `m · v` with fused multiply-adds ([`Float::mul_add`]).
+#[inline(always)]
+pub fn mat_vec_fused<F: Float>(m: &Mat3<F>, v: &Vec3<F>) -> Vec3<F> {
+    [0, 1, 2].map(|i| m[i][2].mul_add(v[2], m[i][1].mul_add(v[1], m[i][0] * v[0])))
+}
+
 /// `a − b` element-wise.
 #[inline(always)]
 pub fn vec_sub<F: Float>(a: &Vec3<F>, b: &Vec3<F>) -> Vec3<F> {

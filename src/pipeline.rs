@@ -12,7 +12,7 @@
 //! - `Profile(i)`: flight-phase profile `i` of the configuration (Tables V2/V3-like), with the
 //!   configuration's [`Variant`](crate::vibration::Variant). The compensated sample is a mean
 //!   over the vibration, `y = a_p + VE(a_p)` per axis; `a_p` is solved for
-//!   ([`solve_static_g`](crate::vibration::solve_static_g), a fixed number of Newton steps)
+//!   ([`solve_static_g`](crate::vibration::solve_static_g), at most four Newton steps)
 //!   and `VE(a_p)` subtracted, so `y − VE = a_p`.
 //! - `Online`: the moments of the last complete block of `W` compensated samples
 //!   ([`MomentWindow`]), for a system that samples fast enough to see the vibration, referred
@@ -148,11 +148,16 @@ pub struct Pipeline<F> {
 pub struct PipelineState<F, const W: usize> {
     /// Moments of the compensated samples, by blocks of `W`.
     pub window: MomentWindow<F, W>,
-    /// The online VE \[g\] of the last complete block and whether it was clamped (`None`
-    /// before the first block's VE is complete).
-    online_ve: Option<(Vec3<F>, bool)>,
+    /// The online VE \[g\] of the last complete block (zero before the first block's VE is
+    /// complete); always finite.
+    online_ve_g: Vec3<F>,
+    /// The flags of the online VE: [`Status::VIBRATION_ESTIMATE_NOT_READY`] before the first
+    /// block's VE is complete, [`Status::VIBRATION_OUT_OF_RANGE`] when it was clamped.
+    online_status: Status,
     /// The VE of the block that completed last, being computed one accelerometer per step.
     next_ve: Option<NextVe<F>>,
+    /// The online source has fed the window or set a VE since the last reset.
+    online_used: bool,
     /// Temperature terms of the last reading.
     temps: TempCache<F>,
     /// The thermal dynamics' state (untouched without dynamics).
@@ -170,11 +175,22 @@ impl<F: Float, const W: usize> PipelineState<F, W> {
     pub const fn new() -> Self {
         PipelineState {
             window: MomentWindow::new(),
-            online_ve: None,
+            online_ve_g: [F::ZERO; 3],
+            online_status: Status::VIBRATION_ESTIMATE_NOT_READY,
             next_ve: None,
+            online_used: false,
             temps: TempCache::new(),
             dynamics: DynamicsState::new(),
         }
+    }
+
+    /// The online estimate forgotten: empty window, no VE.
+    fn reset_online(&mut self) {
+        self.window.reset();
+        self.online_ve_g = [F::ZERO; 3];
+        self.online_status = Status::VIBRATION_ESTIMATE_NOT_READY;
+        self.next_ve = None;
+        self.online_used = false;
     }
 }
 
@@ -327,9 +343,9 @@ impl<F: Float> Pipeline<F> {
             }
         };
         let mut s = self.cal.apply(u_v, state.temps.get(&self.cal, temp_c));
-        if let (true, Some((bias_g, d))) = (usable(&self.cal, &s), play) {
+        if let (true, Some((bias_g, d))) = (usable(&s), play) {
             for (a, b) in s.accel_g.iter_mut().zip(bias_g) {
-                *a -= *b * d;
+                *a = (-*b).mul_add(d, *a);
             }
         }
         let ve = self.subtract_ve(state, &mut s, source);
@@ -348,14 +364,26 @@ impl<F: Float> Pipeline<F> {
         s: &mut Sample<F>,
         source: VibrationSource,
     ) -> Vec3<F> {
-        let usable = usable(&self.cal, s);
+        let usable = usable(s);
+        let mut ve = [F::ZERO; 3];
         if source != VibrationSource::Online {
             // The window serves the online source only: a block must not span a time when
             // it was not selected.
-            if !state.window.is_empty() || state.online_ve.is_some() || state.next_ve.is_some() {
-                state.window.reset();
-                state.online_ve = None;
-                state.next_ve = None;
+            if state.online_used {
+                state.reset_online();
+            }
+            if let (true, VibrationSource::Profile(i)) = (usable, source) {
+                match self.vib.profile(i as usize) {
+                    Some(v) => {
+                        // Finite: each axis's VE is `solve_static_g`'s.
+                        let (e, clamped) = self.vib.correction_for_output_g(v, &s.accel_g);
+                        if clamped {
+                            s.status.insert(Status::VIBRATION_OUT_OF_RANGE);
+                        }
+                        ve = e;
+                    }
+                    None => s.status.insert(Status::VIBRATION_ESTIMATE_NOT_READY),
+                }
             }
         } else if usable {
             // One piece of the online VE per step, so that no step carries a whole block's:
@@ -364,41 +392,19 @@ impl<F: Float> Pipeline<F> {
             if let Some(n) = &mut state.next_ve {
                 self.next_axis_ve(n);
                 if n.done >= 3 {
-                    state.online_ve = Some((n.ve_g, n.clamped));
+                    // Finite: each axis's VE is `solve_static_g`'s.
+                    state.online_ve_g = n.ve_g;
+                    state.online_status = if n.clamped { Status::VIBRATION_OUT_OF_RANGE } else { Status::OK };
                     state.next_ve = None;
                 }
             }
-            if state.window.push(&s.accel_g) == Pushed::BlockDone {
+            state.online_used = true;
+            // The sample is finite (`usable`).
+            if state.window.push_finite(&s.accel_g) == Pushed::BlockDone {
                 state.next_ve = self.block_ve_start(&state.window);
             }
-        }
-        let mut ve = [F::ZERO; 3];
-        if usable {
-            match source {
-                VibrationSource::None => {}
-                VibrationSource::Profile(i) => match self.vib.profile(i as usize) {
-                    Some(v) => {
-                        let (e, clamped) = self.vib.correction_for_output_g(v, &s.accel_g);
-                        if clamped {
-                            s.status.insert(Status::VIBRATION_OUT_OF_RANGE);
-                        }
-                        ve = e;
-                    }
-                    None => s.status.insert(Status::VIBRATION_ESTIMATE_NOT_READY),
-                },
-                VibrationSource::Online => match state.online_ve {
-                    Some((e, clamped)) => {
-                        if clamped {
-                            s.status.insert(Status::VIBRATION_OUT_OF_RANGE);
-                        }
-                        ve = e;
-                    }
-                    None => s.status.insert(Status::VIBRATION_ESTIMATE_NOT_READY),
-                },
-            }
-        }
-        if !(ve[0].is_finite() && ve[1].is_finite() && ve[2].is_finite()) {
-            ve = [F::ZERO; 3];
+            s.status.insert(state.online_status);
+            ve = state.online_ve_g;
         }
         for (a, e) in s.accel_g.iter_mut().zip(ve) {
             *a -= e;
@@ -407,8 +413,9 @@ impl<F: Float> Pipeline<F> {
     }
 }
 
-/// A sample the bias play and the VE apply to: a valid calibration and finite inputs.
+/// A sample the bias play and the VE apply to: a valid calibration and finite inputs (an
+/// invalid calibration flags every sample).
 #[inline(always)]
-fn usable<F: Float>(cal: &Calibration<F>, s: &Sample<F>) -> bool {
-    cal.is_valid() && !s.status.contains(Status::NONFINITE_INPUT)
+fn usable<F>(s: &Sample<F>) -> bool {
+    s.status.0 & (Status::INVALID_CALIBRATION.0 | Status::NONFINITE_INPUT.0) == 0
 }

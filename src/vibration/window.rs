@@ -43,22 +43,22 @@ impl<F: Float> Sums<F> {
         cross: [F::ZERO; 3],
     };
 
-    /// Adds (`sign` = 1) or removes (`sign` = −1) sample `x` under centre `c`.
+    /// Adds sample `x` under centre `c`.
     #[inline(always)]
-    fn update(&mut self, x: &Vec3<F>, c: &Vec3<F>, sign: F) {
+    fn add(&mut self, x: &Vec3<F>, c: &Vec3<F>) {
         let mut d = [F::ZERO; 3];
         for i in 0..3 {
             d[i] = x[i] - c[i];
             let d2 = d[i] * d[i];
-            self.s1[i] += sign * d[i];
-            self.s2[i] += sign * d2;
-            self.s3[i] += sign * d2 * d[i];
-            self.s4[i] += sign * d2 * d2;
-            self.abs[i] += sign * (x[i].abs() - c[i].abs());
+            self.s1[i] += d[i];
+            self.s2[i] += d2;
+            self.s3[i] = d2.mul_add(d[i], self.s3[i]);
+            self.s4[i] = d2.mul_add(d2, self.s4[i]);
+            self.abs[i] += x[i].abs() - c[i].abs();
         }
-        self.cross[0] += sign * d[0] * d[1];
-        self.cross[1] += sign * d[1] * d[2];
-        self.cross[2] += sign * d[2] * d[0];
+        self.cross[0] = d[0].mul_add(d[1], self.cross[0]);
+        self.cross[1] = d[1].mul_add(d[2], self.cross[1]);
+        self.cross[2] = d[2].mul_add(d[0], self.cross[2]);
     }
 }
 
@@ -223,10 +223,20 @@ impl<F: Float, const W: usize> MomentWindow<F, W> {
         if !(x[0].is_finite() && x[1].is_finite() && x[2].is_finite()) || W == 0 {
             return Pushed::Rejected;
         }
+        self.push_finite(x)
+    }
+
+    /// [`push`](Self::push) for a sample the caller knows to be finite (the per-sample step's
+    /// compensated output is).
+    #[inline]
+    pub(crate) fn push_finite(&mut self, x: &Vec3<F>) -> Pushed {
+        if W == 0 {
+            return Pushed::Rejected;
+        }
         if self.pass == 0 && self.blocks == 0 {
             self.c_acc = *x;
         }
-        self.acc.update(x, &self.c_acc, F::ONE);
+        self.acc.add(x, &self.c_acc);
         self.pass += 1;
         if self.pass < W {
             return Pushed::Accepted;
