@@ -285,10 +285,11 @@ fn apply_delta<F: Float>(c: &Constants<F>, d: &CoefDelta<F>) -> Constants<F> {
 ///
 /// Precision: N = K⁻¹ is computed in `f64` at load time and its diagonal kept as a
 /// double-word (hi + lo) pair; A is N plus a small temperature-dependent part, which joins the
-/// low part of the diagonal. Per sample the dominant product `hi·U_i` is evaluated exactly
-/// (TwoProduct by one fused multiply-add) and every other term is small beside it. In `f32`
-/// the result is then within about one rounding of the output (≈0.5 µg at 10 g) of the `f64`
-/// reference, instead of the several µg a plain `f32` inverse and product would lose.
+/// low part of the diagonal. Per sample every other term is small beside the dominant product
+/// `hi·U_i`, which is added to their sum in one fused multiply-add (the product exact, one
+/// rounding). In `f32` the result is then within about one rounding of the output (≈0.5 µg at
+/// 10 g) of the `f64` reference, instead of the several µg a plain `f32` inverse and product
+/// would lose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Calibration<F> {
     params: CalibrationParams,
@@ -467,19 +468,18 @@ impl<F: Float> Calibration<F> {
     }
 
     /// The affine map `A·U − c` of [`AtTemperature`] applied to the signals `u`: per axis the
-    /// dominant `hi_i·U_i` (hi = N_ii rounded) exactly as a product and its rounding error
-    /// ([`float::two_prod`]), the small terms (the diagonal's low part, the off-diagonal
-    /// terms, the offset) fused into one sum, and the two added last. Non-finite when a signal
+    /// small terms (the diagonal's low part, the off-diagonal terms, the offset) as one fused
+    /// sum, then the dominant `hi_i·U_i` (hi = N_ii rounded) added to it in one fused
+    /// multiply-add: the product exact, one rounding of the result. Non-finite when a signal
     /// is (its own axis at least).
     #[inline(always)]
     fn affine(&self, u: &Vec3<F>, at: &AtTemperature<F>) -> Vec3<F> {
         let n = &self.n_g_per_v;
         let l = &at.lin;
-        let c = &at.offset_g;
+        let c = &at.neg_offset_g;
         let row = |i: usize, j: usize, k: usize| {
-            let (p, e) = float::two_prod(n[i][i], u[i]);
-            let small = l[i][k].mul_add(u[k], l[i][j].mul_add(u[j], l[i][i].mul_add(u[i], e)));
-            p + (small - c[i])
+            let small = l[i][k].mul_add(u[k], l[i][j].mul_add(u[j], l[i][i].mul_add(u[i], c[i])));
+            n[i][i].mul_add(u[i], small)
         };
         [row(0, 1, 2), row(1, 2, 0), row(2, 0, 1)]
     }
@@ -614,44 +614,57 @@ impl<F: Float> Calibration<F> {
                 }
             }
         }
-        // c = A·U0' − b, the diagonal's hi part last.
+        // −c = b − A·U0', the diagonal's hi part last.
         let row = |i: usize, j: usize, k: usize| {
-            let small = lin[i][k].mul_add(u0[k], lin[i][j].mul_add(u0[j], lin[i][i].mul_add(u0[i], -b[i])));
-            n[i][i].mul_add(u0[i], small)
+            let small = (-lin[i][k]).mul_add(u0[k], (-lin[i][j]).mul_add(u0[j], (-lin[i][i]).mul_add(u0[i], b[i])));
+            (-n[i][i]).mul_add(u0[i], small)
         };
-        AtTemperature { status, lin, offset_g: [row(0, 1, 2), row(1, 2, 0), row(2, 0, 1)] }
+        AtTemperature { status, lin, neg_offset_g: [row(0, 1, 2), row(1, 2, 0), row(2, 0, 1)] }
     }
 
     /// The signal-dependent half of the step: signals `u_v` \[V\] to specific force \[g\] with
     /// the affine map `at` of [`at_temperature`](Self::at_temperature) (T(1) with method 1 or
-    /// 2 of §5). Non-finite signals, and results that overflow, take the policies' path out
-    /// of line.
+    /// 2 of §5). A non-finite result takes the module's policies: its non-finite signals
+    /// replaced and the map applied again, or, when every signal is finite (an overflow),
+    /// zero, flagged.
     #[inline]
     pub fn apply(&self, u_v: Vec3<F>, at: &AtTemperature<F>) -> Sample<F> {
-        let a = self.affine(&u_v, at);
-        if all_finite(&a) { Sample { accel_g: a, status: at.status } } else { self.apply_nonfinite(u_v, at) }
-    }
-
-    /// [`apply`](Self::apply) for signals whose result is not finite: each non-finite signal
-    /// replaced by its zero offset at T0, and a result still not finite (an overflow) zero,
-    /// both flagged [`Status::NONFINITE_INPUT`].
-    #[cold]
-    #[inline(never)]
-    fn apply_nonfinite(&self, u_v: Vec3<F>, at: &AtTemperature<F>) -> Sample<F> {
-        let mut status = at.status;
         let mut u = u_v;
-        for i in 0..3 {
-            if !u[i].is_finite() {
-                u[i] = self.constants.u0_v[i];
-                status.insert(Status::NONFINITE_INPUT);
+        let mut status = at.status;
+        // A second pass only after a non-finite signal was replaced (the module's policies).
+        for _ in 0..2 {
+            let a = self.affine(&u, at);
+            // One test for the three: the sum is finite when each is (or it overflowed, and
+            // the test of each number says so).
+            let sum = a[0] + a[1] + a[2];
+            if sum - sum == F::ZERO || all_finite(&a) {
+                return Sample { accel_g: a, status };
             }
-        }
-        let mut a = self.affine(&u, at);
-        if !all_finite(&a) {
-            a = [F::ZERO; 3];
+            let mut replaced = u;
+            if !self.replace_nonfinite(&mut replaced) {
+                // Every signal finite: the result overflowed.
+                break;
+            }
+            u = replaced;
             status.insert(Status::NONFINITE_INPUT);
         }
-        Sample { accel_g: a, status }
+        status.insert(Status::NONFINITE_INPUT);
+        Sample { accel_g: [F::ZERO; 3], status }
+    }
+
+    /// Replaces each non-finite signal by its zero offset at T0; false when every signal was
+    /// finite. Out of line: only a sample with a non-finite result comes here.
+    #[cold]
+    #[inline(never)]
+    fn replace_nonfinite(&self, u: &mut Vec3<F>) -> bool {
+        let mut any = false;
+        for (x, u0) in u.iter_mut().zip(self.constants.u0_v) {
+            if !x.is_finite() {
+                *x = u0;
+                any = true;
+            }
+        }
+        any
     }
 }
 
@@ -683,8 +696,8 @@ pub struct AtTemperature<F> {
     /// A without the hi part of N's diagonal (off the diagonal: A_ij; on it: A_ii − hi_i, the
     /// low part of N_ii plus the method's change) \[g/V\].
     lin: Mat3<F>,
-    /// c \[g\].
-    offset_g: Vec3<F>,
+    /// −c \[g\] (negated: the per-sample sum starts from it).
+    neg_offset_g: Vec3<F>,
 }
 
 impl<F: Float> AtTemperature<F> {
@@ -722,7 +735,7 @@ impl<F: Float> TempCache<F> {
         TempCache {
             key_c: F::NAN,
             key_fingerprint: 0,
-            at: AtTemperature { status: Status::OK, lin: [[F::ZERO; 3]; 3], offset_g: [F::ZERO; 3] },
+            at: AtTemperature { status: Status::OK, lin: [[F::ZERO; 3]; 3], neg_offset_g: [F::ZERO; 3] },
         }
     }
 

@@ -46,8 +46,8 @@ pub trait Float:
     fn sqrt(self) -> Self;
     /// `self·a + b` rounded once (IEEE 754 fusedMultiplyAdd): one `vfma.f32` on the
     /// Cortex-M4F, `libm`'s correctly rounded `fmaf`/`fma` on the host (the CPU's FMA
-    /// instruction where it has one), so the same bits on both. With `b = −fl(self·a)` it is
-    /// the exact rounding error of the product ([`two_prod`]).
+    /// instruction where it has one), so the same bits on both. The product is exact inside
+    /// it: `x.mul_add(y, s)` with a small `s` is `x·y + s` to one rounding of the result.
     fn mul_add(self, a: Self, b: Self) -> Self;
     /// True unless NaN or ±∞.
     fn is_finite(self) -> bool;
@@ -205,11 +205,4 @@ pub fn two_sum<F: Float>(a: F, b: F) -> (F, F) {
 pub fn fast_two_sum<F: Float>(a: F, b: F) -> (F, F) {
     let s = a + b;
     (s, b - (s - a))
-}
-
-/// TwoProduct: `p + e = a·b` exactly, `p = fl(a·b)`: the error by one fused multiply-add.
-#[inline(always)]
-pub fn two_prod<F: Float>(a: F, b: F) -> (F, F) {
-    let p = a * b;
-    (p, a.mul_add(b, -p))
 }

@@ -348,68 +348,72 @@ impl<F: Float> Pipeline<F> {
                 *a = (-*b).mul_add(d, *a);
             }
         }
-        let ve = self.subtract_ve(state, &mut s, source);
-        (s, ve)
+        self.subtract_ve(state, s, source)
     }
 
     /// The VE stage of [`step`](Self::step): the VE for `source` subtracted from the
     /// compensated sample `s` (the window fed with it, for the online source), the VE's flags
-    /// set; returns the VE \[g\] subtracted from each axis. Nothing is subtracted from a sample
-    /// of an invalid calibration or with a non-finite input, and it does not enter the window.
-    /// Public so that the benchmark can time it alone.
+    /// set; returns the sample and the VE \[g\] subtracted from each axis. Nothing is
+    /// subtracted from a sample of an invalid calibration or with a non-finite input, and it
+    /// does not enter the window. Public so that the benchmark can time it alone.
     #[inline]
     pub fn subtract_ve<const W: usize>(
         &self,
         state: &mut PipelineState<F, W>,
-        s: &mut Sample<F>,
+        mut s: Sample<F>,
         source: VibrationSource,
-    ) -> Vec3<F> {
-        let usable = usable(s);
-        let mut ve = [F::ZERO; 3];
-        if source != VibrationSource::Online {
-            // The window serves the online source only: a block must not span a time when
-            // it was not selected.
-            if state.online_used {
-                state.reset_online();
-            }
-            if let (true, VibrationSource::Profile(i)) = (usable, source) {
-                match self.vib.profile(i as usize) {
-                    Some(v) => {
+    ) -> (Sample<F>, Vec3<F>) {
+        let ve = match source {
+            VibrationSource::Online => {
+                if !usable(&s) {
+                    return (s, [F::ZERO; 3]);
+                }
+                // One piece of the online VE per step, so that no step carries a whole
+                // block's: the moments on the step that completes a block, then one
+                // accelerometer's VE on each of the next three.
+                if let Some(n) = &mut state.next_ve {
+                    self.next_axis_ve(n);
+                    if n.done >= 3 {
                         // Finite: each axis's VE is `solve_static_g`'s.
-                        let (e, clamped) = self.vib.correction_for_output_g(v, &s.accel_g);
-                        if clamped {
-                            s.status.insert(Status::VIBRATION_OUT_OF_RANGE);
-                        }
-                        ve = e;
+                        state.online_ve_g = n.ve_g;
+                        state.online_status = if n.clamped { Status::VIBRATION_OUT_OF_RANGE } else { Status::OK };
+                        state.next_ve = None;
                     }
-                    None => s.status.insert(Status::VIBRATION_ESTIMATE_NOT_READY),
                 }
-            }
-        } else if usable {
-            // One piece of the online VE per step, so that no step carries a whole block's:
-            // the moments on the step that completes a block, then one accelerometer's VE on
-            // each of the next three.
-            if let Some(n) = &mut state.next_ve {
-                self.next_axis_ve(n);
-                if n.done >= 3 {
-                    // Finite: each axis's VE is `solve_static_g`'s.
-                    state.online_ve_g = n.ve_g;
-                    state.online_status = if n.clamped { Status::VIBRATION_OUT_OF_RANGE } else { Status::OK };
-                    state.next_ve = None;
+                state.online_used = true;
+                // The sample is finite (`usable`).
+                if state.window.push_finite(&s.accel_g) == Pushed::BlockDone {
+                    state.next_ve = self.block_ve_start(&state.window);
                 }
+                s.status.insert(state.online_status);
+                state.online_ve_g
             }
-            state.online_used = true;
-            // The sample is finite (`usable`).
-            if state.window.push_finite(&s.accel_g) == Pushed::BlockDone {
-                state.next_ve = self.block_ve_start(&state.window);
+            _ => {
+                // The window serves the online source only: a block must not span a time
+                // when it was not selected.
+                if state.online_used {
+                    state.reset_online();
+                }
+                let VibrationSource::Profile(i) = source else { return (s, [F::ZERO; 3]) };
+                if !usable(&s) {
+                    return (s, [F::ZERO; 3]);
+                }
+                let Some(v) = self.vib.profile(i as usize) else {
+                    s.status.insert(Status::VIBRATION_ESTIMATE_NOT_READY);
+                    return (s, [F::ZERO; 3]);
+                };
+                // Finite: each axis's VE is `solve_static_g`'s.
+                let (e, clamped) = self.vib.correction_for_output_g(v, &s.accel_g);
+                if clamped {
+                    s.status.insert(Status::VIBRATION_OUT_OF_RANGE);
+                }
+                e
             }
-            s.status.insert(state.online_status);
-            ve = state.online_ve_g;
-        }
+        };
         for (a, e) in s.accel_g.iter_mut().zip(ve) {
             *a -= e;
         }
-        ve
+        (s, ve)
     }
 }
 

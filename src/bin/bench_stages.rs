@@ -159,8 +159,8 @@ fn stages(syst: &mut SYST, name: &str, cal: Calibration<f32>, source: VibrationS
     if source == VibrationSource::Online {
         let mut state = PipelineState::<f32, WINDOW>::new();
         let mut ve = |k: u32| {
-            let mut s = Sample { accel_g: input(k, TEMP_EVERY).u_v, status: Status::OK };
-            pipeline.subtract_ve(&mut state, &mut s, source);
+            let s = Sample { accel_g: input(k, TEMP_EVERY).u_v, status: Status::OK };
+            let (s, _) = pipeline.subtract_ve(&mut state, s, source);
             s.accel_g[0] + s.accel_g[1] + s.accel_g[2] + s.status.0 as f32
         };
         // A complete block first, so the VE takes its full path.
