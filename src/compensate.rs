@@ -292,7 +292,6 @@ fn apply_delta<F: Float>(c: &Constants<F>, d: &CoefDelta<F>) -> Constants<F> {
 /// would lose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Calibration<F> {
-    params: CalibrationParams,
     t0_c: F,
     constants: Constants<F>,
     /// N = K⁻¹ at T0, rounded (diagonal = hi part).
@@ -306,7 +305,8 @@ pub struct Calibration<F> {
     temp_min_c: F,
     temp_max_c: F,
     valid: bool,
-    /// A hash of `params` (0 for [`uncalibrated`](Self::uncalibrated)): what [`TempCache`]
+    /// A hash of the [`CalibrationParams`] it was built from (0 for
+    /// [`uncalibrated`](Self::uncalibrated)): what [`TempCache`]
     /// keys on, so that terms of one calibration are never applied with another.
     fingerprint: u64,
 }
@@ -388,7 +388,6 @@ impl<F: Float> Calibration<F> {
         let lo_at = |i: usize| F::from_f64(n[i][i] - n_f[i][i].to_f64());
         let n_diag_lo = [lo_at(0), lo_at(1), lo_at(2)];
         Ok(Calibration {
-            params: *p,
             t0_c: F::from_f64(p.t0_c),
             constants: constants.cast(),
             n_g_per_v: n_f,
@@ -408,15 +407,7 @@ impl<F: Float> Calibration<F> {
     /// and its output is the raw signal in volts, unscaled.
     pub fn uncalibrated() -> Self {
         let one = [[F::ONE, F::ZERO, F::ZERO], [F::ZERO, F::ONE, F::ZERO], [F::ZERO, F::ZERO, F::ONE]];
-        let one64 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         Calibration {
-            params: CalibrationParams {
-                constants: Constants { k_v_per_g: one64, u0_v: [0.0; 3] },
-                t0_c: 0.0,
-                model: TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] },
-                method: Method::Uncorrected,
-                temp_range_c: (-1.0e30, 1.0e30),
-            },
             t0_c: F::ZERO,
             constants: Constants { k_v_per_g: one, u0_v: [F::ZERO; 3] },
             n_g_per_v: one,
@@ -429,11 +420,6 @@ impl<F: Float> Calibration<F> {
             valid: false,
             fingerprint: 0,
         }
-    }
-
-    /// The parameters this calibration was built from.
-    pub fn params(&self) -> &CalibrationParams {
-        &self.params
     }
 
     /// The compensation method in use.

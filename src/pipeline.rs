@@ -21,11 +21,12 @@
 //!   vibration by 2.5 %, which would overstate the VE by 5 %); the exact moment form is used
 //!   and `a_p` is solved from the block mean the same way. The VE depends on the block alone,
 //!   so it is computed once per block, spread over four steps so that no step carries all of
-//!   it (the moments on the step that completes the block, one accelerometer's VE on each of
-//!   the next three), and subtracted from every sample from then until the next block's is
-//!   ready. The window is fed only while `Online` is selected and emptied by any other
-//!   source, so after switching to `Online` the first estimate comes three steps after the
-//!   first complete block (flagged not ready until then).
+//!   it (the moments on the step after the one that completes the block, which adds the last
+//!   samples to the block's sums; one accelerometer's VE on each of the next three), and
+//!   subtracted from every sample from then until the next block's is ready. The window is
+//!   fed only while `Online` is selected and emptied by any other source, so after switching
+//!   to `Online` the first estimate comes four steps after the first complete block (flagged
+//!   not ready until then).
 //!
 //! # Policies
 //!
@@ -154,8 +155,11 @@ pub struct PipelineState<F, const W: usize> {
     /// The flags of the online VE: [`Status::VIBRATION_ESTIMATE_NOT_READY`] before the first
     /// block's VE is complete, [`Status::VIBRATION_OUT_OF_RANGE`] when it was clamped.
     online_status: Status,
-    /// The VE of the block that completed last, being computed one accelerometer per step.
-    next_ve: Option<NextVe<F>>,
+    /// The online VE's work on the block that completed last, one piece per step: 0 none
+    /// left; 1 its moments; 2, 3, 4 the x, y, z accelerometer's VE.
+    ve_work: u8,
+    /// That block's VE in progress.
+    next_ve: NextVe<F>,
     /// The online source has fed the window or set a VE since the last reset.
     online_used: bool,
     /// Temperature terms of the last reading.
@@ -177,7 +181,8 @@ impl<F: Float, const W: usize> PipelineState<F, W> {
             window: MomentWindow::new(),
             online_ve_g: [F::ZERO; 3],
             online_status: Status::VIBRATION_ESTIMATE_NOT_READY,
-            next_ve: None,
+            ve_work: 0,
+            next_ve: NextVe::ZERO,
             online_used: false,
             temps: TempCache::new(),
             dynamics: DynamicsState::new(),
@@ -189,20 +194,33 @@ impl<F: Float, const W: usize> PipelineState<F, W> {
         self.window.reset();
         self.online_ve_g = [F::ZERO; 3];
         self.online_status = Status::VIBRATION_ESTIMATE_NOT_READY;
-        self.next_ve = None;
+        self.ve_work = 0;
         self.online_used = false;
     }
 }
 
 /// A completed block's VE in progress: its moments (referred to the acceleration and
-/// clamped) and the accelerometers done so far.
+/// clamped), the VE of the accelerometers done so far and whether any was clamped.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct NextVe<F> {
     moments: WindowMoments<F>,
-    /// Accelerometers done (0..3, in the order x, y, z).
-    done: usize,
     ve_g: Vec3<F>,
     clamped: bool,
+}
+
+impl<F: Float> NextVe<F> {
+    const ZERO: Self = NextVe {
+        moments: WindowMoments {
+            mean_g: [F::ZERO; 3],
+            var_g2: [F::ZERO; 3],
+            m3_g3: [F::ZERO; 3],
+            m4_g4: [F::ZERO; 3],
+            cov_g2: [F::ZERO; 3],
+            abs_excess_g: [F::ZERO; 3],
+        },
+        ve_g: [F::ZERO; 3],
+        clamped: false,
+    };
 }
 
 impl<F: Float> Pipeline<F> {
@@ -295,31 +313,42 @@ impl<F: Float> Pipeline<F> {
         self.step_with_ve(state, u_v, temp_c, source).0
     }
 
-    /// The online VE's share of the step that completes a block: the block's moments,
-    /// referred to the acceleration and clamped. Once per block, so it is kept out of the
-    /// per-sample code and optimised for size.
-    #[inline(never)]
-    #[cfg_attr(unstable_target, optimize(size))]
-    fn block_ve_start<const W: usize>(&self, window: &MomentWindow<F, W>) -> Option<NextVe<F>> {
-        window.moments().map(|mut m| {
-            m.unscale(&self.vib.output_gains(&m));
-            let clamped = m.clamp_sigma(F::from_f64(MAX_LEVEL_G));
-            NextVe { moments: m, done: 0, ve_g: [F::ZERO; 3], clamped }
-        })
-    }
-
-    /// The online VE's share of each of the three steps after a block: the next
-    /// accelerometer's VE. Three steps per block, so it is kept out of the per-sample code and
+    /// The online VE's share of a step (`state.ve_work`, see [`PipelineState`]): on the step
+    /// after a block completes, its moments, referred to the acceleration and clamped; on each
+    /// of the next three, one accelerometer's VE, and after the third the block's VE replaces
+    /// the one subtracted. Four steps per block, so it is kept out of the per-sample code and
     /// optimised for size.
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn next_axis_ve(&self, n: &mut NextVe<F>) {
-        if let (Some(&axis), Some(slot)) = (Axis::ALL.get(n.done), n.ve_g.get_mut(n.done)) {
-            let (e, c) = self.vib.correction_from_moments_on_g(&n.moments, &n.moments.mean_g, axis);
-            *slot = e;
-            n.clamped |= c;
+    fn online_ve_work<const W: usize>(&self, state: &mut PipelineState<F, W>) {
+        let n = &mut state.next_ve;
+        match state.ve_work {
+            1 => match state.window.moments() {
+                Some(mut m) => {
+                    m.unscale(&self.vib.output_gains(&m));
+                    n.clamped = m.clamp_sigma(F::from_f64(MAX_LEVEL_G));
+                    n.moments = m;
+                    state.ve_work = 2;
+                }
+                None => state.ve_work = 0,
+            },
+            w => {
+                let i = (w as usize).wrapping_sub(2);
+                if let (Some(&axis), Some(slot)) = (Axis::ALL.get(i), n.ve_g.get_mut(i)) {
+                    let (e, c) = self.vib.correction_from_moments_on_g(&n.moments, &n.moments.mean_g, axis);
+                    *slot = e;
+                    n.clamped |= c;
+                }
+                if w >= 4 {
+                    // Finite: each axis's VE is `solve_static_g`'s.
+                    state.online_ve_g = n.ve_g;
+                    state.online_status = if n.clamped { Status::VIBRATION_OUT_OF_RANGE } else { Status::OK };
+                    state.ve_work = 0;
+                } else {
+                    state.ve_work = w + 1;
+                }
+            }
         }
-        n.done += 1;
     }
 
     /// [`step`](Self::step), also returning the VE \[g\] that was subtracted from each axis.
@@ -369,21 +398,16 @@ impl<F: Float> Pipeline<F> {
                     return (s, [F::ZERO; 3]);
                 }
                 // One piece of the online VE per step, so that no step carries a whole
-                // block's: the moments on the step that completes a block, then one
-                // accelerometer's VE on each of the next three.
-                if let Some(n) = &mut state.next_ve {
-                    self.next_axis_ve(n);
-                    if n.done >= 3 {
-                        // Finite: each axis's VE is `solve_static_g`'s.
-                        state.online_ve_g = n.ve_g;
-                        state.online_status = if n.clamped { Status::VIBRATION_OUT_OF_RANGE } else { Status::OK };
-                        state.next_ve = None;
-                    }
+                // block's (nor a block's last sums and its moments together): the moments on
+                // the step after a block completes, then one accelerometer's VE on each of the
+                // next three.
+                if state.ve_work != 0 {
+                    self.online_ve_work(state);
                 }
                 state.online_used = true;
                 // The sample is finite (`usable`).
                 if state.window.push_finite(&s.accel_g) == Pushed::BlockDone {
-                    state.next_ve = self.block_ve_start(&state.window);
+                    state.ve_work = 1;
                 }
                 s.status.insert(state.online_status);
                 state.online_ve_g

@@ -246,7 +246,7 @@ fn cached_terms_at_the_rounded_effective_temperature_stay_within_2_ug_of_the_exa
             let reading = chamber_reading(n);
             // ±1 g along each axis in turn, 10 s each, signals of the unit at the reading.
             let a = orientations[(n / 10_000) % 6];
-            let c = cal64.params().constants_at(reading);
+            let c = paper::params(model, method).constants_at(reading);
             let u: [f64; 3] =
                 std::array::from_fn(|i| (0..3).map(|j| c.k_v_per_g[i][j] * a[j]).sum::<f64>() + c.u0_v[i]);
             let r64 = reference.step(&mut st64, u, reading, VibrationSource::None);

@@ -7,7 +7,7 @@
 //! per sample. The temperature reading changes every [`TEMP_EVERY`](benchkit::TEMP_EVERY) samples, as a TMP117 at
 //! its fastest conversion cycle (15.5 ms) does at 1 kHz, or, in the "every sample" cases, on
 //! every sample. The worst single step (a new temperature on a step that carries the online
-//! VE's work: the one completing a block and the three after it) is timed alone over
+//! VE's work: the one completing a block and the four after it) is timed alone over
 //! [`WORST_REPS`] blocks, and the largest kept. The stack is
 //! painted below the current stack pointer before the heaviest case and scanned after it.
 //!
@@ -60,7 +60,7 @@ fn step<const W: usize>(t: &mut Tick<f32, W>, i: u32, temp_every: u32, source: V
 }
 
 /// SysTick counts of the worst single step among those that carry the online VE's work (the
-/// step that completes a block and the three after it, each with a new temperature reading),
+/// step that completes a block and the four after it, each with a new temperature reading),
 /// minus the same measurement around nothing; the largest over [`WORST_REPS`] blocks.
 fn worst_counts<const W: usize>(syst: &mut SYST, t: &mut Tick<f32, W>) -> u32 {
     let mut worst = 0;
@@ -71,7 +71,7 @@ fn worst_counts<const W: usize>(syst: &mut SYST, t: &mut Tick<f32, W>) -> u32 {
             step(t, i, u32::MAX, SOURCE);
             i += 1;
         }
-        for _ in 0..4 {
+        for _ in 0..5 {
             syst.clear_current();
             let t0 = SYST::get_current();
             let acc = step(t, i ^ 0x5A5A, 1, SOURCE);
