@@ -195,29 +195,21 @@ impl CalibrationParams {
     /// conditioning of K and K(T) over the range in `f32`, the precision the firmware runs
     /// in, with the same T(3)/T(4) code as the per-sample step: host and target give a blob
     /// the same verdict, and the target needs no `f64` copy of the temperature model or of
-    /// the conditioning test.
-    pub fn validate(&self) -> Result<(), CalibrationError> {
-        self.checked_inverse().map(|_| ())
-    }
-
-    /// [`validate`](Self::validate), returning N = K⁻¹ at T0 (`f64`), which the check
-    /// computes anyway and [`Calibration::new`] needs. Kept out of line: the boot code of the
-    /// firmware calls it from two places and needs one copy of it, not one per caller.
+    /// the conditioning test. Kept out of line: the boot code of the firmware calls it from
+    /// two places and needs one copy of it, not one per caller.
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn checked_inverse(&self) -> Result<Mat3<f64>, CalibrationError> {
+    pub fn validate(&self) -> Result<(), CalibrationError> {
         let p = self;
         let constants = p.constants;
         if !constants.is_finite() {
             return Err(CalibrationError::NonFiniteConstants);
         }
-        // Invertibility is decided in `f32`, like K(T) over the range below; N itself is
-        // computed in `f64`, where the precomputation needs it.
+        // Invertibility is decided in `f32`, like K(T) over the range below.
         let c = constants.cast::<f32>();
         if c.inverse().is_none() {
             return Err(CalibrationError::SingularK);
         }
-        let n = linalg::inverse_unchecked(&constants.k_v_per_g).ok_or(CalibrationError::SingularK)?;
         let k = &constants.k_v_per_g;
         if k[0][0] == 0.0 || k[1][1] == 0.0 || k[2][2] == 0.0 {
             return Err(CalibrationError::ZeroScaleFactor);
@@ -228,13 +220,13 @@ impl CalibrationParams {
             return Err(CalibrationError::BadRange);
         }
         let (model, t0_c) = (p.model.cast::<f32>(), f32::from_f64(p.t0_c));
-        // The fraction i/64 as a running sum of 1/64 (exact), not a conversion of i: the
-        // target then needs no integer-to-f64 conversion.
-        let mut frac = 0.0;
+        // The grid in `f32` (the target has no `f64` arithmetic), the fraction i/64 as a
+        // running sum of 1/64 (exact).
+        let (lo32, hi32) = (f32::from_f64(lo), f32::from_f64(hi));
+        let mut frac = 0.0f32;
         for _ in 0..=RANGE_CHECK_POINTS {
-            let t = lo + (hi - lo) * frac;
-            check_k_at(&c, &model, t0_c, f32::from_f64(t))?;
-            frac += 1.0 / RANGE_CHECK_POINTS as f64;
+            check_k_at(&c, &model, t0_c, lo32 + (hi32 - lo32) * frac)?;
+            frac += 1.0 / RANGE_CHECK_POINTS as f32;
         }
         if let TempModel::Pwl { n_knots, knots_c, .. } = &p.model {
             for &kn in knots_c.iter().take(*n_knots as usize) {
@@ -243,7 +235,7 @@ impl CalibrationParams {
                 }
             }
         }
-        Ok(n)
+        Ok(())
     }
 
     /// The constants at `temp_c` by T(3)/T(4), in `f64`:
@@ -251,6 +243,48 @@ impl CalibrationParams {
     pub fn constants_at(&self, temp_c: f64) -> Constants<f64> {
         apply_delta(&self.constants, &self.model.delta(temp_c, self.t0_c))
     }
+}
+
+/// N = K⁻¹ in the working precision with its diagonal as a double-word pair: N (diagonal =
+/// hi part) and the diagonal's low part, from K in `f64` without `f64` arithmetic (the target
+/// has none). K is split into hi + lo pairs ([`Float::split_f64`]); N₀, the inverse of K's hi
+/// part, is refined by one Newton step `N = N₀ + N₀·R` with the residual `R = I − K·N₀`
+/// computed from both parts by fused multiply-adds (R ~ 10⁻⁷ against the ~1 of each product
+/// it is the difference of, so its rounding is ~10⁻¹⁰ of N): N within ~10⁻⁹ of K⁻¹,
+/// relative. `None` when K's hi part is singular.
+#[inline(never)]
+#[cfg_attr(unstable_target, optimize(size))]
+fn inverse_hi_lo<F: Float>(k: &Mat3<f64>) -> Option<(Mat3<F>, Vec3<F>)> {
+    let split = k.map(|row| row.map(F::split_f64));
+    let k_hi = split.map(|row| row.map(|(h, _)| h));
+    let n0 = linalg::inverse_unchecked(&k_hi)?;
+    let mut r = [[F::ZERO; 3]; 3];
+    for (i, (row, k_row)) in r.iter_mut().zip(&split).enumerate() {
+        for (j, cell) in row.iter_mut().enumerate() {
+            // The largest product first (K_ii·N₀_ij: the one near 1 on the diagonal).
+            let mut acc = if i == j { F::ONE } else { F::ZERO };
+            let n = |m: usize| n0.get(m).and_then(|row| row.get(j)).copied().unwrap_or(F::ZERO);
+            for m in [i, (i + 1) % 3, (i + 2) % 3] {
+                if let Some(&(k_hi, _)) = k_row.get(m) {
+                    acc = (-k_hi).mul_add(n(m), acc);
+                }
+            }
+            for (m, &(_, k_lo)) in k_row.iter().enumerate() {
+                acc = (-k_lo).mul_add(n(m), acc);
+            }
+            *cell = acc;
+        }
+    }
+    let corr = linalg::mat_mul_fused(&n0, &r);
+    let mut n = n0;
+    for (i, (row, c_row)) in n.iter_mut().zip(&corr).enumerate() {
+        for (j, (x, c)) in row.iter_mut().zip(c_row).enumerate() {
+            if i != j {
+                *x += *c;
+            }
+        }
+    }
+    Some((n, [corr[0][0], corr[1][1], corr[2][2]]))
 }
 
 /// K(T) at `temp_c` (T(3)/T(4) from the constants `c` at T0) is invertible and each scale
@@ -283,7 +317,8 @@ fn apply_delta<F: Float>(c: &Constants<F>, d: &CoefDelta<F>) -> Constants<F> {
 /// [`at_temperature`](Self::at_temperature)). A and c are computed once per temperature
 /// reading, so the per-sample work is one 3×3 product and an offset.
 ///
-/// Precision: N = K⁻¹ is computed in `f64` at load time and its diagonal kept as a
+/// Precision: N = K⁻¹ is computed at load time to about twice the working precision (from K
+/// in `f64`, without `f64` arithmetic: [`inverse_hi_lo`]) and its diagonal kept as a
 /// double-word (hi + lo) pair; A is N plus a small temperature-dependent part, which joins the
 /// low part of the diagonal. Per sample every other term is small beside the dominant product
 /// `hi·U_i`, which is added to their sum in one fused multiply-add (the product exact, one
@@ -380,19 +415,17 @@ impl<F: Float> Calibration<F> {
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
     pub fn new(p: &CalibrationParams) -> Result<Self, CalibrationError> {
-        let n = p.checked_inverse()?;
+        p.validate()?;
         let constants = p.constants;
-        let k = &constants.k_v_per_g;
         let (lo, hi) = p.temp_range_c;
-        let n_f: Mat3<F> = linalg::cast_mat(&n);
-        let lo_at = |i: usize| F::from_f64(n[i][i] - n_f[i][i].to_f64());
-        let n_diag_lo = [lo_at(0), lo_at(1), lo_at(2)];
+        let (n, n_diag_lo) = inverse_hi_lo(&constants.k_v_per_g).ok_or(CalibrationError::SingularK)?;
+        let k: Mat3<F> = linalg::cast_mat(&constants.k_v_per_g);
         Ok(Calibration {
             t0_c: F::from_f64(p.t0_c),
             constants: constants.cast(),
-            n_g_per_v: n_f,
+            n_g_per_v: n,
             n_diag_lo,
-            inv_diag: [0, 1, 2].map(|i| F::from_f64(float::recip(k[i][i]))),
+            inv_diag: [0, 1, 2].map(|i| float::recip(k[i][i])),
             model: p.model.cast(),
             method: p.method,
             temp_min_c: F::from_f64(lo),

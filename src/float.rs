@@ -40,6 +40,10 @@ pub trait Float:
     fn from_f64(x: f64) -> Self;
     /// Widens to `f64` (exact).
     fn to_f64(self) -> f64;
+    /// `x` as a pair `hi + lo` of this type: `hi` is `x` rounded, `lo` the rest rounded, so
+    /// the pair holds about twice the mantissa of this type (`f64`: `(x, 0)`). Without `f64`
+    /// arithmetic: the rest is taken from the bits (see the `f32` implementation).
+    fn split_f64(x: f64) -> (Self, Self);
     /// Absolute value.
     fn abs(self) -> Self;
     /// Square root (`libm`, correctly rounded).
@@ -76,6 +80,27 @@ impl Float for f32 {
     #[inline(always)]
     fn to_f64(self) -> f64 {
         self as f64
+    }
+    /// `hi` is `x` rounded to `f32`; `lo` is `x − hi`, an integer multiple of `x`'s last
+    /// place with at most 30 bits, from the two mantissas, rounded to `f32`: `hi + lo` is
+    /// within 2⁻⁴⁷·|x| of `x`. For |x| below 2⁻⁷⁴ (or `hi` not a normal number) `lo` is 0:
+    /// the rest is then below 2⁻⁹⁸.
+    fn split_f64(x: f64) -> (f32, f32) {
+        let hi = x as f32;
+        let (xb, hb) = (x.to_bits(), hi.to_bits());
+        let (ex, eh) = (((xb >> 52) & 0x7ff) as i32, ((hb >> 23) & 0xff) as i32);
+        // x = mx·2^(ex − 1075), hi = mh·2^(eh − 150), of the same sign; hi's last place is 2^29
+        // or 2^30 times x's (30 when the rounding carried into the next binade).
+        let unit = ex - 1075;
+        let shift = (eh - 150) - unit;
+        if ex == 0 || eh == 0 || eh == 0xff || !(29..=30).contains(&shift) || unit < -126 {
+            return (hi, 0.0);
+        }
+        let mx = ((xb & ((1 << 52) - 1)) | (1 << 52)) as i64;
+        let mh = ((hb & 0x7f_ffff) | 0x80_0000) as i64;
+        let rest = (mx - (mh << shift)) as i32 as f32;
+        let lo = rest * f32::from_bits(((unit + 127) as u32) << 23);
+        (hi, if xb >> 63 != 0 { -lo } else { lo })
     }
     #[inline(always)]
     fn abs(self) -> Self {
@@ -137,6 +162,10 @@ impl Float for f64 {
     #[inline(always)]
     fn to_f64(self) -> f64 {
         self
+    }
+    #[inline(always)]
+    fn split_f64(x: f64) -> (f64, f64) {
+        (x, 0.0)
     }
     #[inline(always)]
     fn abs(self) -> Self {

@@ -43,34 +43,53 @@ impl<F: Float> Sums<F> {
         cross: [F::ZERO; 3],
     };
 
-    /// Adds the samples `xs` (at most [`CHUNK`]) under centre `c`, in order. The sums are held
-    /// in registers over the samples and stored once; out of line, as it runs once per `CHUNK`
-    /// samples.
+    /// Adds the samples `xs` (at most [`CHUNK`]) under centre `c`, in order: per sample and
+    /// axis the deviation `d = x − c`, `d`, `d²`, `d³`, `d⁴` (the last two by fused
+    /// multiply-adds) and `|x| − |c|`, and the three cross products, the sums held in
+    /// registers over the samples and stored once. Out of line,
+    /// as it runs once per `CHUNK` samples, and not unrolled (unrolled, the sums move between
+    /// registers from one sample to the next).
     #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
     fn add_all(&mut self, xs: &[Vec3<F>], c: &Vec3<F>) {
-        let mut s = *self;
-        for x in xs {
-            s.add(x, c);
+        let [cx, cy, cz] = *c;
+        let (ax, ay, az) = (cx.abs(), cy.abs(), cz.abs());
+        let [mut s1x, mut s1y, mut s1z] = self.s1;
+        let [mut s2x, mut s2y, mut s2z] = self.s2;
+        let [mut s3x, mut s3y, mut s3z] = self.s3;
+        let [mut s4x, mut s4y, mut s4z] = self.s4;
+        let [mut sax, mut say, mut saz] = self.abs;
+        let [mut cxy, mut cyz, mut czx] = self.cross;
+        for &[x, y, z] in xs {
+            let (dx, dy, dz) = (x - cx, y - cy, z - cz);
+            let (qx, qy, qz) = (dx * dx, dy * dy, dz * dz);
+            s1x += dx;
+            s1y += dy;
+            s1z += dz;
+            s2x += qx;
+            s2y += qy;
+            s2z += qz;
+            s3x = qx.mul_add(dx, s3x);
+            s3y = qy.mul_add(dy, s3y);
+            s3z = qz.mul_add(dz, s3z);
+            s4x = qx.mul_add(qx, s4x);
+            s4y = qy.mul_add(qy, s4y);
+            s4z = qz.mul_add(qz, s4z);
+            sax += x.abs() - ax;
+            say += y.abs() - ay;
+            saz += z.abs() - az;
+            cxy = dx.mul_add(dy, cxy);
+            cyz = dy.mul_add(dz, cyz);
+            czx = dz.mul_add(dx, czx);
         }
-        *self = s;
-    }
-
-    /// Adds sample `x` under centre `c`.
-    #[inline(always)]
-    fn add(&mut self, x: &Vec3<F>, c: &Vec3<F>) {
-        let mut d = [F::ZERO; 3];
-        for i in 0..3 {
-            d[i] = x[i] - c[i];
-            let d2 = d[i] * d[i];
-            self.s1[i] += d[i];
-            self.s2[i] += d2;
-            self.s3[i] = d2.mul_add(d[i], self.s3[i]);
-            self.s4[i] = d2.mul_add(d2, self.s4[i]);
-            self.abs[i] += x[i].abs() - c[i].abs();
-        }
-        self.cross[0] = d[0].mul_add(d[1], self.cross[0]);
-        self.cross[1] = d[1].mul_add(d[2], self.cross[1]);
-        self.cross[2] = d[2].mul_add(d[0], self.cross[2]);
+        *self = Sums {
+            s1: [s1x, s1y, s1z],
+            s2: [s2x, s2y, s2z],
+            s3: [s3x, s3y, s3z],
+            s4: [s4x, s4y, s4z],
+            abs: [sax, say, saz],
+            cross: [cxy, cyz, czx],
+        };
     }
 }
 
