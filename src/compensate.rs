@@ -331,8 +331,10 @@ pub struct Calibration<F> {
     constants: Constants<F>,
     /// N = K⁻¹ at T0, rounded (diagonal = hi part).
     n_g_per_v: Mat3<F>,
-    /// Low part of the diagonal: N_ii − hi.
-    n_diag_lo: Vec3<F>,
+    /// The map at T0 (no temperature correction): N with its diagonal's low part (N_ii − hi)
+    /// in place of the diagonal, and `−N·U0` \[g\] (see [`AtTemperature`]).
+    lin0: Mat3<F>,
+    neg_offset0_g: Vec3<F>,
     /// 1/K_ii at T0 ([`float::recip`] in `f64`, rounded).
     inv_diag: Vec3<F>,
     model: TempModel<F>,
@@ -420,11 +422,19 @@ impl<F: Float> Calibration<F> {
         let (lo, hi) = p.temp_range_c;
         let (n, n_diag_lo) = inverse_hi_lo(&constants.k_v_per_g).ok_or(CalibrationError::SingularK)?;
         let k: Mat3<F> = linalg::cast_mat(&constants.k_v_per_g);
+        let constants_f: Constants<F> = constants.cast();
+        let mut lin0 = n;
+        for (i, row) in lin0.iter_mut().enumerate() {
+            if let (Some(x), Some(&lo)) = (row.get_mut(i), n_diag_lo.get(i)) {
+                *x = lo;
+            }
+        }
         Ok(Calibration {
             t0_c: F::from_f64(p.t0_c),
-            constants: constants.cast(),
+            constants: constants_f,
             n_g_per_v: n,
-            n_diag_lo,
+            lin0,
+            neg_offset0_g: neg_offset(&n, &lin0, &constants_f.u0_v, &[F::ZERO; 3]),
             inv_diag: [0, 1, 2].map(|i| float::recip(k[i][i])),
             model: p.model.cast(),
             method: p.method,
@@ -444,7 +454,8 @@ impl<F: Float> Calibration<F> {
             t0_c: F::ZERO,
             constants: Constants { k_v_per_g: one, u0_v: [F::ZERO; 3] },
             n_g_per_v: one,
-            n_diag_lo: [F::ZERO; 3],
+            lin0: [[F::ZERO; 3]; 3],
+            neg_offset0_g: [F::ZERO; 3],
             inv_diag: [F::ONE; 3],
             model: TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] },
             method: Method::Uncorrected,
@@ -578,67 +589,62 @@ impl<F: Float> Calibration<F> {
     /// not change ([`TempCache`]) without changing any result.
     #[inline]
     pub fn at_temperature(&self, temp_c: F) -> AtTemperature<F> {
-        let (t, mut status) = self.clamped(temp_c);
+        let (t, status) = self.clamped(temp_c);
+        // The map at T0 (no correction), and the method's temperature terms added to it.
+        let mut at = AtTemperature { status, lin: self.lin0, neg_offset_g: self.neg_offset0_g };
+        if self.method == Method::Uncorrected {
+            return at;
+        }
+        let d = self.model.delta(t, self.t0_c);
         let n = &self.n_g_per_v;
         let k = &self.constants.k_v_per_g;
-        // The linear part minus the diagonal's hi part: N's off-diagonal and low parts, plus
-        // the method's temperature terms below.
-        let mut lin = *n;
-        for i in 0..3 {
-            lin[i][i] = self.n_diag_lo[i];
-        }
-        let mut u0 = self.constants.u0_v;
-        // Added after the linear part (method 2's terms without v).
-        let mut b = [F::ZERO; 3];
         match self.method {
             Method::Uncorrected => {}
             Method::CoefficientCorrection => {
-                let d = self.model.delta(t, self.t0_c);
-                for i in 0..3 {
-                    u0[i] += d.du0_v[i];
-                }
+                let u0 = linalg::vec_add(&self.constants.u0_v, &d.du0_v);
                 let x = linalg::mat_mul_fused(n, &delta_k(k, &d));
-                let mut y = x;
-                for (i, row) in y.iter_mut().enumerate() {
-                    row[i] += F::ONE;
+                match identity_minus_inverse(&x, F::from_f64(linalg::MIN_HADAMARD_RATIO)) {
+                    Some(m) => at.lin = linalg::mat_mul_sub(&m, n, &at.lin),
+                    None => at.status.insert(Status::SINGULAR_AT_TEMP),
                 }
-                match linalg::inverse_checked(&y, F::from_f64(linalg::MIN_HADAMARD_RATIO)) {
-                    Some(inv) => lin = linalg::mat_mul_sub(&inv, &linalg::mat_mul_fused(&x, n), &lin),
-                    None => status.insert(Status::SINGULAR_AT_TEMP),
-                }
+                at.neg_offset_g = neg_offset(n, &at.lin, &u0, &[F::ZERO; 3]);
             }
             Method::OutputCorrection(Form::Linearized) => {
-                let d = self.model.delta(t, self.t0_c);
-                // D = −N·ΔK·N, b = −N·ΔU0.
+                // A = N + D with D = −X·N, X = N·ΔK; −c = −c₀ + b − D·U0 with b = −N·ΔU0 and
+                // D·U0 = X·c₀.
                 let x = linalg::mat_mul_fused(n, &delta_k(k, &d));
-                lin = linalg::mat_mul_sub(&x, n, &lin);
                 let nd = linalg::mat_vec_fused(n, &d.du0_v);
-                b = [-nd[0], -nd[1], -nd[2]];
+                at.lin = linalg::mat_sub(&at.lin, &linalg::mat_mul_fused(&x, n));
+                let xc = linalg::mat_vec_fused(&x, &self.neg_offset0_g);
+                for i in 0..3 {
+                    at.neg_offset_g[i] -= nd[i] + xc[i];
+                }
             }
             Method::OutputCorrection(form) => {
-                let d = self.model.delta(t, self.t0_c);
+                // A = N + D, −c = −c₀ + b − D·U0: per axis i, D_ii = −β_ii/K_ii and
+                // b_i = −α_i/K_ii, and in the full form D_ij = −γ_ij·K_ij/(K_ii·K_jj),
+                // b_i += α_j·K_ij/(K_ii·K_jj) (j ≠ i).
                 let r = &self.inv_diag;
+                let u0 = &self.constants.u0_v;
                 for i in 0..3 {
-                    lin[i][i] -= d.rel_k[i][i] * r[i];
-                    b[i] = -(d.du0_v[i] * r[i]);
+                    let dii = -(d.rel_k[i][i] * r[i]);
+                    at.lin[i][i] += dii;
+                    let mut neg = (-dii).mul_add(u0[i], at.neg_offset_g[i] - d.du0_v[i] * r[i]);
                     if form == Form::Full {
                         for j in 0..3 {
                             if j != i {
                                 let q = k[i][j] * r[i] * r[j];
-                                lin[i][j] -= q * d.rel_k[i][j];
-                                b[i] = q.mul_add(d.du0_v[j], b[i]);
+                                let dij = -(q * d.rel_k[i][j]);
+                                at.lin[i][j] += dij;
+                                neg = q.mul_add(d.du0_v[j], (-dij).mul_add(u0[j], neg));
                             }
                         }
                     }
+                    at.neg_offset_g[i] = neg;
                 }
             }
         }
-        // −c = b − A·U0', the diagonal's hi part last.
-        let row = |i: usize, j: usize, k: usize| {
-            let small = (-lin[i][k]).mul_add(u0[k], (-lin[i][j]).mul_add(u0[j], (-lin[i][i]).mul_add(u0[i], b[i])));
-            (-n[i][i]).mul_add(u0[i], small)
-        };
-        AtTemperature { status, lin, neg_offset_g: [row(0, 1, 2), row(1, 2, 0), row(2, 0, 1)] }
+        at
     }
 
     /// The signal-dependent half of the step: signals `u_v` \[V\] to specific force \[g\] with
@@ -691,6 +697,53 @@ impl<F: Float> Calibration<F> {
 #[inline(always)]
 fn all_finite<F: Float>(a: &Vec3<F>) -> bool {
     (a[0] - a[0]) + (a[1] - a[1]) + (a[2] - a[2]) == F::ZERO
+}
+
+/// `b − A·U0'` for the map whose linear part is `lin` plus N's diagonal hi part (`n`'s
+/// diagonal): the small terms first, the hi part last.
+#[inline(always)]
+fn neg_offset<F: Float>(n: &Mat3<F>, lin: &Mat3<F>, u0: &Vec3<F>, b: &Vec3<F>) -> Vec3<F> {
+    let row = |i: usize, j: usize, k: usize| {
+        let small = (-lin[i][k]).mul_add(u0[k], (-lin[i][j]).mul_add(u0[j], (-lin[i][i]).mul_add(u0[i], b[i])));
+        (-n[i][i]).mul_add(u0[i], small)
+    };
+    [row(0, 1, 2), row(1, 2, 0), row(2, 0, 1)]
+}
+
+/// `I − (I + X)⁻¹` for a small X (method 1's correction, `K(T)⁻¹ = (I − M)·N`), from the
+/// cofactors C of `Y = I + X`: `M = (det Y·I − adj Y)/det Y` with `det Y − C_ii = Σ_j X_ij·C_ij`
+/// (the expansion of det Y along row i less C_ii): every numerator a sum of products of small
+/// numbers, so M keeps `f32`'s relative precision although Y's elements are near 1 or 0.
+/// `None` when Y fails [`linalg::inverse_checked`]'s test (not finite, or its Hadamard ratio
+/// below `min_ratio`).
+#[inline(always)]
+fn identity_minus_inverse<F: Float>(x: &Mat3<F>, min_ratio: F) -> Option<Mat3<F>> {
+    let one = |i: usize| F::ONE + x[i][i];
+    let (y00, y11, y22) = (one(0), one(1), one(2));
+    // Cofactors C_ij of Y.
+    let c00 = y11.mul_add(y22, -(x[1][2] * x[2][1]));
+    let c01 = x[1][2].mul_add(x[2][0], -(x[1][0] * y22));
+    let c02 = x[1][0].mul_add(x[2][1], -(y11 * x[2][0]));
+    let c10 = x[0][2].mul_add(x[2][1], -(x[0][1] * y22));
+    let c11 = y00.mul_add(y22, -(x[0][2] * x[2][0]));
+    let c12 = x[0][1].mul_add(x[2][0], -(y00 * x[2][1]));
+    let c20 = x[0][1].mul_add(x[1][2], -(x[0][2] * y11));
+    let c21 = x[0][2].mul_add(x[1][0], -(y00 * x[1][2]));
+    let c22 = y00.mul_add(y11, -(x[0][1] * x[1][0]));
+    // det Y − C_ii, row by row.
+    let n0 = x[0][2].mul_add(c02, x[0][1].mul_add(c01, x[0][0] * c00));
+    let n1 = x[1][2].mul_add(c12, x[1][1].mul_add(c11, x[1][0] * c10));
+    let n2 = x[2][2].mul_add(c22, x[2][1].mul_add(c21, x[2][0] * c20));
+    let det = c00 + n0;
+    let norm2 = |a: F, b: F, c: F| c.mul_add(c, b.mul_add(b, a * a));
+    let p =
+        norm2(y00, x[0][1], x[0][2]).sqrt() * norm2(x[1][0], y11, x[1][2]).sqrt() * norm2(x[2][0], x[2][1], y22).sqrt();
+    // `!(x >= y)` is also true for NaN, so a non-finite X is rejected here too.
+    if !(det.abs() >= min_ratio * p) || !(p > F::ZERO) || !det.is_finite() || !p.is_finite() {
+        return None;
+    }
+    let r = F::ONE / det;
+    Some([[n0 * r, -(c10 * r), -(c20 * r)], [-(c01 * r), n1 * r, -(c21 * r)], [-(c02 * r), -(c12 * r), n2 * r]])
 }
 
 /// ΔK(T) = K ∘ (ΔK/K): the elementwise product of the constants at T0 and the relative

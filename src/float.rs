@@ -84,7 +84,9 @@ impl Float for f32 {
     /// `hi` is `x` rounded to `f32`; `lo` is `x − hi`, an integer multiple of `x`'s last
     /// place with at most 30 bits, from the two mantissas, rounded to `f32`: `hi + lo` is
     /// within 2⁻⁴⁷·|x| of `x`. For |x| below 2⁻⁷⁴ (or `hi` not a normal number) `lo` is 0:
-    /// the rest is then below 2⁻⁹⁸.
+    /// the rest is then below 2⁻⁹⁸. Load-time code: out of line, optimised for size.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
     fn split_f64(x: f64) -> (f32, f32) {
         let hi = x as f32;
         let (xb, hb) = (x.to_bits(), hi.to_bits());

@@ -62,6 +62,19 @@ pub fn mat_vec_fused<F: Float>(m: &Mat3<F>, v: &Vec3<F>) -> Vec3<F> {
     [e(&m[0]), e(&m[1]), e(&m[2])]
 }
 
+/// `a + b` element-wise.
+#[inline(always)]
+pub fn vec_add<F: Float>(a: &Vec3<F>, b: &Vec3<F>) -> Vec3<F> {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+/// `a − b` element-wise.
+#[inline(always)]
+pub fn mat_sub<F: Float>(a: &Mat3<F>, b: &Mat3<F>) -> Mat3<F> {
+    let row = |x: &Vec3<F>, y: &Vec3<F>| [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
+    [row(&a[0], &b[0]), row(&a[1], &b[1]), row(&a[2], &b[2])]
+}
+
 /// `a − b` element-wise.
 #[inline(always)]
 pub fn vec_sub<F: Float>(a: &Vec3<F>, b: &Vec3<F>) -> Vec3<F> {
