@@ -143,8 +143,8 @@ impl Xtask {
     /// and the flight image (`llvm-size`), the host's samples per second (criterion), the
     /// diagnosis's wall time on 30 000- and 260 000-row pairs against its budgets, and the CPU
     /// time and peak memory of `calibrate` and `verify` on a simulated day at 100 Hz against
-    /// theirs. `--only N` runs step N alone (the steps after 2 need the toolchain of step 1 only
-    /// for the firmware).
+    /// theirs. `--only N` runs step N alone, after step 1 (the toolchain) for the firmware's
+    /// steps 2 to 4.
     pub(crate) fn bench(&mut self, args: &[String]) -> bool {
         let only = match args {
             [] => None,
@@ -162,7 +162,9 @@ impl Xtask {
         };
         let started = Instant::now();
         let mut ok = true;
-        for &(n, name, f) in BENCH_STEPS.iter().filter(|s| only.is_none_or(|k| k == s.0)) {
+        // The firmware's steps need the toolchain that step 1 finds or installs.
+        let wanted = |n: usize| only.is_none_or(|k| k == n || (n == 1 && (2..=4).contains(&k)));
+        for &(n, name, f) in BENCH_STEPS.iter().filter(|s| wanted(s.0)) {
             ok = self.step(n, name, f);
             if !ok {
                 break;
