@@ -273,9 +273,6 @@ impl<F: Float, const W: usize> MomentWindow<F, W> {
         if W == 0 {
             return Pushed::Rejected;
         }
-        if self.pass == 0 && self.blocks == 0 {
-            self.c_acc = *x;
-        }
         let k = self.pass % CHUNK;
         if let Some(slot) = self.pending.get_mut(k) {
             *slot = *x;
@@ -283,6 +280,11 @@ impl<F: Float, const W: usize> MomentWindow<F, W> {
         self.pass += 1;
         if k + 1 < CHUNK && self.pass < W {
             return Pushed::Accepted;
+        }
+        // The first block is centred on its first sample: set here, where the sums first use
+        // the centre, rather than tested on every sample.
+        if self.blocks == 0 && self.pass == k + 1 {
+            self.c_acc = self.pending[0];
         }
         self.acc.add_all(self.pending.get(..=k).unwrap_or(&[]), &self.c_acc);
         if self.pass < W {
