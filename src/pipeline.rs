@@ -422,15 +422,8 @@ impl<F: Float> Pipeline<F> {
                 if !usable(&s) {
                     return (s, [F::ZERO; 3]);
                 }
-                let Some(v) = self.vib.profile(i as usize) else {
-                    s.status.insert(Status::VIBRATION_ESTIMATE_NOT_READY);
-                    return (s, [F::ZERO; 3]);
-                };
-                // Finite: each axis's VE is `solve_static_g`'s.
-                let (e, clamped) = self.vib.correction_for_output_g(v, &s.accel_g);
-                if clamped {
-                    s.status.insert(Status::VIBRATION_OUT_OF_RANGE);
-                }
+                let (e, flags) = self.profile_ve(i, s.accel_g);
+                s.status.insert(flags);
                 e
             }
         };
@@ -438,6 +431,22 @@ impl<F: Float> Pipeline<F> {
             *a -= e;
         }
         (s, ve)
+    }
+}
+
+impl<F: Float> Pipeline<F> {
+    /// The VE \[g\] of flight profile `i` for the compensated output `accel_g` and the flags
+    /// it sets. Out of line: its locals (four Newton steps per axis) would otherwise enlarge
+    /// the step's frame for every source, and a call is negligible beside its cost. The
+    /// output by value, so that the step's sample stays in registers.
+    #[inline(never)]
+    fn profile_ve(&self, i: u8, accel_g: Vec3<F>) -> (Vec3<F>, Status) {
+        let Some(v) = self.vib.profile(i as usize) else {
+            return ([F::ZERO; 3], Status::VIBRATION_ESTIMATE_NOT_READY);
+        };
+        // Finite: each axis's VE is `solve_static_g`'s.
+        let (e, clamped) = self.vib.correction_for_output_g(v, &accel_g);
+        (e, if clamped { Status::VIBRATION_OUT_OF_RANGE } else { Status::OK })
     }
 }
 
