@@ -43,7 +43,8 @@ impl<F: Float> Sums<F> {
         cross: [F::ZERO; 3],
     };
 
-    /// Adds the samples `xs` (at most [`CHUNK`]) under centre `c`, in order: per sample and
+    /// Adds the samples `xs` (at most [`CHUNK`]) under centre `c`, in order, to these sums
+    /// or, with `fresh`, to zero sums (the block's first chunk): per sample and
     /// axis the deviation `d = x − c`, `d`, `d²`, `d³`, `d⁴` (the last two by fused
     /// multiply-adds) and `|x| − |c|`, and the three cross products, the sums held in
     /// registers over the samples and stored once. Out of line,
@@ -51,15 +52,16 @@ impl<F: Float> Sums<F> {
     /// registers from one sample to the next).
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn add_all(&mut self, xs: &[Vec3<F>], c: &Vec3<F>) {
+    fn add_all(&mut self, xs: &[Vec3<F>], c: &Vec3<F>, fresh: bool) {
         let [cx, cy, cz] = *c;
         let (ax, ay, az) = (cx.abs(), cy.abs(), cz.abs());
-        let [mut s1x, mut s1y, mut s1z] = self.s1;
-        let [mut s2x, mut s2y, mut s2z] = self.s2;
-        let [mut s3x, mut s3y, mut s3z] = self.s3;
-        let [mut s4x, mut s4y, mut s4z] = self.s4;
-        let [mut sax, mut say, mut saz] = self.abs;
-        let [mut cxy, mut cyz, mut czx] = self.cross;
+        let from = if fresh { Sums::ZERO } else { *self };
+        let [mut s1x, mut s1y, mut s1z] = from.s1;
+        let [mut s2x, mut s2y, mut s2z] = from.s2;
+        let [mut s3x, mut s3y, mut s3z] = from.s3;
+        let [mut s4x, mut s4y, mut s4z] = from.s4;
+        let [mut sax, mut say, mut saz] = from.abs;
+        let [mut cxy, mut cyz, mut czx] = from.cross;
         for &[x, y, z] in xs {
             let (dx, dy, dz) = (x - cx, y - cy, z - cz);
             let (qx, qy, qz) = (dx * dx, dy * dy, dz * dz);
@@ -203,16 +205,18 @@ pub const CHUNK: usize = 8;
 pub struct MomentWindow<F, const W: usize> {
     /// Samples of the current block so far (< W).
     pass: usize,
-    /// Centre of `acc`.
+    /// Centre of the current block's sums.
     c_acc: Vec3<F>,
-    /// Sums over the current block's samples before the last `pass % CHUNK`.
-    acc: Sums<F>,
+    /// The sums of two blocks, `sums[cur]` the current block's (over its samples before the
+    /// last `pass % CHUNK`, set afresh by its first chunk) and the other the last complete
+    /// block's: a completed block's sums change roles, they are not copied.
+    sums: [Sums<F>; 2],
+    /// Index of the current block's sums (0 or 1).
+    cur: usize,
     /// The current block's last `pass % CHUNK` samples, not yet in `acc`.
     pending: [Vec3<F>; CHUNK],
-    /// Centre of `done`.
+    /// Centre of the last complete block's sums.
     c_done: Vec3<F>,
-    /// Sums over the last complete block.
-    done: Sums<F>,
     /// Blocks completed (saturating).
     blocks: u32,
 }
@@ -229,10 +233,10 @@ impl<F: Float, const W: usize> MomentWindow<F, W> {
         MomentWindow {
             pass: 0,
             c_acc: [F::ZERO; 3],
-            acc: Sums::ZERO,
+            sums: [Sums::ZERO; 2],
+            cur: 0,
             pending: [[F::ZERO; 3]; CHUNK],
             c_done: [F::ZERO; 3],
-            done: Sums::ZERO,
             blocks: 0,
         }
     }
@@ -281,24 +285,27 @@ impl<F: Float, const W: usize> MomentWindow<F, W> {
         if k + 1 < CHUNK && self.pass < W {
             return Pushed::Accepted;
         }
-        // The first block is centred on its first sample: set here, where the sums first use
-        // the centre, rather than tested on every sample.
-        if self.blocks == 0 && self.pass == k + 1 {
+        // The block's first chunk: its sums start from zero. The first block is centred on its
+        // first sample: set here, where the sums first use the centre, rather than tested on
+        // every sample.
+        let fresh = self.pass == k + 1;
+        if fresh && self.blocks == 0 {
             self.c_acc = self.pending[0];
         }
-        self.acc.add_all(self.pending.get(..=k).unwrap_or(&[]), &self.c_acc);
+        let cur = self.cur & 1;
+        self.sums[cur].add_all(self.pending.get(..=k).unwrap_or(&[]), &self.c_acc, fresh);
         if self.pass < W {
             return Pushed::Accepted;
         }
-        // The block is complete: it becomes the estimate, and the next block is centred on
-        // its mean.
-        self.done = self.acc;
+        // The block is complete: its sums become the estimate, and the next block is centred
+        // on its mean.
         self.c_done = self.c_acc;
         let inv_n = F::ONE / F::from_f64(W as f64);
+        let s1 = self.sums[cur].s1;
         for i in 0..3 {
-            self.c_acc[i] = self.c_done[i] + self.done.s1[i] * inv_n;
+            self.c_acc[i] = self.c_done[i] + s1[i] * inv_n;
         }
-        self.acc = Sums::ZERO;
+        self.cur = cur ^ 1;
         self.pass = 0;
         self.blocks = self.blocks.saturating_add(1);
         Pushed::BlockDone
@@ -310,7 +317,7 @@ impl<F: Float, const W: usize> MomentWindow<F, W> {
             return None;
         }
         let inv_n = F::ONE / F::from_f64(W as f64);
-        let s = &self.done;
+        let s = &self.sums[(self.cur ^ 1) & 1];
         let c = &self.c_done;
         let mut m = WindowMoments::default();
         let mut mu = [F::ZERO; 3];
