@@ -189,7 +189,10 @@ impl<F: Float, const W: usize> PipelineState<F, W> {
         }
     }
 
-    /// The online estimate forgotten: empty window, no VE.
+    /// The online estimate forgotten: empty window, no VE. Out of line: it runs when the
+    /// source changes from the online one, not per sample.
+    #[cold]
+    #[inline(never)]
     fn reset_online(&mut self) {
         self.window.reset();
         self.online_ve_g = [F::ZERO; 3];
@@ -372,7 +375,10 @@ impl<F: Float> Pipeline<F> {
             }
         };
         let mut s = self.cal.apply(u_v, state.temps.get(&self.cal, temp_c));
-        if let (true, Some((bias_g, d))) = (usable(&s), play) {
+        // Without dynamics one test, not two.
+        if let Some((bias_g, d)) = play
+            && usable(&s)
+        {
             for (a, b) in s.accel_g.iter_mut().zip(bias_g) {
                 *a = (-*b).mul_add(d, *a);
             }
@@ -412,13 +418,18 @@ impl<F: Float> Pipeline<F> {
                 s.status.insert(state.online_status);
                 state.online_ve_g
             }
-            _ => {
-                // The window serves the online source only: a block must not span a time
-                // when it was not selected.
+            // The window serves the online source only: a block must not span a time when it
+            // was not selected.
+            VibrationSource::None => {
                 if state.online_used {
                     state.reset_online();
                 }
-                let VibrationSource::Profile(i) = source else { return (s, [F::ZERO; 3]) };
+                return (s, [F::ZERO; 3]);
+            }
+            VibrationSource::Profile(i) => {
+                if state.online_used {
+                    state.reset_online();
+                }
                 if !usable(&s) {
                     return (s, [F::ZERO; 3]);
                 }
