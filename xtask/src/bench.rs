@@ -1,6 +1,7 @@
 //! `cargo xtask bench`: instructions per sample and stack depth in QEMU, flash and static RAM
 //! of the images against their budgets, host samples per second, the diagnosis's speed, the
-//! CPU time and peak memory of `calibrate` and `verify` on a day at 100 Hz.
+//! CPU time and peak memory of `calibrate` and `verify` on a day at 100 Hz, and of `import` on
+//! 100 MB flight-controller logs.
 
 use std::path::Path;
 use std::process::Stdio;
@@ -133,6 +134,16 @@ pub(crate) const DAY_RUNS: [(&str, &[&str]); 5] = [
     ),
 ];
 
+/// CPU budget of `bins-cal import` of a 100 MB log \[s\].
+pub(crate) const LOG_CPU_BUDGET_S: f64 = 10.0;
+
+/// Peak-memory budget of `bins-cal import` of a 100 MB log \[MB\]: a stream, bounded by
+/// its buffers and the log's definitions, not by the file.
+pub(crate) const LOG_RSS_BUDGET_MB: f64 = 50.0;
+
+/// Size of the benchmark's logs \[MB\].
+pub(crate) const LOG_MB: &str = "100";
+
 /// A bench step: its number, its title and what it runs.
 type BenchStep = (usize, &'static str, StepFn);
 
@@ -251,8 +262,60 @@ impl Xtask {
     }
 }
 
+impl Xtask {
+    /// Bench step 8: writes a 100 MB ArduPilot DataFlash log and a 100 MB PX4 ULog (three
+    /// accelerometers at 1 kHz, the `fc_log_gen` example) into a temporary directory and
+    /// measures `bins-cal import` of each (release): CPU time and peak resident set against
+    /// [`LOG_CPU_BUDGET_S`] and [`LOG_RSS_BUDGET_MB`].
+    fn bench_logs(&mut self) -> Result {
+        self.run(self.host_cargo([
+            "build",
+            "--release",
+            "-q",
+            "-p",
+            "bins-cal",
+            "--bin",
+            "bins-cal",
+            "--example",
+            "fc_log_gen",
+        ]))?;
+        let bin = self.root.join("target/release/bins-cal");
+        let gen_bin = self.root.join("target/release/examples/fc_log_gen");
+        let dir = std::env::temp_dir().join(format!("bins-cal-bench-logs-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let r = self.bench_logs_in(&bin, &gen_bin, &dir);
+        let _ = std::fs::remove_dir_all(&dir);
+        r
+    }
+
+    fn bench_logs_in(&self, bin: &Path, gen_bin: &Path, dir: &Path) -> Result {
+        let mut missed = Vec::new();
+        for log in ["log.bin", "log.ulg"] {
+            let path = dir.join(log);
+            let mut c = self.command(gen_bin);
+            c.arg(&path).arg(LOG_MB);
+            self.run(c)?;
+            let mut c = self.command(bin);
+            c.arg("import").arg(&path).arg("-o").arg(dir.join("rec.csv")).arg("--quiet").stdout(Stdio::null());
+            let u = measured(c)?;
+            let met = u.cpu_s < LOG_CPU_BUDGET_S && u.peak_rss_mb < LOG_RSS_BUDGET_MB;
+            if !met {
+                missed.push(log);
+            }
+            println!(
+                "  import {log} ({LOG_MB} MB) {:>7.2} s CPU {:>8.1} MB peak {:>7.2} s wall  {}",
+                u.cpu_s,
+                u.peak_rss_mb,
+                u.wall_s,
+                if met { "met" } else { "MISSED" }
+            );
+        }
+        if missed.is_empty() { Ok(()) } else { Err(format!("over budget: import {}", missed.join(", "))) }
+    }
+}
+
 /// The bench's steps in order.
-const BENCH_STEPS: [BenchStep; 7] = [
+const BENCH_STEPS: [BenchStep; 8] = [
     (1, "toolchain", Xtask::setup_toolchain),
     (2, "build", |x| {
         x.build_firmware()?;
@@ -301,6 +364,11 @@ const BENCH_STEPS: [BenchStep; 7] = [
         7,
         "bins-cal calibrate (static, --free, --dynamics identify) and verify on a day at 100 Hz: < 30 s CPU, < 500 MB peak each; diagnose of the day: < 60 s, < 1 GB (release, one thread)",
         Xtask::bench_day,
+    ),
+    (
+        8,
+        "bins-cal import of a 100 MB ArduPilot DataFlash log and a 100 MB PX4 ULog: < 10 s CPU, < 50 MB peak each (release)",
+        Xtask::bench_logs,
     ),
 ];
 

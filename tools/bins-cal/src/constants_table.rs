@@ -17,11 +17,10 @@ pub const U0_NAMES: [&str; 3] = ["U0x", "U0y", "U0z"];
 pub const MIN_TEMP_C: f64 = -150.0;
 /// See [`MIN_TEMP_C`].
 pub const MAX_TEMP_C: f64 = 250.0;
-/// Smallest |K_ii| \[V/g\]: a row whose scale factor is below it (an all-zero row) has no
-/// accelerometer in it.
-pub const MIN_K_DIAG_V_PER_G: f64 = 1.0e-6;
-/// Largest |K_ij| \[V/g\] and |U0_i| \[V\].
-pub const MAX_ABS_V: f64 = 1.0e3;
+/// The physical limits of the constants: the firmware's ([`bins_comp::blob::limits`]), so that
+/// a table is refused exactly where a calibration made from it could not be flashed: |K_ii|
+/// within 1e-3 … 1e3 V/g, |K_ij| (i ≠ j) at most half |K_ii|, |U0_i| at most 100 V.
+pub use bins_comp::blob::limits;
 
 /// Reads a constants table: (temperature [°C], constants) per data row, in file order.
 pub fn read(path: &Path) -> anyhow::Result<Vec<(f64, Constants<f64>)>> {
@@ -58,20 +57,26 @@ fn from_table(table: &Table) -> anyhow::Result<Vec<(f64, Constants<f64>)>> {
             bail!("{file}:{line}, column `temp_C`: {t} °C is outside {MIN_TEMP_C} … {MAX_TEMP_C} °C");
         }
         for i in 0..3 {
-            if !(c.k_v_per_g[i][i].abs() >= MIN_K_DIAG_V_PER_G) {
+            let k_ii = c.k_v_per_g[i][i];
+            let (lo, hi) = (limits::SCALE_FACTOR_MIN_V_PER_G, limits::SCALE_FACTOR_MAX_V_PER_G);
+            if !(lo..=hi).contains(&k_ii.abs()) {
                 bail!(
-                    "{file}:{line}, column `{}`: {} V/g: the scale factor of an accelerometer must be at least {MIN_K_DIAG_V_PER_G} V/g in magnitude",
-                    K_NAMES[i][i],
-                    c.k_v_per_g[i][i]
+                    "{file}:{line}, column `{}`: {k_ii} V/g: the scale factor of an accelerometer must be within {lo} … {hi} V/g in magnitude",
+                    K_NAMES[i][i]
                 );
             }
             for (j, k) in c.k_v_per_g[i].iter().enumerate() {
-                if k.abs() > MAX_ABS_V {
-                    bail!("{file}:{line}, column `{}`: {k} V/g is beyond ±{MAX_ABS_V}", K_NAMES[i][j]);
+                let max = limits::CROSS_RATIO_MAX * k_ii.abs();
+                if j != i && !(k.abs() <= max) {
+                    bail!(
+                        "{file}:{line}, column `{}`: {k} V/g is beyond ±{max} V/g ({} of the row's scale factor {k_ii}: a cross-axis sensitivity, not an axis)",
+                        K_NAMES[i][j],
+                        limits::CROSS_RATIO_MAX
+                    );
                 }
             }
-            if c.u0_v[i].abs() > MAX_ABS_V {
-                bail!("{file}:{line}, column `{}`: {} V is beyond ±{MAX_ABS_V}", U0_NAMES[i], c.u0_v[i]);
+            if !(c.u0_v[i].abs() <= limits::U0_MAX_V) {
+                bail!("{file}:{line}, column `{}`: {} V is beyond ±{} V", U0_NAMES[i], c.u0_v[i], limits::U0_MAX_V);
             }
         }
         if out.iter().any(|(u, _)| *u == t) {

@@ -23,6 +23,66 @@ use std::sync::{Mutex, MutexGuard};
 /// The temporary files this process has created and not yet renamed or removed.
 static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
+/// The output directories this process has created for a set of outputs not yet committed
+/// ([`OutputDir`]): a signal removes them (when empty) with the temporary files.
+static DIRS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn dirs() -> MutexGuard<'static, Vec<PathBuf>> {
+    DIRS.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// An output directory (a plot directory) created for outputs that are written all or nothing:
+/// [`OutputDir::create`] makes it (and its missing parents) when it does not exist; dropped
+/// without [`keep`](OutputDir::keep) — an error, or a signal
+/// ([`remove_temporaries_on_signals`]) — the directories it created are removed again when
+/// empty, so that a set of outputs leaves no trace when it does not appear.
+pub struct OutputDir {
+    created: Vec<PathBuf>,
+}
+
+impl OutputDir {
+    /// Creates `dir` and its missing parents. Errors name the directory.
+    pub fn create(dir: &Path) -> anyhow::Result<Self> {
+        let mut missing = Vec::new();
+        let mut d = Some(dir);
+        while let Some(p) = d.filter(|p| !p.as_os_str().is_empty() && !p.exists()) {
+            missing.push(p.to_path_buf());
+            d = p.parent();
+        }
+        let mut out = OutputDir { created: Vec::new() };
+        for p in missing.into_iter().rev() {
+            let mut registry = dirs();
+            match std::fs::create_dir(&p) {
+                Ok(()) => {
+                    registry.push(p.clone());
+                    out.created.push(p);
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+                Err(e) => anyhow::bail!("{}: {e}", p.display()),
+            }
+        }
+        Ok(out)
+    }
+
+    /// The outputs are in place: the directories stay.
+    pub fn keep(mut self) {
+        let mut registry = dirs();
+        for p in self.created.drain(..) {
+            registry.retain(|r| *r != p);
+        }
+    }
+}
+
+impl Drop for OutputDir {
+    fn drop(&mut self) {
+        let mut registry = dirs();
+        for p in self.created.drain(..).rev() {
+            let _ = std::fs::remove_dir(&p);
+            registry.retain(|r| *r != p);
+        }
+    }
+}
+
 fn live() -> MutexGuard<'static, Vec<PathBuf>> {
     // A panic while the list was held leaves it consistent (pushes and removals only).
     LIVE.lock().unwrap_or_else(|e| e.into_inner())
@@ -282,15 +342,31 @@ pub fn write_all_or_nothing(outputs: &[(&Path, &[u8])]) -> anyhow::Result<()> {
 }
 
 /// Commits several [`AtomicFile`]s all or nothing: every one flushed and synced first (an
-/// error removes them all), then all renamed into place.
+/// error removes them all), then all renamed into place under the registry's lock, so that a
+/// signal handled meanwhile ([`remove_temporaries_on_signals`]) waits for the last rename:
+/// the set appears whole, or (the signal handled before the first rename) not at all.
 pub fn commit_all(mut files: Vec<AtomicFile>) -> anyhow::Result<()> {
     for f in &mut files {
         f.prepare()?;
     }
-    for f in files {
-        f.commit()?;
+    let mut live = live();
+    let mut result = Ok(());
+    for mut f in files {
+        f.out = None;
+        if let Dest::Replace { target, tmp } = &f.dest {
+            let renamed = if result.is_ok() { std::fs::rename(tmp, target) } else { Err(std::io::Error::other("")) };
+            if let Err(e) = renamed {
+                let _ = std::fs::remove_file(tmp);
+                if result.is_ok() {
+                    result = Err(anyhow::anyhow!("{}: {e}", f.path.display()));
+                }
+            }
+            if let Some(i) = live.iter().position(|p| p == tmp) {
+                live.swap_remove(i);
+            }
+        }
     }
-    Ok(())
+    result
 }
 
 /// A file written in a stream and put in place only on success: the data goes to a temporary
@@ -344,6 +420,18 @@ impl AtomicFile {
             }
             Dest::InPlace => Ok(()),
         }
+    }
+}
+
+/// Writes go to the temporary file (or the device or FIFO given as the output), so that a
+/// streaming writer can own the file until it is committed.
+impl Write for AtomicFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.writer().write(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.writer().flush()
     }
 }
 
@@ -421,6 +509,11 @@ pub fn remove_temporaries_on_signals() {
         let live = live();
         for p in live.iter() {
             let _ = std::fs::remove_file(p);
+        }
+        // The directories created for outputs that did not appear, innermost first (only
+        // when empty: a file someone else put there stays).
+        for d in dirs().iter().rev() {
+            let _ = std::fs::remove_dir(d);
         }
         // The default action of `sig`: the process ends by it as if it had not been handled.
         let _ = signal_hook::low_level::emulate_default_handler(sig);

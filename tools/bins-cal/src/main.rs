@@ -7,6 +7,8 @@
 //! | `calibrate` | [`cmd::calibrate`], [`cmd::shaker`] | tilter (and shake-table) recordings, or holds placed by hand (`--free`, `--tilt`) → calibration file, blob |
 //! | `verify` | [`cmd::verify`] | check recordings + calibration → \|g\| errors, table, plots |
 //! | `diagnose` | [`cmd::diagnose`] | SIM vs REAL recording → mismatch located, mechanisms named and fitted, report, plots |
+//! | `export` | [`cmd::export`] | calibration file → PX4 `TC_A*` / ArduPilot `INS_TCAL*` parameters, what they lose |
+//! | `import` | [`cmd::import`] | flight-controller log (PX4 ULog, ArduPilot DataFlash) → recordings, one per accelerometer |
 //! | `replay` | [`cmd::replay`] | recording + calibration → the firmware's per-sample output on the host; replay streams |
 //! | `simulate` | [`cmd::simulate`] | scenario file (TOML) → simulated recording (format v1) |
 //! | `tempco` | [`cmd::tempco`] | temperature coefficients from constants at several temperatures |
@@ -40,6 +42,12 @@ enum Command {
     Verify(cmd::verify::Args),
     /// Locate a sim-vs-real mismatch, name the missing physics, model it (report, plots).
     Diagnose(cmd::diagnose::Args),
+    /// A calibration's bias against temperature as PX4 (TC_A*) or ArduPilot (INS_TCAL*)
+    /// parameters.
+    Export(cmd::export::Args),
+    /// A flight-controller log (PX4 ULog, ArduPilot DataFlash) into recordings, one per
+    /// accelerometer instance.
+    Import(cmd::import::Args),
     /// A recording through the firmware's per-sample step (host), or its replay streams.
     Replay(cmd::replay::Args),
     /// Simulate a unit on its rigs (scenario file → recording).
@@ -61,6 +69,8 @@ fn main() -> ExitCode {
         Command::Calibrate(args) => cmd::calibrate::run(*args),
         Command::Verify(args) => cmd::verify::run(args),
         Command::Diagnose(args) => cmd::diagnose::run(args),
+        Command::Export(args) => cmd::export::run(args),
+        Command::Import(args) => cmd::import::run(args),
         Command::Replay(args) => cmd::replay::run(args),
         Command::Simulate(args) => cmd::simulate::run(args),
         Command::Tempco(args) => cmd::tempco::run(args),

@@ -106,7 +106,12 @@ fn real_sweep_steps_on_z_are_located_and_fitted_with_the_model() {
     eprintln!("combined held-out RMS after / before: {ratio:.3}");
     let z_reported = r.unexplained_rms_mg["z"] > 0.0 && r.unexplained_located.iter().any(|u| u.axis == "z");
     assert!(ratio <= 0.62 || z_reported, "combined held-out ratio {ratio:.3} and z's structure not reported");
-    assert!(r.effects.iter().any(|e| e.id == "thermal_lag" && e.axes.iter().any(|a| a == "y")), "y's lag lost");
+    // y's heating/cooling difference at one ramp rate: a lag, or a play the recording cannot tell
+    // from it (the separating test is two ramp rates with holds).
+    let on_y = |axes: &[String]| axes.iter().any(|a| a == "y");
+    let lag_named = r.effects.iter().any(|e| e.id == "thermal_lag" && on_y(&e.axes));
+    let lag_grouped = r.ambiguous.iter().any(|g| g.ids.iter().any(|i| i == "thermal_lag") && on_y(&g.axes));
+    assert!(lag_named || lag_grouped, "y's lag lost: {:?} {:?}", r.effects, r.ambiguous);
     assert!(r.heldout_rms_after_mg["y"] <= 0.70, "y held-out after {}", r.heldout_rms_after_mg["y"]);
 }
 

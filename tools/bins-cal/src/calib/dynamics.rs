@@ -22,8 +22,14 @@
 //! held out in turn, and a component is kept only when the prediction of the held-out blocks
 //! without it is worse by more than [`MIN_HELDOUT_Z`] standard errors (the scatter of the
 //! per-chunk gains, drift included) and by more than [`MIN_HELDOUT_REL`] of the residual. The
-//! kept parameters get standard errors from the residual's curvature. Without a dwell during a
-//! ramp nothing is searched ([`Identification::not_searched`]).
+//! chosen model then goes through a time-halves check ([`HalvesCheck`]): refitted at its θ on
+//! the first half of the recording it predicts the second, and the reverse. The bias play's
+//! amplitude is kept only on the axes where it predicts better in both directions (elsewhere
+//! the axis is fitted without it, [`fit_at_axes`]), and a lag or play that still leaves an
+//! axis predicted worse than by the static model in either direction (beyond
+//! [`MIN_HELDOUT_Z`] standard errors) is dropped. The kept parameters get standard errors from
+//! the residual's curvature. Without a dwell during a ramp nothing is searched
+//! ([`Identification::not_searched`]).
 //!
 //! Dwells are found as for the static calibration ([`segments`] finds them), but dwells
 //! during temperature ramps are used too (they are what tells the dynamics); each dwell is cut
@@ -333,6 +339,20 @@ pub struct JointFit {
 }
 
 impl JointFit {
+    /// The fit's dynamics as the core's parameters (self-heating 0: a tilter recording has no
+    /// power-on to identify it from; the bias play only with its play). No `-0.0`.
+    pub fn dynamics(&self) -> ThermalDynamics<f64> {
+        let th = self.theta;
+        ThermalDynamics {
+            lag_tau_s: th.lag_tau_s + 0.0,
+            hysteresis_width_c: th.hysteresis_width_c + 0.0,
+            self_heating_c: 0.0,
+            self_heating_tau_s: 0.0,
+            bias_play_width_c: th.bias_play_width_c + 0.0,
+            bias_play_g: if th.bias_play_width_c > 0.0 { self.bias_play_g.map(|b| b + 0.0) } else { [0.0; 3] },
+        }
+    }
+
     /// RMS residual of the block means per axis \[g\].
     pub fn rms_g(&self) -> [f64; 3] {
         self.sse_g2.map(|s| (s / self.n_blocks.max(1) as f64).sqrt())
@@ -362,6 +382,19 @@ fn varying(series: &[Series]) -> [bool; 3] {
 /// The least-squares fit of the constants and their temperature model at `th`. `scale_v_per_g`
 /// converts each axis's residual to g (K_ii). Errors: too few blocks for the parameters.
 pub fn fit_at(series: &[Series], th: &Theta, req: &Request, scale_v_per_g: [f64; 3]) -> anyhow::Result<JointFit> {
+    fit_at_axes(series, th, req, scale_v_per_g, [true; 3])
+}
+
+/// [`fit_at`] with the bias play's amplitude fitted on the axes of `bias_axes` only (on the
+/// others the axis is fitted without its column: amplitude 0, and its constants those of the
+/// fit without it).
+pub fn fit_at_axes(
+    series: &[Series],
+    th: &Theta,
+    req: &Request,
+    scale_v_per_g: [f64; 3],
+    bias_axes: [bool; 3],
+) -> anyhow::Result<JointFit> {
     let order = req.order;
     if !(1..=MAX_POLY_ORDER).contains(&order) {
         bail!("the polynomial order must be 1 to {MAX_POLY_ORDER}, got {order}");
@@ -424,6 +457,7 @@ pub fn fit_at(series: &[Series], th: &Theta, req: &Request, scale_v_per_g: [f64;
                 tags.push((p, Some(j)));
             }
         }
+        let with_bias = with_bias && bias_axes[i];
         if with_bias {
             cols.push(dcol.clone());
         }
@@ -534,7 +568,34 @@ pub struct Identification {
     pub evaluations: usize,
     /// Why nothing was searched, when nothing was (e.g. no dwell during a ramp).
     pub not_searched: Option<String>,
+    /// The time-halves check of the kept model (`None` when nothing was searched or a half has
+    /// too few blocks).
+    pub halves: Option<HalvesCheck>,
 }
+
+/// The two-way time-halves check of the kept model: the model refitted at the kept θ on the
+/// blocks of one half of each recording's dwell span predicts the other half's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HalvesCheck {
+    /// Where each recording was split \[s\]: the middle of its blocks' time span.
+    pub split_s: Vec<f64>,
+    /// Block RMS per axis \[g\] of the prediction of the other half, per direction (`[0]`:
+    /// fitted on the first half, predicting the second; `[1]`: the reverse), by the static
+    /// model of the same order …
+    pub static_rms_g: [[f64; 3]; 2],
+    /// … and by the kept model (dynamics and bias play amplitudes on `bias_axes`).
+    pub dynamic_rms_g: [[f64; 3]; 2],
+    /// Blocks predicted in each direction.
+    pub n_blocks: [usize; 2],
+    /// The axes the bias play's amplitude is kept on (none without a bias play).
+    pub bias_axes: [bool; 3],
+    /// Per axis whose amplitude was zeroed, the direction it did not improve (`x: fitted on …
+    /// 2.094 → 3.260 mg`).
+    pub bias_notes: Vec<String>,
+}
+
+/// The axes' names.
+pub const AXES: [&str; 3] = ["x", "y", "z"];
 
 impl Identification {
     /// True when at least one component is kept.
@@ -542,18 +603,10 @@ impl Identification {
         self.components.iter().any(|c| c.on)
     }
 
-    /// The identified dynamics as the core's parameters (self-heating 0: a tilter recording has
-    /// no power-on to identify it from; the bias play only with its play). No `-0.0`.
+    /// The identified dynamics as the core's parameters ([`JointFit::dynamics`] of the kept
+    /// fit).
     pub fn dynamics(&self) -> ThermalDynamics<f64> {
-        let th = self.fit.theta;
-        ThermalDynamics {
-            lag_tau_s: th.lag_tau_s + 0.0,
-            hysteresis_width_c: th.hysteresis_width_c + 0.0,
-            self_heating_c: 0.0,
-            self_heating_tau_s: 0.0,
-            bias_play_width_c: th.bias_play_width_c + 0.0,
-            bias_play_g: if th.bias_play_width_c > 0.0 { self.fit.bias_play_g.map(|b| b + 0.0) } else { [0.0; 3] },
-        }
+        self.fit.dynamics()
     }
 }
 
@@ -760,14 +813,20 @@ struct Blocks<'a> {
     w: [f64; 3],
     chunk: Vec<usize>,
     n_chunks: usize,
+    /// Per block, its half of its recording's dwell span (0: the first, 1: the second), by the
+    /// time of its middle row.
+    half: Vec<usize>,
 }
 
 impl<'a> Blocks<'a> {
     fn new(series: &'a [Series], req: &'a Request, scale_v_per_g: [f64; 3]) -> Blocks<'a> {
         let var = varying(series);
         let (mut f, mut y, mut chunk) = (Vec::new(), [Vec::new(), Vec::new(), Vec::new()], Vec::new());
+        let mut half = Vec::new();
         let mut n_chunks = 0;
         for s in series {
+            let mid_s = split_s(s);
+            half.extend(s.blocks.iter().map(|&(a, b, _)| usize::from(s.t_s[(a + b - 1) / 2] >= mid_s)));
             let t_first = s.t_s.first().copied().unwrap_or(0.0);
             let len = (s.duration_s() / CHUNKS_PER_RECORDING).max(CHUNK_MIN_S);
             let mut last = 0;
@@ -783,7 +842,7 @@ impl<'a> Blocks<'a> {
             }
             n_chunks += last + 1;
         }
-        Blocks { series, req, var, f, y, w: scale_v_per_g.map(|s| 1.0 / (s * s)), chunk, n_chunks }
+        Blocks { series, req, var, f, y, w: scale_v_per_g.map(|s| 1.0 / (s * s)), chunk, n_chunks, half }
     }
 
     /// The lagged temperature (τ) through the play (h) of every row of every series.
@@ -884,6 +943,80 @@ impl<'a> Blocks<'a> {
         }
         out
     }
+
+    /// The two-way time-halves check at θ: per direction (0: the model fitted on the blocks of
+    /// the first half of each recording's dwell span, predicting the second; 1: the reverse)
+    /// and per axis, the residual of the predicted blocks \[g²\], with the bias play's column on
+    /// the axes of `bias_axes` only; and the blocks predicted in each direction. `None` when a
+    /// half has no more blocks than the model has parameters.
+    fn halves(&self, th: &Theta, bias_axes: [bool; 3]) -> Option<Halves> {
+        let te = self.temp_eff(th.lag_tau_s, th.hysteresis_width_c);
+        let base = self.base(&te);
+        let d = (th.bias_play_width_c > 0.0).then(|| self.dcol(&te, th.bias_play_width_c));
+        let mut out = Halves { sse_g2: [[0.0; 3]; 2], n_blocks: [0; 2], chunk_g2: Default::default() };
+        for dir in 0..2 {
+            let train: Vec<usize> = (0..self.f.len()).filter(|&k| self.half[k] == dir).collect();
+            let test: Vec<usize> = (0..self.f.len()).filter(|&k| self.half[k] != dir).collect();
+            if test.is_empty() || train.len() <= base.len() + 1 {
+                return None;
+            }
+            out.n_blocks[dir] = test.len();
+            // The predicted half's chunks, in order: each test block's index among them.
+            let mut ids: Vec<usize> = test.iter().map(|&k| self.chunk[k]).collect();
+            ids.dedup();
+            let at: Vec<usize> = test.iter().map(|&k| ids.partition_point(|&c| c < self.chunk[k])).collect();
+            for i in 0..3 {
+                out.chunk_g2[dir][i] = vec![0.0; ids.len()];
+                let mut cols: Vec<&Vec<f64>> = base.iter().collect();
+                if let (Some(d), true) = (&d, bias_axes[i]) {
+                    cols.push(d);
+                }
+                let sub: Vec<Vec<f64>> = cols.iter().map(|c| train.iter().map(|&k| c[k]).collect()).collect();
+                let refs: Vec<&[f64]> = sub.iter().map(Vec::as_slice).collect();
+                let beta = Basis::new(&refs).coef(&train.iter().map(|&k| self.y[i][k]).collect::<Vec<_>>());
+                for (&k, &c) in test.iter().zip(&at) {
+                    let pred: f64 = cols.iter().zip(&beta).map(|(c, b)| c[k] * b).sum();
+                    let e2 = self.w[i] * (self.y[i][k] - pred).powi(2);
+                    out.sse_g2[dir][i] += e2;
+                    out.chunk_g2[dir][i][c] += e2;
+                }
+            }
+        }
+        Some(out)
+    }
+}
+
+/// The residuals of the time-halves check (`Blocks::halves`).
+#[derive(Clone, Debug)]
+struct Halves {
+    /// Per direction (0: fitted on the first half, 1: on the second) and axis \[g²\].
+    sse_g2: [[f64; 3]; 2],
+    /// Blocks predicted per direction.
+    n_blocks: [usize; 2],
+    /// The same per chunk of the predicted half (the chunks of the held-out selection, in
+    /// time order) \[g²\]: the scatter that gives a difference its standard error.
+    chunk_g2: [[Vec<f64>; 3]; 2],
+}
+
+impl Halves {
+    fn rms_g(&self) -> [[f64; 3]; 2] {
+        let mut r = [[0.0; 3]; 2];
+        for dir in 0..2 {
+            for i in 0..3 {
+                r[dir][i] = (self.sse_g2[dir][i] / self.n_blocks[dir].max(1) as f64).sqrt();
+            }
+        }
+        r
+    }
+}
+
+/// The middle of the time span of `s`'s blocks \[s\] (from the first row of the first block to
+/// the last row of the last): where the time-halves check splits the recording.
+pub fn split_s(s: &Series) -> f64 {
+    match (s.blocks.first(), s.blocks.last()) {
+        (Some(a), Some(b)) => 0.5 * (s.t_s[a.0] + s.t_s[b.1 - 1]),
+        _ => 0.0,
+    }
 }
 
 /// `a − b` summed, and its standard error from the scatter of the per-chunk differences.
@@ -943,6 +1076,7 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
             lag_resolution_s: lag_res,
             evaluations: 2,
             not_searched: Some(why),
+            halves: None,
         });
     }
     let blocks = Blocks::new(series, req, scale);
@@ -1116,12 +1250,23 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
     }
     let theta = by_mask[m].as_ref().map_or(Theta::default(), |c| c.0.theta);
     progress(&format!(
-        "dynamics: chosen {}: τ = {:.1} s, h = {:.3} °C, h_b = {:.3} °C",
+        "dynamics: chosen by the held-out chunks {}: τ = {:.1} s, h = {:.3} °C, h_b = {:.3} °C",
         mask_label(m as u8),
         theta.lag_tau_s,
         theta.hysteresis_width_c,
         theta.bias_play_width_c
     ));
+    let best_theta: Vec<Option<Theta>> = by_mask.iter().map(|c| c.as_ref().map(|c| c.0.theta)).collect();
+    let (m, theta, halves, dropped) = halves_check(&blocks, &best_theta, m, theta, &mut evaluations, progress);
+    if !dropped.is_empty() {
+        progress(&format!(
+            "dynamics: kept {}: τ = {:.1} s, h = {:.3} °C, h_b = {:.3} °C",
+            mask_label(m as u8),
+            theta.lag_tau_s,
+            theta.hysteresis_width_c,
+            theta.bias_play_width_c
+        ));
+    }
     // Standard errors of the kept parameters: the curvature of the residual in their
     // logarithms, with the held-out residual variance (drift included).
     let on: Vec<usize> = (0..3).filter(|&k| m & (1 << k) != 0).collect();
@@ -1157,6 +1302,7 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
                 100.0 * MIN_HELDOUT_REL
             )
         });
+        let why_off = dropped.iter().find(|d| d.0 == k).map(|d| d.1.clone()).or(why_off);
         let std_error = on.iter().position(|&j| j == k).map_or(0.0, |p| se[p]);
         components.push(Component {
             name: COMPONENTS[k],
@@ -1168,7 +1314,8 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
             why_off,
         });
     }
-    let fit = fit_at(series, &theta, req, scale)?;
+    let bias_axes = halves.as_ref().map_or([true; 3], |h| h.bias_axes);
+    let fit = fit_at_axes(series, &theta, req, scale, bias_axes)?;
     Ok(Identification {
         fit,
         static_fit,
@@ -1177,7 +1324,173 @@ pub fn identify(series: &[Series], req: &Request, progress: &mut dyn FnMut(&str)
         lag_resolution_s: lag_res,
         evaluations,
         not_searched: None,
+        halves,
     })
+}
+
+/// The time-halves check of the model the held-out chunks chose (mask `m`, parameters
+/// `theta`; `best_theta[mask]` the best candidate of each combination): the model refitted at
+/// θ on the blocks of the first half of each recording's dwell span predicts the second, and
+/// the reverse, and so does the static model of the same order. The bias play's amplitude is
+/// kept on an axis only when it lowers that axis's residual in both directions (against the
+/// same θ without it); with no such axis the bias play is dropped. Then, if the model still
+/// predicts some axis worse than the static model in either direction by more than
+/// [`MIN_HELDOUT_Z`] standard errors of the excess (the scatter of its per-chunk parts; only
+/// a lag or a play, components of the whole unit with no amplitude of their own, can do
+/// that), the one of them whose removal mends the worst axis most is dropped, and everything
+/// is checked again at the remaining combination's θ. Returns the kept mask and θ, the check
+/// (`None` when a half has too few blocks for the model: nothing is then dropped) and, per
+/// dropped component, why.
+#[allow(clippy::type_complexity)]
+fn halves_check(
+    blocks: &Blocks<'_>,
+    best_theta: &[Option<Theta>],
+    mut m: usize,
+    mut theta: Theta,
+    evaluations: &mut usize,
+    progress: &mut dyn FnMut(&str),
+) -> (usize, Theta, Option<HalvesCheck>, Vec<(usize, String)>) {
+    const DIRS: [&str; 2] =
+        ["fitted on the first half, predicting the second", "fitted on the second half, predicting the first"];
+    let mg = |v: [f64; 3]| format!("{:>7.3} / {:>7.3} / {:>7.3}", v[0] * 1e3, v[1] * 1e3, v[2] * 1e3);
+    let row = |name: &str, h: &Halves| {
+        let r = h.rms_g();
+        format!("  {name:<56} {}   {}", mg(r[0]), mg(r[1]))
+    };
+    let split_s: Vec<f64> = blocks.series.iter().map(split_s).collect();
+    let mut dropped: Vec<(usize, String)> = Vec::new();
+    *evaluations += 1;
+    let Some(static_h) = blocks.halves(&Theta::default(), [false; 3]) else {
+        progress("dynamics: time-halves check not made: a half of the dwells has too few blocks for the model");
+        return (m, theta, None, dropped);
+    };
+    progress(&format!(
+        "dynamics: time-halves check (split at {} s; at θ the model refitted on one half predicts the other), block RMS x / y / z [mg]:",
+        split_s.iter().map(|t| format!("{t:.0}")).collect::<Vec<_>>().join(", ")
+    ));
+    progress(&format!("  {:<56} {:<29}   {}", "", "first half → second", "second half → first"));
+    progress(&row("static", &static_h));
+    loop {
+        let label = mask_label(m as u8);
+        let mut bias_axes = [false; 3];
+        let mut bias_notes = Vec::new();
+        if m & 4 != 0 {
+            let mut th0 = theta;
+            th0.bias_play_width_c = 0.0;
+            *evaluations += 2;
+            // The halves have the blocks for the static model, so for any θ (the bias play's
+            // column is allowed for): `None` does not happen here.
+            let (Some(with), Some(without)) = (blocks.halves(&theta, [true; 3]), blocks.halves(&th0, [false; 3]))
+            else {
+                return (m, theta, None, dropped);
+            };
+            progress(&row(&format!("{label} (amplitude on every axis)"), &with));
+            if m & !4 != 0 {
+                progress(&row(&mask_label((m & !4) as u8), &without));
+            }
+            let (rw, ro) = (with.rms_g(), without.rms_g());
+            for i in 0..3 {
+                bias_axes[i] = (0..2).all(|d| with.sse_g2[d][i] < without.sse_g2[d][i]);
+                if let Some(d) = (0..2).find(|&d| with.sse_g2[d][i] >= without.sse_g2[d][i]) {
+                    bias_notes.push(format!(
+                        "{}: {} {:.3} → {:.3} mg",
+                        AXES[i],
+                        DIRS[d],
+                        ro[d][i] * 1e3,
+                        rw[d][i] * 1e3
+                    ));
+                }
+            }
+            if bias_axes.iter().all(|b| !b) {
+                let why = format!(
+                    "chosen by the held-out chunks, dropped by the time-halves check: its amplitude predicts no axis better in both directions ({})",
+                    bias_notes.join("; ")
+                );
+                progress(&format!("dynamics: bias_play {why}"));
+                dropped.push((2, why));
+                m &= !4;
+                theta = best_theta[m].unwrap_or(th0);
+                continue;
+            }
+            if !bias_notes.is_empty() {
+                progress(&format!(
+                    "dynamics: bias play amplitude kept on {} only (0 where it does not predict better in both directions: {})",
+                    (0..3).filter(|&i| bias_axes[i]).map(|i| AXES[i]).collect::<Vec<_>>().join(", "),
+                    bias_notes.join("; ")
+                ));
+            }
+        }
+        *evaluations += 1;
+        let Some(model) = blocks.halves(&theta, bias_axes) else { return (m, theta, None, dropped) };
+        let kept_label = if m & 4 != 0 && bias_axes != [true; 3] {
+            let on: Vec<&str> = (0..3).filter(|&i| bias_axes[i]).map(|i| AXES[i]).collect();
+            format!("{label} (amplitude on {})", on.join(", "))
+        } else {
+            label.clone()
+        };
+        progress(&row(&kept_label, &model));
+        // The axis predicted worst against the static model, as (the excess of its residual
+        // in standard errors of that excess, direction, axis): worse when the excess is more
+        // than MIN_HELDOUT_Z of them (the scatter of its per-chunk parts, as for the held-out
+        // gains).
+        let worst_vs_static = |h: &Halves| {
+            let mut w = (f64::NEG_INFINITY, 0, 0);
+            for d in 0..2 {
+                for i in 0..3 {
+                    let (excess, se) = gain_and_se(&h.chunk_g2[d][i], &static_h.chunk_g2[d][i]);
+                    let z = excess / se.max(1e-300);
+                    if z > w.0 {
+                        w = (z, d, i);
+                    }
+                }
+            }
+            w
+        };
+        let (z, d, i) = worst_vs_static(&model);
+        if z > MIN_HELDOUT_Z {
+            // An axis worse than static that its amplitude cannot mend (kept only where it
+            // helps): the unit-wide component whose removal mends the most goes.
+            let (rs, rm) = (static_h.rms_g(), model.rms_g());
+            let why = format!(
+                "chosen by the held-out chunks, dropped by the time-halves check: with it {} is predicted worse than by the static model {} ({:.3} → {:.3} mg, {z:.1} standard errors; {MIN_HELDOUT_Z} allowed)",
+                AXES[i],
+                DIRS[d],
+                rs[d][i] * 1e3,
+                rm[d][i] * 1e3
+            );
+            let mut best: Option<(usize, f64)> = None;
+            for k in (0..2).filter(|&k| m & (1 << k) != 0) {
+                let mut thk = theta;
+                set(&mut thk, k, 0.0);
+                *evaluations += 1;
+                let Some(without) = blocks.halves(&thk, bias_axes) else { continue };
+                progress(&row(&format!("{kept_label} without {}", COMPONENTS[k]), &without));
+                let w = worst_vs_static(&without).0;
+                if best.is_none_or(|b| w < b.1) {
+                    best = Some((k, w));
+                }
+            }
+            // Without a lag or a play, every axis is static or mended by its amplitude; should
+            // rounding say otherwise, the bias play goes.
+            let k = best.map_or(2, |b| b.0);
+            progress(&format!("dynamics: {} {why}", COMPONENTS[k]));
+            let mut thk = theta;
+            set(&mut thk, k, 0.0);
+            dropped.push((k, why));
+            m &= !(1 << k);
+            theta = best_theta[m].unwrap_or(thk);
+            continue;
+        }
+        let check = HalvesCheck {
+            split_s,
+            static_rms_g: static_h.rms_g(),
+            dynamic_rms_g: model.rms_g(),
+            n_blocks: model.n_blocks,
+            bias_axes,
+            bias_notes,
+        };
+        return (m, theta, Some(check), dropped);
+    }
 }
 
 fn fmt_value(k: usize, v: f64) -> String {

@@ -435,6 +435,19 @@ fn identify_dynamics(
             c.why_off.as_deref().unwrap_or("kept")
         );
     }
+    // The time-halves check of what is kept, both directions, per axis (the search printed
+    // its table): a note in the file.
+    let halves = id.halves.as_ref().filter(|_| id.any_kept()).map(|h| {
+        let mg = |v: [f64; 3]| format!("{:.3} / {:.3} / {:.3}", v[0] * 1e3, v[1] * 1e3, v[2] * 1e3);
+        let dirs = ["first half → second", "second half → first"];
+        format!(
+            "time-halves check (the model refitted at the kept θ on one half of the dwells predicts the other), block RMS x/y/z static → with the dynamics: {}",
+            (0..2)
+                .map(|d| format!("{} {} → {} mg", dirs[d], mg(h.static_rms_g[d]), mg(h.dynamic_rms_g[d])))
+                .collect::<Vec<_>>()
+                .join("; ")
+        )
+    });
     let off: Vec<String> =
         id.components.iter().filter_map(|c| c.why_off.as_ref().map(|w| format!("{} off: {w}", c.name))).collect();
     if !id.any_kept() {
@@ -474,12 +487,19 @@ fn identify_dynamics(
             "lag" => format!("τ = {:.1} ± {:.1} s", d.lag_tau_s, c.std_error),
             "hysteresis" => format!("h = {:.3} ± {:.3} °C", d.hysteresis_width_c, c.std_error),
             _ => format!(
-                "h_b = {:.3} ± {:.3} °C with {:+.4} / {:+.4} / {:+.4} mg",
+                "h_b = {:.3} ± {:.3} °C with {:+.4} / {:+.4} / {:+.4} mg{}",
                 d.bias_play_width_c,
                 c.std_error,
                 b[0] * 1e3,
                 b[1] * 1e3,
-                b[2] * 1e3
+                b[2] * 1e3,
+                match id.halves.as_ref().map(|h| &h.bias_notes) {
+                    Some(n) if !n.is_empty() => format!(
+                        " (0 where it does not predict the other half better in both directions: {})",
+                        n.join("; ")
+                    ),
+                    _ => String::new(),
+                }
             ),
         })
         .collect();
@@ -493,6 +513,7 @@ fn identify_dynamics(
     if !off.is_empty() {
         notes.push(off.join("; "));
     }
+    notes.extend(halves);
     notes.push("self-heating is not identified from a tilter recording without a power-on (0)".into());
     let mut params = id.fit.params;
     // The calibrated range covers the static model's too.

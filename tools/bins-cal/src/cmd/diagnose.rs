@@ -82,18 +82,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         outputs.push((m, text.as_bytes()));
     }
     outputs.extend(plots.iter().map(|(p, png)| (p.as_path(), png.as_slice())));
-    let created = match &args.plots {
-        Some(dir) if !dir.exists() => {
-            std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
-            Some(dir)
-        }
-        _ => None,
-    };
-    if let Err(e) = fsio::write_all_or_nothing(&outputs) {
-        if let Some(dir) = created {
-            let _ = std::fs::remove_dir(dir);
-        }
-        return Err(e);
+    // A plot directory this run creates goes again with the outputs when they do not appear
+    // (an error, or a signal before the renames: fsio::OutputDir).
+    let created = args.plots.as_deref().map(fsio::OutputDir::create).transpose()?;
+    fsio::write_all_or_nothing(&outputs)?;
+    if let Some(d) = created {
+        d.keep();
     }
     let plots: Vec<PathBuf> = plots.into_iter().map(|p| p.0).collect();
     println!("diagnosed {} rows ({} used) in {:.1} s", r.rows, r.rows_used, t0.elapsed().as_secs_f64());
@@ -131,6 +125,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             a.ids.join(" / "),
             a.modelled_as,
             a.separating_test
+        );
+        for (ax, sep) in &a.separability {
+            if sep.is_empty() {
+                continue;
+            }
+            let list: Vec<String> = sep.iter().map(|(id, d)| format!("{id} {d:.1}")).collect();
+            let thr = a.separation_needed.get(ax).copied().unwrap_or(f64::NAN);
+            println!(
+                "    {ax}: of what {} predicts here, each alternative refitted cannot absorb: {} (a name needs {thr:.1})",
+                a.modelled_as,
+                list.join(", ")
+            );
+        }
+    }
+    if !r.negligible.is_empty() {
+        let list: Vec<String> = r
+            .negligible
+            .iter()
+            .map(|n| {
+                format!(
+                    "{} on {} (cuts {:.4} ± {:.4} mg of a {:.4} mg floor)",
+                    n.id, n.axis, n.heldout_cut_mg, n.heldout_cut_se_mg, n.noise_floor_mg
+                )
+            })
+            .collect();
+        println!(
+            "negligible (significant, but the held-out cut is under {:.0} % of the noise floor or {} standard errors): {}",
+            100.0 * bins_cal::diagnose::report::MATERIAL_FLOOR_SHARE,
+            bins_cal::diagnose::report::MATERIAL_SE,
+            list.join("; ")
         );
     }
     for s in &r.steps {

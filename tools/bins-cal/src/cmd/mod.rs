@@ -3,6 +3,8 @@
 pub mod blob;
 pub mod calibrate;
 pub mod diagnose;
+pub mod export;
+pub mod import;
 pub mod replay;
 pub mod shaker;
 pub mod simulate;

@@ -292,16 +292,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (csv, table) = tables(&panels, &params, &names);
     let png = plot(&panels, &names, &format!("T0 = {:.2} °C, {}", params.t0_c, args.calib.display()))?;
     print!("{table}");
-    // Both or neither; a directory created here is removed again when they cannot be written.
-    let created = !args.output.exists();
-    std::fs::create_dir_all(&args.output).with_context(|| format!("{}", args.output.display()))?;
+    // Both or neither; a directory created here goes again when they do not appear (an
+    // error, or a signal before the renames: fsio::OutputDir).
+    let created = fsio::OutputDir::create(&args.output)?;
     let (csv_path, png_path) = (args.output.join("verify.csv"), args.output.join("verify.png"));
-    if let Err(e) = fsio::write_all_or_nothing(&[(&csv_path, csv.as_bytes()), (&png_path, &png)]) {
-        if created {
-            let _ = std::fs::remove_dir(&args.output);
-        }
-        return Err(e);
-    }
+    fsio::write_all_or_nothing(&[(&csv_path, csv.as_bytes()), (&png_path, &png)])?;
+    created.keep();
     println!("wrote {} and {}", args.output.join("verify.csv").display(), args.output.join("verify.png").display());
     Ok(())
 }

@@ -117,6 +117,24 @@ pub fn read_cf(path: &Path) -> anyhow::Result<Vec<(f64, ConversionFunction<f64>)
             m31_g_per_g2: v[9],
             m32_g_per_g2: v[10],
         };
+        // Each coefficient within the firmware's limit (blob::coefficient_limit: a nonlinear
+        // term within 1 g at the 10 g full scale), said in the column's own unit.
+        for (k, (&c, (name, scale))) in idx.iter().zip(cols.iter()).enumerate() {
+            if k == 1 {
+                continue;
+            }
+            let limit_g = bins_comp::blob::coefficient_limit(if k == 0 { 0 } else { (k - 1) as u8 });
+            if !(v[k].abs() <= limit_g) {
+                let unit = name.split_once('_').map_or("", |(_, u)| u);
+                bail!(
+                    "{}:{line}, column {} `{name}`: `{}` is beyond ±{} ({unit}), the firmware's limit of this coefficient (a term of at most 1 g at the 10 g full scale; a0 1 g, δ_1A 0.1, m1 and m2 0.5 g/g)",
+                    path.display(),
+                    c + 1,
+                    cells[c],
+                    limit_g / scale
+                );
+            }
+        }
         if !(v[1] != 0.0 && v[1].abs() <= MAX_K1_V_PER_G) {
             bail!(
                 "{}:{line}, column `K1_V_per_g`: {} V/g: the scale factor must be nonzero and within ±{MAX_K1_V_PER_G} V/g",

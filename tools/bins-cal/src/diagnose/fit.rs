@@ -328,8 +328,15 @@ pub struct AxisFit {
     /// The selected terms.
     pub terms: Vec<Term>,
     /// For each selected mechanism, the mechanisms that explain the data equally well, with
-    /// the deviance difference.
+    /// the deviance difference on the data (NaN where the rival joined on its separability
+    /// alone).
     pub ambiguous: Vec<(Mech, Vec<(Mech, f64)>)>,
+    /// For each selected mechanism, every rival's separability on this recording
+    /// ([`super::separate::separability`]: the deviance the rival, refitted, cannot absorb of
+    /// what the mechanism predicts), ascending.
+    pub separability: Vec<(Mech, Vec<(Mech, f64)>)>,
+    /// The unit of the deviances: the whitened residual variance times the inflation.
+    pub deviance_scale: f64,
     /// The forward search.
     pub trace: Vec<StepInfo>,
     /// The drift of the final model at every row \[g\]: the smoothed random-walk level of
@@ -460,6 +467,20 @@ pub fn centred_rms_rows(v: &[f64], blocks: Option<(&[f64], &[f64])>) -> f64 {
     }
     let m = v.iter().zip(w).map(|(x, w)| x * w).sum::<f64>() / c;
     ((v.iter().zip(w).zip(within).map(|((x, w), s)| w * (x - m).powi(2) + s).sum::<f64>()) / c).sqrt()
+}
+
+/// `v` less its mean over each session (row-weighted by `weight` when the rows are blocks).
+pub fn session_centred(v: &[f64], sessions: &[std::ops::Range<usize>], weight: Option<&[f64]>) -> Vec<f64> {
+    let mut out = v.to_vec();
+    for r in sessions {
+        let (s, c) = r.clone().fold((0.0, 0.0), |(s, c), i| {
+            let w = weight.map_or(1.0, |w| w[i]);
+            (s + w * v[i], c + w)
+        });
+        let m = if c > 0.0 { s / c } else { 0.0 };
+        out[r.clone()].iter_mut().for_each(|x| *x -= m);
+    }
+    out
 }
 
 /// RMS of `v` about its mean (over the rows of `mask`, all when `None`).
@@ -759,10 +780,15 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                 model.remove(k);
             }
             None => {
-                let mut amb = match &last_grams {
+                let all_dev = match &last_grams {
                     Some(g) => ambiguity(&bank, &model, g, fit.inflation),
                     None => Vec::new(),
                 };
+                let mut amb: Vec<(Mech, Vec<(Mech, f64)>)> = all_dev
+                    .iter()
+                    .map(|(m, alts)| (*m, alts.iter().copied().filter(|a| a.1 < AMBIGUOUS_LR).collect::<Vec<_>>()))
+                    .filter(|(_, alts)| !alts.is_empty())
+                    .collect();
                 let beyond = drift_alternatives(ctx, &bank, &model, q, fit.inflation, &mut amb);
                 // A temperature form that a drift in time explains clearly better, and that
                 // adds nothing once that drift is in, is not a finding: it competes with
@@ -778,16 +804,163 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                     model.remove(k);
                     continue;
                 }
+                let sep = separability_of(ctx, &fit);
+                for (m, rivals) in &sep {
+                    let df = fit
+                        .terms
+                        .iter()
+                        .find(|t| t.mech == *m)
+                        .map_or(1, |t| t.coef.len() + usize::from(t.theta.is_some()));
+                    let needed = super::separate::separation_needed(naming_threshold(alpha, df), df);
+                    for &(b, _) in rivals.iter().filter(|r| r.1 < needed) {
+                        // The rival's deviance difference on the data, where the search has it.
+                        let on_data = all_dev
+                            .iter()
+                            .find(|(a, _)| a == m)
+                            .and_then(|(_, alts)| alts.iter().find(|x| x.0 == b))
+                            .map_or(f64::NAN, |x| x.1);
+                        match amb.iter_mut().find(|(a, _)| a == m) {
+                            Some((_, alts)) => {
+                                if !alts.iter().any(|x| x.0 == b) {
+                                    alts.push((b, on_data));
+                                }
+                            }
+                            None => amb.push((*m, vec![(b, on_data)])),
+                        }
+                    }
+                }
                 fit.trace = trace;
                 fit.ambiguous = amb;
+                fit.separability = sep;
                 return fit;
             }
         }
     }
 }
 
-/// For each member of `model`, the mechanisms that replace it (θ re-searched on the grid)
-/// with a deviance change below [`AMBIGUOUS_LR`].
+/// The naming threshold of a term of `df` parameters: the likelihood-ratio statistic whose χ²
+/// tail is the selection's per-test level `alpha`.
+pub fn naming_threshold(alpha: f64, df: usize) -> f64 {
+    super::stats::chi2_isf(alpha, df.max(1) as f64)
+}
+
+/// For each term of the final model, the separability of every rival ([`super::separate`]),
+/// each refitted (θ searched) with the nuisance and the other terms free beside it, to what
+/// the term predicts on this recording; ascending by deviance. The rivals are every mechanism
+/// whose columns this design holds ([`Context::rival_possible`]: also one the search does not
+/// offer because the design makes it another's alias, as a scale-factor tempco in one
+/// orientation is a bias tempco), the drift in time, and a second time constant of each other
+/// term with one (the term may be only the rest of that one's shape: a second-order lag fitted
+/// by first-order terms leaves a remainder that a play or a turn-on term takes).
+fn separability_of(ctx: &Context, fit: &AxisFit) -> Vec<(Mech, Vec<(Mech, f64)>)> {
+    use super::separate::{Fitted, Refit, predict};
+    let mut out = Vec::new();
+    for (k, term) in fit.terms.iter().enumerate() {
+        let a = [Fitted { mech: term.mech, theta: term.theta, coef: term.coef.clone() }];
+        let shared: Vec<Vec<f64>> = ctx
+            .nuisance
+            .iter()
+            .cloned()
+            .chain(fit.terms.iter().enumerate().filter(|(j, _)| *j != k).flat_map(|(_, t)| t.columns.iter().cloned()))
+            .collect();
+        let refit = Refit::new(ctx, fit.q, fit.deviance_scale, &predict(ctx, &a), &shared);
+        let second_copy =
+            |m: Mech| m.theta().is_some() && fit.terms.iter().enumerate().any(|(j, t)| j != k && t.mech == m);
+        let mut rivals: Vec<(Mech, f64)> = Mech::ALL
+            .iter()
+            .chain(Mech::ALTERNATIVES.iter())
+            .copied()
+            .filter(|&m| m != term.mech && ctx.rival_possible(m))
+            .filter(|&m| !fit.terms.iter().any(|t| t.mech == m) || second_copy(m))
+            .filter_map(|m| refit.mechanism(m).map(|s| (m, s.deviance)))
+            .collect();
+        if matches!(term.mech, Mech::Warmup | Mech::SelfHeating) {
+            let mut add = |m: Mech, d: f64| match rivals.iter_mut().find(|r| r.0 == m) {
+                Some(r) => r.1 = r.1.min(d),
+                None => rivals.push((m, d)),
+            };
+            // A turn-on term beside a temperature form may be that form acting through a die
+            // that runs warmer than the thermistor after power-on: `∂A/∂T · (1 − e^(−P/τ))`, A
+            // the other term's fitted contribution.
+            for (j, other) in fit.terms.iter().enumerate() {
+                if j == k || !other.mech.temperature_form() {
+                    continue;
+                }
+                if let Some(d) = through_self_heating(ctx, &refit, other) {
+                    add(other.mech, d);
+                }
+            }
+            // Or a temperature form the model lacks, acting through a die that self-heats
+            // after power-on unseen by the thermistor (a tempco on a soak is a turn-on
+            // transient).
+            for m in [
+                Mech::BiasTempOrder,
+                Mech::ScaleTemp,
+                Mech::CrossCouplingTemp,
+                Mech::BiasHysteresis,
+                Mech::ThermalHysteresis,
+            ] {
+                if !fit.terms.iter().any(|t| t.mech == m)
+                    && let Some(d) = refit.through_die_rise(m)
+                {
+                    add(m, d);
+                }
+            }
+        }
+        let mut add = |m: Mech, d: f64| match rivals.iter_mut().find(|r| r.0 == m) {
+            Some(r) => r.1 = r.1.min(d),
+            None => rivals.push((m, d)),
+        };
+        // A temperature form may be the die heating after power-on, acting through a
+        // sensitivity SIM does not have, `(1 − e^(−P/τ))·(c0 + c1 ΔT + c2 ΔT²)`; or a die
+        // running steadily warmer than the thermistor, through SIM's own (`S'(T)`).
+        if term.mech.temperature_form() {
+            for d in [refit.self_heating_free(), refit.self_heating_settled()].into_iter().flatten() {
+                add(Mech::SelfHeating, d);
+            }
+        }
+        // Beside a lag, any term may be the rest of a second lag stage.
+        for (j, other) in fit.terms.iter().enumerate() {
+            if j != k
+                && other.mech == Mech::ThermalLag
+                && let Some(d) = other.theta.and_then(|tau| refit.second_lag_stage(tau))
+            {
+                add(Mech::ThermalLag, d);
+            }
+        }
+        rivals.sort_by(|x, y| x.1.total_cmp(&y.1));
+        out.push((term.mech, rivals));
+    }
+    out
+}
+
+/// The separability of a turn-on term (what `refit` holds) from the temperature form `other`
+/// acting through a self-heated die: the rival column `∂A/∂T · (1 − e^(−P/τ))` (A: `other`'s
+/// fitted contribution, its derivative by a difference of 0.1 °C of the smoothed temperature),
+/// τ on the turn-on grid.
+fn through_self_heating(ctx: &Context, refit: &super::separate::Refit, other: &Term) -> Option<f64> {
+    let power = ctx.p.power.as_deref()?;
+    let delta = 0.1;
+    let shifted: Vec<f64> = ctx.p.temp_s.iter().map(|v| v + delta).collect();
+    let cols2 = ctx.columns_at(other.mech, other.theta.unwrap_or(0.0), &shifted);
+    let n = ctx.p.t.len();
+    let mut slope = vec![0.0; n];
+    for (c, b) in cols2.iter().zip(&other.coef) {
+        for (s, v) in slope.iter_mut().zip(c) {
+            *s += b * v;
+        }
+    }
+    for (s, v) in slope.iter_mut().zip(&other.contribution) {
+        *s = (*s - v) / delta;
+    }
+    let grid = ctx.grid(Mech::Warmup);
+    let offered = |th: f64| ctx.offered(Mech::Warmup, th);
+    let columns = |tau: f64| vec![(0..n).map(|r| slope[r] * -(-power[r] / tau).exp_m1()).collect()];
+    refit.deviance(&grid, &offered, &columns).map(|s| s.deviance)
+}
+
+/// For each member of `model`, every mechanism that can replace it (θ re-searched on the grid)
+/// with the deviance change on the data; those below [`AMBIGUOUS_LR`] are ambiguous.
 fn ambiguity(bank: &Bank, model: &[usize], grams: &Grams, infl: f64) -> Vec<(Mech, Vec<(Mech, f64)>)> {
     if model.is_empty() {
         return Vec::new();
@@ -817,9 +990,7 @@ fn ambiguity(bank: &Bank, model: &[usize], grams: &Grams, infl: f64) -> Vec<(Mec
             }
             if let (Some(s_alt), Some(s_full)) = (best, sse_full) {
                 let d = grams.n_all as f64 * (s_alt / s_full.max(1e-300)).ln() / infl;
-                if d < AMBIGUOUS_LR {
-                    alts.push((m, d));
-                }
+                alts.push((m, d));
             }
         }
         if !alts.is_empty() {
@@ -887,7 +1058,7 @@ fn drift_alternatives(
 /// Least squares of a whitened `y` on fixed whitened columns plus a few that change (one
 /// member's θ searched while the rest of the model stays): the fixed part's products are
 /// computed once.
-struct PartialLs {
+pub(crate) struct PartialLs {
     w: Vec<Vec<f64>>,
     g: Vec<f64>,
     gy: Vec<f64>,
@@ -896,7 +1067,7 @@ struct PartialLs {
 }
 
 impl PartialLs {
-    fn new(filt: &Filter, y: &[f64], fixed: &[Vec<f64>]) -> Self {
+    pub(crate) fn new(filt: &Filter, y: &[f64], fixed: &[Vec<f64>]) -> Self {
         let w: Vec<Vec<f64>> = fixed.iter().map(|c| filt.whitened(c)).collect();
         let wy = filt.whitened(y);
         let p = w.len();
@@ -913,7 +1084,7 @@ impl PartialLs {
     }
 
     /// SSE with the raw columns `extra` added (infinite when they are collinear).
-    fn sse_plus(&self, filt: &Filter, extra: &[Vec<f64>]) -> f64 {
+    pub(crate) fn sse_plus(&self, filt: &Filter, extra: &[Vec<f64>]) -> f64 {
         let we: Vec<Vec<f64>> = extra.iter().map(|c| filt.whitened(c)).collect();
         let (pf, m) = (self.w.len(), self.w.len() + we.len());
         let col = |i: usize| if i < pf { &self.w[i] } else { &we[i - pf] };
@@ -1011,6 +1182,7 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     });
     let infl = inflation(&res, &used);
     let sigma2 = sse / (nu - beta.len() as f64).max(1.0);
+    let deviance_scale = sse / nu.max(1.0) * infl;
     let mut terms = Vec::new();
     let mut off = ctx.nuisance.len();
     // The nuisance (SIM's own terms re-fitted) is part of the prediction, never a term.
@@ -1081,24 +1253,29 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     // the model; held-out rows use coefficients and offset fitted without their fold. The
     // drift (the random-walk level of what the model leaves) is its own figure, never
     // subtracted.
+    let blocks = (!ctx.p.weight.is_empty()).then(|| (ctx.p.weight.as_slice(), ctx.p.within[axis].as_slice()));
+    // "Before" removes one offset per session (the level restarts at each), nothing else.
+    let sessions = ctx.p.sessions();
+    let y_c = session_centred(y, &sessions, blocks.map(|b| b.0));
     if members.is_empty() {
-        prediction.iter_mut().for_each(|v| *v = 0.0);
+        prediction = y.iter().zip(&y_c).map(|(a, b)| a - b).collect();
     }
     let e: Vec<f64> = y.iter().zip(&prediction).map(|(a, b)| a - b).collect();
     let drift = smooth_level(t, r, q, &e);
-    let blocks = (!ctx.p.weight.is_empty()).then(|| (ctx.p.weight.as_slice(), ctx.p.within[axis].as_slice()));
-    let before = centred_rms_rows(y, blocks);
+    let before = centred_rms_rows(&y_c, blocks);
     let after = centred_rms_rows(&e, blocks);
     // The drift is slow: its RMS over the rows is its blocks' weighted RMS.
     let drift_rms = match blocks {
         Some((w, _)) => centred_rms_rows(&drift, Some((w, &vec![0.0; w.len()]))),
         None => centred_rms(&drift, None),
     };
-    let hb = raw_heldout(t, r, q, y, &[], fold, blocks);
+    let session_cols = ctx.p.session_columns();
+    let session_refs: Vec<&[f64]> = session_cols.iter().map(Vec::as_slice).collect();
+    let hb = raw_heldout(t, r, q, y, &session_refs, fold, blocks);
     // With nothing named the model is SIM itself: its own terms re-fitted alone are not a
     // finding, and "after" is "before".
     let ha = if members.is_empty() {
-        raw_heldout(t, r, q, y, &[], fold, blocks)
+        raw_heldout(t, r, q, y, &session_refs, fold, blocks)
     } else {
         raw_heldout(t, r, q, y, &refs, fold, blocks)
     };
@@ -1122,6 +1299,8 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
         inflation: infl,
         terms,
         ambiguous: Vec::new(),
+        separability: Vec::new(),
+        deviance_scale,
         trace: Vec::new(),
         drift,
         drift_rms,

@@ -194,6 +194,7 @@ pub fn separating_test(a: Mech, b: Mech) -> String {
     use Mech::*;
     let (a, b) = if a <= b { (a, b) } else { (b, a) };
     match (a, b) {
+        (Warmup, Drift) | (SelfHeating, Drift) => "a second power-on (power cycle): a turn-on term restarts with power_s, a drift in time does not".into(),
         (_, Drift) => "a temperature reversal (heat, then cool back through the same temperatures, or the reverse): a temperature term follows the temperature back, a drift in time does not".into(),
         (ThermalHysteresis, BiasHysteresis) => "positions or temperature ranges where the temperature sensitivity differs (e.g. +1 g and −1 g on an axis whose scale factor has a tempco): thermal hysteresis follows dS/dT, an additive bias play does not".into(),
         (ThermalLag, BiasHysteresis) => "two ramp rates with holds at the ends of the ramps: a lag's error scales with the rate and decays during a hold, an additive play does neither".into(),
@@ -371,6 +372,20 @@ pub fn play(temp: &[f64], h: f64) -> Vec<f64> {
         .collect()
 }
 
+/// `f` applied to each session's rows ([`Prepared::sessions`]) and the results joined: a lag or
+/// play starts afresh at each session, its state across the unrecorded time being unknown.
+pub fn by_session(p: &Prepared, f: impl Fn(std::ops::Range<usize>) -> Vec<f64>) -> Vec<f64> {
+    let sessions = p.sessions();
+    if sessions.len() == 1 {
+        return f(0..p.t.len());
+    }
+    let mut out = Vec::with_capacity(p.t.len());
+    for r in sessions {
+        out.extend(f(r));
+    }
+    out
+}
+
 /// The largest share of the centred energy of the column `c` (one value per row) that falls
 /// in one held-out fold (`fold[i]`: row `i`'s fold); 1 for a constant column.
 pub fn max_fold_share(c: impl Iterator<Item = f64> + Clone, fold: &[usize]) -> f64 {
@@ -512,7 +527,10 @@ impl<'a> Context<'a> {
         let s = fit_sensitivity(p, axis);
         let (tmin, tmax) = p.temp_s.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
         let s_now = (0..p.t.len()).map(|k| s.eval(p.temp_s[k], &p.f[k])).collect();
-        let (nuisance, nuisance_names, nuisance_orders) = sim_fitted_forms(p, axis);
+        let (mut nuisance, nuisance_names, nuisance_orders) = sim_fitted_forms(p, axis);
+        // A level of its own for every session after the first (the noise model's level
+        // restarts there); not SIM's terms, so not named among them.
+        nuisance.extend(p.session_columns());
         Context {
             p,
             axis,
@@ -548,6 +566,21 @@ impl<'a> Context<'a> {
             Mech::ScaleFactor => varies(i),
             Mech::SelfHeating | Mech::Warmup => self.p.power.is_some() && !self.grid(m).is_empty(),
             Mech::Drift => self.p.t.len() >= 50,
+            // Rectification needs vibration: on static rows `a3·a1` is a product of the
+            // reference alone, which the static terms and the temperature forms already span.
+            Mech::VibrationCross => self.p.vib.iter().any(|v| !matches!(v, Vibration::None)),
+            _ => true,
+        }
+    }
+
+    /// Whether the mechanism's columns exist on this design, to be tried as a rival
+    /// ([`super::separate`]): every mechanism the search offers, and those it does not offer
+    /// because this design makes them another's alias (a term in `f_j` that never changes, a
+    /// thermal term over less than the search's temperature range); not a turn-on term without
+    /// `power_s`, nor a vibration term on rows without vibration.
+    pub fn rival_possible(&self, m: Mech) -> bool {
+        match m {
+            Mech::SelfHeating | Mech::Warmup | Mech::VibrationCross | Mech::Drift => self.available(m),
             _ => true,
         }
     }
@@ -599,28 +632,38 @@ impl<'a> Context<'a> {
 
     /// The columns of mechanism `m` at `theta` (ignored for linear mechanisms).
     pub fn columns(&self, m: Mech, theta: f64) -> Vec<Vec<f64>> {
+        self.columns_at(m, theta, &self.p.temp_s)
+    }
+
+    /// [`Context::columns`] with the temperature the thermal and temperature terms are built
+    /// from given (one value a row; [`Context::columns`] gives the smoothed `temp_C`): a rival
+    /// acting on a die warmer than the thermistor ([`super::separate`]).
+    pub fn columns_at(&self, m: Mech, theta: f64, temp: &[f64]) -> Vec<Vec<f64>> {
         let p = self.p;
         let n = p.t.len();
         let i = self.axis;
         let (j, k) = ((i + 1) % 3, (i + 2) % 3);
-        let dtc = |r: usize| p.temp_s[r] - T0_C;
+        let dtc = |r: usize| temp[r] - T0_C;
+        let s_now = |r: usize| {
+            if std::ptr::eq(temp, p.temp_s.as_slice()) { self.s_now[r] } else { self.s.eval(temp[r], &p.f[r]) }
+        };
         match m {
             Mech::ThermalLag => {
-                let te = lagged(&p.t, &p.temp_s, theta);
-                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - self.s_now[r]).collect()]
+                let te = by_session(p, |r| lagged(&p.t[r.clone()], &temp[r], theta));
+                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - s_now(r)).collect()]
             }
             Mech::ThermalHysteresis => {
-                let te = play(&p.temp_s, theta);
-                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - self.s_now[r]).collect()]
+                let te = by_session(p, |r| play(&temp[r], theta));
+                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - s_now(r)).collect()]
             }
             Mech::BiasHysteresis => {
-                let te = play(&p.temp_s, theta);
-                let d: Vec<f64> = (0..n).map(|r| (te[r] - p.temp_s[r]) / (0.5 * theta)).collect();
+                let te = by_session(p, |r| play(&temp[r], theta));
+                let d: Vec<f64> = (0..n).map(|r| (te[r] - temp[r]) / (0.5 * theta)).collect();
                 vec![d.clone(), (0..n).map(|r| d[r] * dtc(r)).collect()]
             }
             Mech::SelfHeating => {
                 let pw = p.power.as_deref().unwrap_or(&[]);
-                vec![(0..n).map(|r| self.s.deriv(p.temp_s[r], &p.f[r]) * -(-pw[r] / theta).exp_m1()).collect()]
+                vec![(0..n).map(|r| self.s.deriv(temp[r], &p.f[r]) * -(-pw[r] / theta).exp_m1()).collect()]
             }
             Mech::Warmup => {
                 let pw = p.power.as_deref().unwrap_or(&[]);

@@ -7,7 +7,9 @@
 //! 3. [`locate`]: strata of the test that carry the mismatch.
 //! 4. [`mech`] + [`fit`]: the mechanism library, forward selection scored on held-out blocks
 //!    with a significance test against the autocorrelated noise, ambiguity between
-//!    mechanisms the data cannot separate.
+//!    mechanisms the data cannot separate, and [`separate`]: the deviance a rival cannot
+//!    absorb of what the selected model predicts on this design (groups below the naming
+//!    threshold).
 //! 5. [`steps`]: bias steps located by an innovation-outlier test, fitted jointly with the
 //!    selected mechanisms (the selection re-run with their columns in).
 //! 6. [`report`]: the JSON report and the augmented model; [`plot`]: PNGs.
@@ -25,6 +27,7 @@ pub mod noise;
 pub mod plot;
 pub mod prep;
 pub mod report;
+pub mod separate;
 pub mod stats;
 pub mod steps;
 

@@ -163,7 +163,10 @@ pub fn render_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<(PathBuf, Vec<u8>)>
                 .draw()
                 .map_err(drawing_error)
         })?);
-        for term in fit.terms.iter() {
+        // A term whose held-out cut is not material gets no plot of its own (the report lists
+        // it as negligible).
+        let negligible = |id: &str| d.report.model.term.iter().any(|t| t.id == id && t.axis == *ax && t.negligible);
+        for term in fit.terms.iter().filter(|t| !negligible(t.mech.id())) {
             let partial: Vec<f64> = (0..y.len()).map(|i| y[i] - fit.prediction[i] + term.contribution[i]).collect();
             let off = mean(&partial) - mean(&term.contribution);
             let xs: Vec<f64> = term.contribution.iter().map(|v| v * 1e3).collect();
@@ -178,7 +181,7 @@ pub fn render_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<(PathBuf, Vec<u8>)>
                 (0..xs.len()).step_by(xs.len().div_ceil(3000).max(1)).map(|i| (xs[i], ys[i])).collect();
             let (x0, x1) = range(xs.iter().copied());
             let (y0, y1) = range(pts.iter().map(|q| q.1).chain(bins.iter().map(|q| q.1)));
-            let theta = term.theta.map_or(String::new(), |t| format!(", θ = {t:.4}"));
+            let theta = term.theta.map_or(String::new(), |t| format!(", {}", theta_label(term.mech, t)));
             let title = format!("{} on {ax}{theta}: partial residual vs fitted term", term.mech.id());
             out.push(draw(dir, &format!("effect_{}_{ax}.png", term.mech.id()), |root| {
                 let mut chart = ChartBuilder::on(root)
@@ -224,4 +227,24 @@ pub fn render_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<(PathBuf, Vec<u8>)>
         }
     }
     Ok(out)
+}
+
+/// θ with its symbol and unit, as a plot title gives it (`τ = 167 s`, `h = 0.98 °C`).
+pub fn theta_label(m: super::mech::Mech, theta: f64) -> String {
+    use super::mech::Mech;
+    let digits = |v: f64| {
+        if v >= 100.0 {
+            0
+        } else if v >= 10.0 {
+            1
+        } else if v >= 1.0 {
+            2
+        } else {
+            3
+        }
+    };
+    match m {
+        Mech::ThermalHysteresis | Mech::BiasHysteresis => format!("h = {theta:.*} °C", digits(theta)),
+        _ => format!("τ = {theta:.*} s", digits(theta)),
+    }
 }

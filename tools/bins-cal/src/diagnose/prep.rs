@@ -75,8 +75,72 @@ pub struct Prepared {
     /// With blocks: the per-row noise floor measured from consecutive rows (the Allan deviation
     /// at one row, `√(½·mean((r_k − r_{k−1})²))`, over rows without vibration, or all) \[g\].
     pub row_floor: Option<[f64; 3]>,
+    /// The first row (or block) of each session, ascending, starting with 0: a session starts
+    /// where the time jumps between consecutive lines of the file with the unit unpowered
+    /// ([`SESSION_GAP_S`]; `power_s` going back across a longer step than the sampling's). The
+    /// noise model's level, the thermal terms' lags and plays and the temperature's smoothing
+    /// restart at each: their state across the unrecorded time is unknown. A power cycle within
+    /// the sampling (`power_s` going back, no time missing) is not a new session: the
+    /// temperature was recorded throughout.
+    pub session_starts: Vec<usize>,
     /// Notes for the report.
     pub notes: Vec<String>,
+}
+
+/// A step of `t_s` between consecutive lines longer than this \[s\] (and than
+/// [`SESSION_GAP_STEPS`] times the step before it) starts a new session, unless `power_s`
+/// advanced across it by at least half of it (the unit stayed powered while the logger
+/// paused).
+pub const SESSION_GAP_S: f64 = 60.0;
+
+/// See [`SESSION_GAP_S`].
+pub const SESSION_GAP_STEPS: f64 = 20.0;
+
+/// Where `power_s` goes back (a power-on), a step of `t_s` longer than this many times the step
+/// before it starts a new session: the unit was off for time the record does not hold.
+pub const POWER_ON_GAP_STEPS: f64 = 10.0;
+
+impl Prepared {
+    /// The session of each row (index into [`Prepared::session_starts`]).
+    pub fn session_of_rows(&self) -> Vec<usize> {
+        let mut out = Vec::with_capacity(self.t.len());
+        let mut s = 0;
+        for i in 0..self.t.len() {
+            while s + 1 < self.session_starts.len() && self.session_starts[s + 1] <= i {
+                s += 1;
+            }
+            out.push(s);
+        }
+        out
+    }
+
+    /// The row ranges of the sessions.
+    pub fn sessions(&self) -> Vec<std::ops::Range<usize>> {
+        session_ranges(&self.session_starts, self.t.len())
+    }
+
+    /// One column per session after the first: 1 from its first row on, 0 before (a
+    /// Heaviside). With them in a model the level restarts at every session, as a diffuse
+    /// start of the noise model's level would.
+    pub fn session_columns(&self) -> Vec<Vec<f64>> {
+        let n = self.t.len();
+        self.session_starts.iter().skip(1).map(|&k| (0..n).map(|i| if i >= k { 1.0 } else { 0.0 }).collect()).collect()
+    }
+}
+
+/// The ranges `starts[k]..starts[k + 1]` (the last to `n`).
+pub fn session_ranges(starts: &[usize], n: usize) -> Vec<std::ops::Range<usize>> {
+    let mut out = Vec::with_capacity(starts.len());
+    for (k, &a) in starts.iter().enumerate() {
+        let b = starts.get(k + 1).copied().unwrap_or(n);
+        if b > a {
+            out.push(a..b);
+        }
+    }
+    if out.is_empty() {
+        out.push(0..n);
+    }
+    out
 }
 
 impl Prepared {
@@ -211,6 +275,12 @@ pub struct Builder {
     quiet_diff2: ([f64; 3], usize),
     /// The previous usable row (for the differences and the runs).
     prev: Option<Kept>,
+    /// Whether each row (or block) kept starts a session.
+    session_start: Vec<bool>,
+    /// The previous line's `t_s`, `power_s` and time step (of any line, used or not).
+    last_line: Option<(f64, Option<f64>, f64)>,
+    /// A session break seen since the last row kept: the next row kept starts a session.
+    break_pending: bool,
 }
 
 /// A block length chosen from the rows ([`Builder::block_choice`]).
@@ -286,6 +356,8 @@ struct Kept {
     pos: Option<usize>,
     du: [f64; 3],
     sim_u: [f64; 3],
+    /// It starts a session.
+    session: bool,
 }
 
 impl Kept {
@@ -297,6 +369,7 @@ impl Kept {
             vib: self.vib,
             pos: self.pos,
             power: self.power,
+            session: self.session,
         }
     }
 }
@@ -312,18 +385,21 @@ struct RunEnd {
     vib: Vibration<f64>,
     pos: Option<usize>,
     power: f64,
+    /// Its first row starts a session.
+    session: bool,
 }
 
 impl RunEnd {
-    /// The same reference, vibration and position, the next line, and no power-on between
-    /// (`power_s` does not go back): a mean `power_s` across a power-on would stand for
-    /// neither side.
+    /// The same reference, vibration and position, the next line, no power-on between
+    /// (`power_s` does not go back: a mean `power_s` across a power-on would stand for neither
+    /// side) and no new session.
     fn continued_by(&self, next: &RunEnd) -> bool {
         self.next_line == next.first_line
             && self.f == next.f
             && self.vib == next.vib
             && self.pos == next.pos
             && next.power >= self.power
+            && !next.session
     }
 }
 
@@ -344,6 +420,7 @@ struct Pending {
     du: [f64; 3],
     du2: [f64; 3],
     sim_u: [f64; 3],
+    session: bool,
 }
 
 impl Builder {
@@ -501,6 +578,9 @@ impl Builder {
             diff2: Vec::new(),
             quiet_diff2: ([0.0; 3], 0),
             prev: None,
+            session_start: Vec::new(),
+            last_line: None,
+            break_pending: false,
         }
     }
 
@@ -513,15 +593,31 @@ impl Builder {
     fn clear_used(&mut self) {
         let fresh = Builder::new(Path::new(""), Path::new(""));
         let (sim_name, real_name) = (std::mem::take(&mut self.sim_name), std::mem::take(&mut self.real_name));
-        let (n_total, any_vib, block_s, auto, max_blocks, temp_step) =
-            (self.n_total, self.any_vib, self.block_s, self.auto, self.max_blocks, self.temp_step);
-        *self = Builder { sim_name, real_name, n_total, any_vib, block_s, auto, max_blocks, temp_step, ..fresh };
+        let (n_total, any_vib, block_s, auto, max_blocks, temp_step, last_line) =
+            (self.n_total, self.any_vib, self.block_s, self.auto, self.max_blocks, self.temp_step, self.last_line);
+        *self =
+            Builder { sim_name, real_name, n_total, any_vib, block_s, auto, max_blocks, temp_step, last_line, ..fresh };
     }
 
     /// Checks one pair (SIM's row `s`, REAL's row `r`) and keeps what the diagnosis needs of it
     /// when its reference is known. Errors name REAL's file and line and SIM's line.
     pub fn push(&mut self, s: &Row, r: &Row) -> Result<(), DiagnoseError> {
         self.n_total += 1;
+        // A new session: the time jumps between lines and `power_s` (if any) did not advance
+        // with it, or `power_s` goes back across a step longer than the sampling's.
+        if let Some((t_prev, p_prev, step_prev)) = self.last_line {
+            let step = r.t_s - t_prev;
+            let power_on = matches!((p_prev, r.power_s), (Some(a), Some(b)) if b < a);
+            let jump = step > SESSION_GAP_S && step > SESSION_GAP_STEPS * step_prev;
+            let powered = matches!((p_prev, r.power_s), (Some(a), Some(b)) if b - a >= 0.5 * step);
+            if (jump && !powered) || (power_on && step > POWER_ON_GAP_STEPS * step_prev) {
+                self.break_pending = true;
+            }
+            let normal = if jump { step_prev } else { step };
+            self.last_line = Some((r.t_s, r.power_s, normal));
+        } else {
+            self.last_line = Some((r.t_s, r.power_s, f64::INFINITY));
+        }
         let (prev, smallest) = &mut self.temp_step;
         if let Some(p) = *prev {
             let d = (r.temp_c - p).abs();
@@ -619,6 +715,7 @@ impl Builder {
             pos,
             du,
             sim_u: s.u_v,
+            session: std::mem::take(&mut self.break_pending) && !(self.t.is_empty() && self.pending.is_none()),
         };
         self.keep(k);
         Ok(())
@@ -626,8 +723,9 @@ impl Builder {
 
     /// Keeps one usable row: as it is, or into the block being filled.
     fn keep(&mut self, k: Kept) {
-        let Kept { line, t, temp, sim_temp, power, f, vib, vib_class, pos, du, sim_u } = k;
+        let Kept { line, t, temp, sim_temp, power, f, vib, vib_class, pos, du, sim_u, session } = k;
         let Some(block_s) = self.block_s else {
+            self.session_start.push(session);
             for i in 0..3 {
                 self.du[i].push(du[i]);
                 self.sim_u[i].push(sim_u[i]);
@@ -697,6 +795,7 @@ impl Builder {
             du: [0.0; 3],
             du2: [0.0; 3],
             sim_u: [0.0; 3],
+            session,
         });
         b.n += 1;
         b.last_line = line;
@@ -748,6 +847,7 @@ impl Builder {
         let pos = std::mem::take(&mut self.pos);
         let du = std::mem::take(&mut self.du);
         let sim_u = std::mem::take(&mut self.sim_u);
+        let session = std::mem::take(&mut self.session_start);
         for k in 0..t.len() {
             self.keep(Kept {
                 line: line[k],
@@ -761,6 +861,7 @@ impl Builder {
                 pos: pos[k],
                 du: [du[0][k], du[1][k], du[2][k]],
                 sim_u: [sim_u[0][k], sim_u[1][k], sim_u[2][k]],
+                session: session[k],
             });
         }
     }
@@ -775,6 +876,7 @@ impl Builder {
             vib: self.vib[i],
             pos: self.pos[i],
             power: self.power[i],
+            session: self.session_start[i],
         }
     }
 
@@ -802,6 +904,7 @@ impl Builder {
             out.vib.push(self.vib[j]);
             out.vib_class.push(self.vib_class[j]);
             out.pos.push(self.pos[j]);
+            out.session_start.push(self.session_start[j]);
             out.weight.push(w);
             for a in 0..3 {
                 let m = mean(&self.du[a]);
@@ -822,6 +925,7 @@ impl Builder {
         self.vib = out.vib;
         self.vib_class = out.vib_class;
         self.pos = out.pos;
+        self.session_start = out.session_start;
         self.weight = out.weight;
         self.du = out.du;
         self.sim_u = out.sim_u;
@@ -841,6 +945,7 @@ impl Builder {
         self.vib.push(b.vib);
         self.vib_class.push(b.vib_class);
         self.pos.push(b.pos);
+        self.session_start.push(b.session);
         self.weight.push(n);
         for i in 0..3 {
             let m = b.du[i] / n;
@@ -911,6 +1016,7 @@ impl Builder {
             quiet_diff2,
             block_note,
             temp_step,
+            session_start,
             ..
         } = self;
         let temp_resolution_c = temp_step.1.is_finite().then_some(temp_step.1);
@@ -957,10 +1063,20 @@ impl Builder {
             }
             None
         };
-        // Segments: a new one where the reference changes or time jumps.
+        let session_starts: Vec<usize> = std::iter::once(0).chain((1..n).filter(|&i| session_start[i])).collect();
+        drop(session_start);
+        if session_starts.len() > 1 {
+            notes.push(format!(
+                "{} sessions (the time jumping with the unit unpowered): the noise model's level, the thermal terms' lags and plays and the temperature's smoothing restart at each; the figures remove one offset per session",
+                session_starts.len()
+            ));
+        }
+        let sessions = session_ranges(&session_starts, n);
+        // Segments: a new one where the reference changes, time jumps or a session starts.
         let mut seg = vec![0usize; n];
         for i in 1..n {
-            let change = f[i] != f[i - 1]
+            let change = session_starts.binary_search(&i).is_ok()
+                || f[i] != f[i - 1]
                 || vib[i] != vib[i - 1]
                 || pos[i] != pos[i - 1]
                 || t[i] - t[i - 1] > 3.0 * dt
@@ -1033,16 +1149,18 @@ impl Builder {
         // Temperature rate: centred difference over ±max(30 s, 15 dt).
         let w = (30.0f64).max(15.0 * dt);
         let mut dtemp = vec![0.0; n];
-        let (mut lo, mut hi) = (0usize, 0usize);
-        for i in 0..n {
-            while t[i] - t[lo] > w {
-                lo += 1;
-            }
-            while hi + 1 < n && t[hi + 1] - t[i] <= w {
-                hi += 1;
-            }
-            if t[hi] > t[lo] {
-                dtemp[i] = (temp[hi] - temp[lo]) / (t[hi] - t[lo]);
+        for sess in &sessions {
+            let (mut lo, mut hi) = (sess.start, sess.start);
+            for i in sess.clone() {
+                while t[i] - t[lo] > w {
+                    lo += 1;
+                }
+                while hi + 1 < sess.end && t[hi + 1] - t[i] <= w {
+                    hi += 1;
+                }
+                if t[hi] > t[lo] {
+                    dtemp[i] = (temp[hi] - temp[lo]) / (t[hi] - t[lo]);
+                }
             }
         }
         // ±10 s, at least ±1 row, at most ±50 of the recording's rows: with blocks, the same
@@ -1053,13 +1171,16 @@ impl Builder {
         } else {
             ((10.0 / dt).round() as usize).clamp(1, 50)
         };
-        let temp_s = smooth_temperature(&t, &temp, half);
+        let smooth = |x: &[f64]| -> Vec<f64> {
+            sessions.iter().flat_map(|r| smooth_temperature(&t[r.clone()], &x[r.clone()], half)).collect()
+        };
+        let temp_s = smooth(&temp);
         // SIM's own temperature: what SIM's sensitivity is a function of. It is REAL's when SIM
         // follows REAL's temperature; a simulation with its own thermal path reads its own.
         let sim_temp_s = if sim_temp == temp {
             temp_s.clone()
         } else {
-            let s = smooth_temperature(&t, &sim_temp, half);
+            let s = smooth(&sim_temp);
             let (mut worst, mut at, mut ss) = (0.0f64, 0usize, 0.0);
             for k in 0..n {
                 let d = temp_s[k] - s[k];
@@ -1162,6 +1283,7 @@ impl Builder {
             weight,
             within,
             row_floor,
+            session_starts,
             notes,
         })
     }

@@ -37,6 +37,10 @@ pub struct Effect {
     /// [`UNDETERMINED_RATIO`] or more. Their values are not findings.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub undetermined: PerAxis<Vec<String>>,
+    /// Per accelerometer, the closest rivals (at most three) and the deviance each, refitted,
+    /// cannot absorb of what the term predicts on this recording ([`super::separate`]): how
+    /// far the recording separates the name from the next explanation.
+    pub separability: PerAxis<BTreeMap<String, f64>>,
 }
 
 /// A time constant or width whose 95 % interval spans this ratio (two decades) or more is
@@ -54,8 +58,46 @@ pub struct Ambiguous {
     pub separating_test: String,
     /// Which one the model carries (for the RMS figures and the augmented model).
     pub modelled_as: String,
-    /// Deviance difference of the alternatives, per accelerometer.
+    /// Deviance difference of the alternatives on the data, per accelerometer (absent where
+    /// an alternative joined on its separability alone).
     pub deviance_difference: PerAxis<BTreeMap<String, f64>>,
+    /// Per accelerometer, the deviance each alternative, refitted, cannot absorb of what the
+    /// modelled member predicts on this recording ([`super::separate`]); below the separation
+    /// a name needs the two are one group whatever the data's ranking says.
+    pub separability: PerAxis<BTreeMap<String, f64>>,
+    /// The separation a name needs, per accelerometer: the expected deviance at which data
+    /// drawn from the modelled member pass its naming threshold against the rival with 95 %
+    /// probability ([`super::separate::separation_needed`]).
+    pub separation_needed: PerAxis<f64>,
+}
+
+/// A term the selection keeps (it passes the tests) whose held-out cut is not material: below
+/// [`MATERIAL_FLOOR_SHARE`] of the axis's noise floor or under [`MATERIAL_SE`] standard errors.
+/// It stays in the fitted model and its figures; it is not an effect a user acts on.
+#[derive(Clone, Debug, Serialize)]
+pub struct Negligible {
+    /// Mechanism id (or the ids of an ambiguous group, joined by `/`).
+    pub id: String,
+    /// Accelerometer.
+    pub axis: String,
+    /// The cut of the raw held-out RMS it brings \[mg\].
+    pub heldout_cut_mg: f64,
+    /// That cut's fold-to-fold standard error \[mg\].
+    pub heldout_cut_se_mg: f64,
+    /// The axis's noise floor \[mg\].
+    pub noise_floor_mg: f64,
+}
+
+/// An effect is printed only where its held-out cut is at least this share of the axis's noise
+/// floor ([`Report::noise_floor_mg`]) …
+pub const MATERIAL_FLOOR_SHARE: f64 = 0.05;
+
+/// … and at least this many of its fold-to-fold standard errors.
+pub const MATERIAL_SE: f64 = 2.0;
+
+/// Whether a held-out cut `(cut, se)` \[g\] is material against the noise floor `floor_g`.
+pub fn material(cut: (f64, f64), floor_g: f64) -> bool {
+    cut.0 >= MATERIAL_FLOOR_SHARE * floor_g && cut.0 >= MATERIAL_SE * cut.1
 }
 
 /// One point of the Allan deviation.
@@ -151,6 +193,10 @@ pub struct ModelTerm {
     /// the `[thermal_dynamics]` table.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub undetermined: Vec<String>,
+    /// Its held-out cut is not material ([`Negligible`]): left out of the
+    /// `[thermal_dynamics]` table.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub negligible: bool,
 }
 
 /// The augmented model: the found terms, to add to the simulation.
@@ -180,7 +226,7 @@ pub fn dynamics_table(terms: &[ModelTerm]) -> Option<crate::calfile::DynamicsSpe
     let median = |id: &str, key: &str| -> Option<f64> {
         let mut v: Vec<f64> = terms
             .iter()
-            .filter(|t| t.id == id && !t.ambiguous && t.undetermined.is_empty())
+            .filter(|t| t.id == id && !t.ambiguous && !t.negligible && t.undetermined.is_empty())
             .filter_map(|t| t.params.get(key).copied())
             .filter(|x| x.is_finite())
             .collect();
@@ -208,7 +254,10 @@ pub fn dynamics_table(terms: &[ModelTerm]) -> Option<crate::calfile::DynamicsSpe
     }
     if let Some(hb) = median("bias_hysteresis", "width_C") {
         d.bias_play_width_c = hb;
-        for t in terms.iter().filter(|t| t.id == "bias_hysteresis" && !t.ambiguous && t.undetermined.is_empty()) {
+        for t in terms
+            .iter()
+            .filter(|t| t.id == "bias_hysteresis" && !t.ambiguous && !t.negligible && t.undetermined.is_empty())
+        {
             if let (Some(k), Some(a)) = (AXES.iter().position(|a| *a == t.axis), t.params.get("amp_mg")) {
                 d.bias_play_mg[k] = *a;
             }
@@ -275,6 +324,9 @@ pub struct Report {
     pub effects: Vec<Effect>,
     /// Groups the data cannot separate.
     pub ambiguous: Vec<Ambiguous>,
+    /// Terms (or groups) kept by the selection whose held-out cut is not material
+    /// ([`material`]): listed with their figures, not effects.
+    pub negligible: Vec<Negligible>,
     /// RMS of the raw residual (one offset removed) before the model \[mg\].
     pub rms_before_mg: PerAxis<f64>,
     /// After the model \[mg\].
@@ -448,7 +500,23 @@ pub struct Inputs<'a> {
 }
 
 /// Accelerometers, the mechanism modelled, deviance differences per accelerometer.
-type AmbGroup = (Vec<String>, String, PerAxis<BTreeMap<String, f64>>);
+/// A group being built: its axes, the member modelled, the data's deviance differences, the
+/// separabilities and the naming thresholds, per axis.
+type AmbGroup = (Vec<String>, String, PerAxis<BTreeMap<String, f64>>, PerAxis<BTreeMap<String, f64>>, PerAxis<f64>);
+
+/// The separability of rival `b` against the term `m` of `fit` ([`AxisFit::separability`]).
+fn separability_of(fit: &AxisFit, m: Mech, b: Mech) -> Option<f64> {
+    fit.separability.iter().find(|(a, _)| *a == m).and_then(|(_, r)| r.iter().find(|x| x.0 == b)).map(|x| x.1)
+}
+
+/// The separation term `m` of `fit` needs from a rival to be named alone
+/// ([`super::separate::separation_needed`] of its naming threshold,
+/// [`super::fit::naming_threshold`] at the selection's per-test level).
+fn threshold_of(fit: &AxisFit, m: Mech) -> f64 {
+    let alpha = super::fit::ALPHA / (Mech::ALL.len() * 3) as f64;
+    let df = fit.terms.iter().find(|t| t.mech == m).map_or(1, |t| t.coef.len() + usize::from(t.theta.is_some()));
+    super::separate::separation_needed(super::fit::naming_threshold(alpha, df), df)
+}
 
 /// Whether `m` is a play whose width `theta` is below [`PLAY_MIN_STEPS`] steps of REAL's
 /// `temp_C` ([`Prepared::temp_resolution_c`]). A stepped reading shows a reversal only once the
@@ -500,46 +568,120 @@ pub fn build(
         })
         .collect();
     let is_folded = |axis: usize, m: Mech| folded[axis].iter().any(|f| f.0 == m);
-    // Ambiguous groups per axis: the member and its alternatives.
+    // Materiality: the held-out cut of each selected term against the axis's noise floor.
+    let cut_of = |axis: usize, m: Mech| {
+        let fit = &axes[axis];
+        fit.terms.iter().position(|t| t.mech == m).and_then(|k| fit.heldout_gain.get(k).copied())
+    };
+    let immaterial = |axis: usize, m: Mech| cut_of(axis, m).is_some_and(|c| !material(c, floor.0[axis]));
+    let mut negligible: Vec<Negligible> = Vec::new();
+    let mut add_negligible = |axis: usize, id: String, m: Mech| {
+        if let Some((cut, se)) = cut_of(axis, m) {
+            negligible.push(Negligible {
+                id,
+                axis: AXES[axis].into(),
+                heldout_cut_mg: cut * 1e3,
+                heldout_cut_se_mg: se * 1e3,
+                noise_floor_mg: floor.0[axis] * 1e3,
+            });
+        }
+    };
+    // Ambiguous groups per axis: each member and its alternatives; groups on one axis that
+    // share a mechanism are one group (two members each "a drift, or …" are not two findings).
     let mut amb_groups: BTreeMap<Vec<String>, AmbGroup> = BTreeMap::new();
     let mut ambiguous_member: Vec<Vec<Mech>> = vec![Vec::new(); 3];
     for fit in axes {
+        // (members, every id, data deviances, separabilities, threshold)
+        type Local = (Vec<Mech>, Vec<Mech>, BTreeMap<String, f64>, BTreeMap<String, f64>, f64);
+        let mut local: Vec<Local> = Vec::new();
         for (m, alts) in &fit.ambiguous {
             if is_folded(fit.axis, *m) {
                 continue;
             }
-            let mut ids: Vec<String> =
-                std::iter::once(m.id().to_string()).chain(alts.iter().map(|a| a.0.id().to_string())).collect();
-            ids.sort();
-            let e = amb_groups.entry(ids).or_insert_with(|| (Vec::new(), m.id().to_string(), BTreeMap::new()));
-            e.0.push(AXES[fit.axis].into());
-            e.2.insert(AXES[fit.axis].into(), alts.iter().map(|a| (a.0.id().to_string(), a.1)).collect());
-            ambiguous_member[fit.axis].push(*m);
+            let ids: Vec<Mech> = std::iter::once(*m).chain(alts.iter().map(|a| a.0)).collect();
+            let dev = alts.iter().filter(|a| a.1.is_finite()).map(|a| (a.0.id().to_string(), a.1)).collect();
+            let sep =
+                alts.iter().filter_map(|a| separability_of(fit, *m, a.0).map(|d| (a.0.id().to_string(), d))).collect();
+            local.push((vec![*m], ids, dev, sep, threshold_of(fit, *m)));
         }
         // Both turn-on terms found on one accelerometer: a power-on transient with two time
         // constants is explained as well by a warm-up plus self-heating as by either with a
         // second exponential, so the pair is reported as one group the data cannot split (the
         // separating test: power-ons in other positions or at other temperatures).
-        let has = |m: Mech| fit.terms.iter().any(|t| t.mech == m) && !ambiguous_member[fit.axis].contains(&m);
+        let has = |m: Mech| fit.terms.iter().any(|t| t.mech == m);
         if has(Mech::SelfHeating) && has(Mech::Warmup) {
-            let ids = vec![Mech::SelfHeating.id().to_string(), Mech::Warmup.id().to_string()];
-            let e =
-                amb_groups.entry(ids).or_insert_with(|| (Vec::new(), "self_heating + warmup".into(), BTreeMap::new()));
-            e.0.push(AXES[fit.axis].into());
-            e.2.insert(AXES[fit.axis].into(), BTreeMap::new());
-            ambiguous_member[fit.axis].extend([Mech::SelfHeating, Mech::Warmup]);
+            let pair = vec![Mech::SelfHeating, Mech::Warmup];
+            local.push((pair.clone(), pair, BTreeMap::new(), BTreeMap::new(), f64::NAN));
+        }
+        // Merge what shares a mechanism, until nothing does.
+        let mut merged = true;
+        while merged {
+            merged = false;
+            'outer: for a in 0..local.len() {
+                for b in a + 1..local.len() {
+                    if local[a].1.iter().any(|m| local[b].1.contains(m)) {
+                        let g = local.remove(b);
+                        let e = &mut local[a];
+                        for m in g.0 {
+                            if !e.0.contains(&m) {
+                                e.0.push(m);
+                            }
+                        }
+                        for m in g.1 {
+                            if !e.1.contains(&m) {
+                                e.1.push(m);
+                            }
+                        }
+                        e.2.extend(g.2);
+                        e.3.extend(g.3);
+                        e.4 = if e.4.is_nan() { g.4 } else { e.4.max(g.4) };
+                        merged = true;
+                        break 'outer;
+                    }
+                }
+            }
+        }
+        let ax = AXES[fit.axis].to_string();
+        for (members, mechs, dev, sep, thr) in local {
+            let mut ids: Vec<String> = mechs.iter().map(|m| m.id().to_string()).collect();
+            ids.sort();
+            ids.dedup();
+            ambiguous_member[fit.axis].extend(members.iter().copied());
+            if members.iter().all(|m| immaterial(fit.axis, *m)) {
+                let names: Vec<&str> = members.iter().map(|m| m.id()).collect();
+                add_negligible(fit.axis, names.join(" + "), members[0]);
+                continue;
+            }
+            let modelled: Vec<&str> = members.iter().map(|m| m.id()).collect();
+            let e = amb_groups.entry(ids).or_insert_with(|| {
+                (Vec::new(), modelled.join(" + "), BTreeMap::new(), BTreeMap::new(), BTreeMap::new())
+            });
+            e.0.push(ax.clone());
+            e.2.insert(ax.clone(), dev);
+            e.3.insert(ax.clone(), sep);
+            if thr.is_finite() {
+                e.4.insert(ax.clone(), thr);
+            }
         }
     }
     let ambiguous: Vec<Ambiguous> = amb_groups
         .into_iter()
-        .map(|(ids, (axes, modelled_as, dev))| {
+        .map(|(ids, (axes, modelled_as, dev, sep, thr))| {
             let ms: Vec<Mech> = ids.iter().filter_map(|i| Mech::from_id(i)).collect();
             let separating_test = if ms.len() == 2 {
                 separating_test(ms[0], ms[1])
             } else {
                 ms.windows(2).map(|w| separating_test(w[0], w[1])).collect::<Vec<_>>().join("; ")
             };
-            Ambiguous { ids, axes, separating_test, modelled_as, deviance_difference: dev }
+            Ambiguous {
+                ids,
+                axes,
+                separating_test,
+                modelled_as,
+                deviance_difference: dev,
+                separability: sep,
+                separation_needed: thr,
+            }
         })
         .collect();
     let mut effects: Vec<Effect> = Vec::new();
@@ -554,11 +696,13 @@ pub fn build(
             significance: BTreeMap::new(),
             heldout_cut_mg: BTreeMap::new(),
             undetermined: BTreeMap::new(),
+            separability: BTreeMap::new(),
         };
         for fit in axes {
             for t in fit.terms.iter().filter(|t| t.mech == m) {
                 let (mut params, mut ci) = term_params(t, &sens[fit.axis], fit.axis);
                 let amb = ambiguous_member[fit.axis].contains(&m);
+                let small = immaterial(fit.axis, m);
                 let undetermined: Vec<String> = match (m.theta(), t.theta_ci) {
                     (Some(name), Some((lo, hi))) if !(hi < UNDETERMINED_RATIO * lo) => vec![name.to_string()],
                     (Some(name), _) if unresolved_play(p, m, t.theta) => vec![name.to_string()],
@@ -570,8 +714,13 @@ pub fn build(
                     params: params.clone(),
                     ambiguous: amb,
                     undetermined: undetermined.clone(),
+                    negligible: small,
                 });
                 if amb {
+                    continue;
+                }
+                if small {
+                    add_negligible(fit.axis, m.id().into(), m);
                     continue;
                 }
                 if is_folded(fit.axis, m) {
@@ -593,6 +742,10 @@ pub fn build(
                     && let Some(g) = fit.heldout_gain.get(k)
                 {
                     e.heldout_cut_mg.insert(ax.clone(), [g.0 * 1e3, g.1 * 1e3]);
+                }
+                if let Some((_, rivals)) = fit.separability.iter().find(|(a, _)| *a == m) {
+                    e.separability
+                        .insert(ax.clone(), rivals.iter().take(3).map(|(b, d)| (b.id().to_string(), *d)).collect());
                 }
                 if !undetermined.is_empty() {
                     e.undetermined.insert(ax, undetermined);
@@ -694,6 +847,7 @@ pub fn build(
         unexplained_located,
         effects,
         ambiguous,
+        negligible,
         rms_before_mg: per_axis(|i| axes[i].rms.0 * 1e3),
         rms_after_mg: per_axis(|i| axes[i].rms.1 * 1e3),
         heldout_rms_before_mg: per_axis(|i| axes[i].heldout_rms.0 * 1e3),

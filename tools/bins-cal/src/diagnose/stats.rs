@@ -159,6 +159,26 @@ pub fn chi2_sf(x: f64, k: f64) -> f64 {
     gamma_q(0.5 * k, 0.5 * x)
 }
 
+/// The `x` with `P(χ²_k > x) = p` (bisection on [`chi2_sf`], to 10⁻⁹ relative).
+pub fn chi2_isf(p: f64, k: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0, k.max(1.0));
+    while chi2_sf(hi, k) > p && hi < 1e6 {
+        hi *= 2.0;
+    }
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if chi2_sf(mid, k) > p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        if hi - lo <= 1e-9 * hi {
+            break;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
 /// Sum and number of the squared first (`order` 1) or second (`order` 2) differences of the
 /// overlapping cluster means of `m` samples, pooled over `segments` (prefix sums: the cluster
 /// means are `ȳ_k = (S[k+m] − S[k])/m`).

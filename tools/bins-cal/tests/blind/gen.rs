@@ -275,6 +275,10 @@ pub struct Case {
     /// Further concealed mechanisms acting at the same time (combined cases; empty in the
     /// single-mechanism mode). `mech`, `size_sigma` and `axis_weight` are the first member.
     pub extra: Vec<Member>,
+    /// A test profile drawn the way users record, independently of the concealed members
+    /// ([`Case::draw_user`]): sessions, power-ons and the unit's thermal path. `None`: the
+    /// profile above, drawn so that every member can be seen.
+    pub user: Option<UserPlan>,
 }
 
 /// One concealed mechanism of a case, with its size and where it acts.
@@ -490,6 +494,7 @@ impl Case {
             dwell_s,
             anchor_c: anchor_c(),
             extra,
+            user: None,
         }
     }
 }
@@ -973,6 +978,9 @@ pub struct Truth {
 
 /// Generates the SIM and REAL rows of a case.
 pub fn generate(c: &Case) -> (Vec<Row>, Vec<Row>, Truth) {
+    if let Some(u) = &c.user {
+        return generate_user(c, u);
+    }
     let mut rng = ChaCha8Rng::seed_from_u64(c.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xB11D);
     let unit = Unit::draw(&mut rng);
     let n = c.rows;
@@ -1047,6 +1055,356 @@ pub fn generate(c: &Case) -> (Vec<Row>, Vec<Row>, Truth) {
                 v += g[i] * con[k][i];
             }
             r.u_v[i] = v + kd[i] * noise_g;
+        }
+        sim.push(row);
+        real.push(r);
+    }
+    (sim, real, truth)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Profiles drawn the way users record (`Case::draw_user`): independent of the concealed members.
+// ---------------------------------------------------------------------------------------------
+
+/// One powered session of a user profile.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UserSession {
+    /// `t_s` of its first row \[s\].
+    pub start_s: f64,
+    /// Its length \[s\].
+    pub dur_s: f64,
+    /// `power_s` at its first row \[s\] (0: powered on at its start).
+    pub power_offset_s: f64,
+    /// What the chamber does: `ramp`, `reversal`, `soak` or `steps`.
+    pub kind: &'static str,
+}
+
+/// A test profile as users record it: sessions joined in one file (unpowered gaps between), the
+/// chamber's program over the whole time, and the unit's own thermal path (its case lags the
+/// chamber, its die self-heats after each power-on, in SIM and REAL alike, and its thermistor
+/// sits between case and die).
+#[derive(Clone, Debug, PartialEq)]
+pub struct UserPlan {
+    /// The sessions, in time order.
+    pub sessions: Vec<UserSession>,
+    /// The chamber's temperature program, knots `(t_s, °C)` over the whole time.
+    pub chamber: Vec<(f64, f64)>,
+    /// The case's lag behind the chamber \[s\].
+    pub case_tau_s: f64,
+    /// The die's rise over the case after a power-on [°C].
+    pub rise_c: f64,
+    /// Its time constant \[s\].
+    pub rise_tau_s: f64,
+    /// Where the thermistor sits: `case + share·(die − case)`.
+    pub thermistor_share: f64,
+    /// The thermistor reading's step [°C] (0: none).
+    pub quantum_c: f64,
+}
+
+impl UserPlan {
+    /// Name for the tables: sessions and their kinds.
+    pub fn name(&self) -> String {
+        let kinds: Vec<&str> = self.sessions.iter().map(|s| s.kind).collect();
+        format!("{}x[{}]", self.sessions.len(), kinds.join(","))
+    }
+}
+
+impl Case {
+    /// Draws a case whose test profile is drawn the way users record, independently of the
+    /// concealed members (a stream of its own): one session (60 %) or 2–3 joined with unpowered
+    /// gaps of 10–120 min; each powered on at its start (the first one already powered for
+    /// 10–120 min in 30 % of cases); per session a single monotone ramp from a hot or cold
+    /// start (40 %), a ramp with one reversal (25 %), a soak (15 %) or steps with holds (20 %), at
+    /// 0.2–0.5 °C/min, with or without holds; the unit's case lagging the chamber by 5–25 min,
+    /// its die self-heating 0.5–2 °C after each power-on, its thermistor between case and die;
+    /// 1–100 Hz; one orientation (55 %), six (30 %) or tilted ones (15 %). `combined`: 2–3
+    /// members, otherwise one or none (27 %), as [`Case::draw`] and [`Case::draw_combined`].
+    pub fn draw_user(seed: u64, combined: bool) -> Case {
+        // The members from one stream, the profile from another: the profile is the same
+        // whatever is concealed.
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x05E2_F11E_B11D);
+        let mut prng = ChaCha8Rng::seed_from_u64(seed ^ 0x05E2_9A0F_11E5);
+        let mechs: Vec<Mech> = if combined {
+            let k = rng.random_range(2..=3);
+            let mut ids: Vec<&str> = MECH_IDS.to_vec();
+            (0..k).map(|_| mech_of(ids.remove(rng.random_range(0..ids.len())), &mut rng)).collect()
+        } else if rng.random_bool(0.27) {
+            vec![Mech::None]
+        } else {
+            vec![mech_of(MECH_IDS[rng.random_range(0..MECH_IDS.len())], &mut rng)]
+        };
+        // The profile: nothing below looks at `mechs`.
+        let n_sessions = if prng.random_bool(0.6) { 1 } else { prng.random_range(2..=3) };
+        let mut sessions = Vec::new();
+        let mut chamber: Vec<(f64, f64)> = Vec::new();
+        let mut now = 0.0;
+        let mut temp_c =
+            if prng.random_bool(0.5) { prng.random_range(35.0..65.0) } else { prng.random_range(-30.0..5.0) };
+        chamber.push((-4.0 * 3600.0, temp_c));
+        for k in 0..n_sessions {
+            if k > 0 {
+                now += prng.random_range(600.0..7200.0);
+            }
+            let dur_s = prng.random_range(1800.0..14_400.0);
+            let kind = match prng.random_range(0..100) {
+                0..40 => "ramp",
+                40..65 => "reversal",
+                65..80 => "soak",
+                _ => "steps",
+            };
+            let rate = prng.random_range(0.2..0.5) / 60.0;
+            let hold =
+                |r: &mut ChaCha8Rng| -> f64 { if r.random_bool(0.5) { r.random_range(600.0..2400.0) } else { 0.0 } };
+            // Heading for the far side of the range from where the chamber is.
+            let toward = |from: f64, r: &mut ChaCha8Rng| {
+                if from > 20.0 { r.random_range(-30.0..5.0) } else { r.random_range(35.0..65.0) }
+            };
+            let end = now + dur_s;
+            let mut t = now;
+            chamber.push((t, temp_c));
+            let go = |to: f64, t: &mut f64, temp_c: &mut f64, chamber: &mut Vec<(f64, f64)>| {
+                let len = ((to - *temp_c).abs() / rate).min(end - *t).max(0.0);
+                let reached = *temp_c + (to - *temp_c).signum() * rate * len;
+                *t += len;
+                *temp_c = reached;
+                chamber.push((*t, *temp_c));
+            };
+            match kind {
+                "soak" => {}
+                "ramp" => {
+                    t += hold(&mut prng).min(0.3 * dur_s);
+                    chamber.push((t, temp_c));
+                    let to = toward(temp_c, &mut prng);
+                    go(to, &mut t, &mut temp_c, &mut chamber);
+                }
+                "reversal" => {
+                    t += hold(&mut prng).min(0.2 * dur_s);
+                    chamber.push((t, temp_c));
+                    let from = temp_c;
+                    let to = toward(temp_c, &mut prng);
+                    let turn_at = temp_c + (to - temp_c) * prng.random_range(0.4..1.0);
+                    let first = ((turn_at - temp_c).abs() / rate).min(0.6 * (end - t));
+                    let turn = temp_c + (turn_at - temp_c).signum() * rate * first;
+                    go(turn, &mut t, &mut temp_c, &mut chamber);
+                    t += hold(&mut prng).min(0.2 * dur_s).min((end - t).max(0.0));
+                    chamber.push((t, temp_c));
+                    let back = temp_c - (turn - from) * prng.random_range(0.5..1.2);
+                    go(back, &mut t, &mut temp_c, &mut chamber);
+                }
+                _ => {
+                    let levels = prng.random_range(2..=4);
+                    let to = toward(temp_c, &mut prng);
+                    let step = (to - temp_c) / levels as f64;
+                    for _ in 0..levels {
+                        let target = temp_c + step;
+                        go(target, &mut t, &mut temp_c, &mut chamber);
+                        t += prng.random_range(600.0..2400.0_f64).min((end - t).max(0.0));
+                        chamber.push((t, temp_c));
+                    }
+                }
+            }
+            chamber.push((end.max(t), temp_c));
+            let power_offset_s = if k == 0 && prng.random_bool(0.3) { prng.random_range(600.0..7200.0) } else { 0.0 };
+            sessions.push(UserSession { start_s: now, dur_s, power_offset_s, kind });
+            now = end;
+        }
+        chamber.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let total_s: f64 = sessions.iter().map(|s| s.dur_s).sum();
+        let rates = [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0];
+        let mut rate_hz = rates[prng.random_range(0..rates.len())];
+        while rate_hz > 1.0 && total_s * rate_hz > 250_000.0 {
+            rate_hz = rates.iter().copied().filter(|&r| r < rate_hz).fold(1.0, f64::max);
+        }
+        let positions = match prng.random_range(0..100) {
+            0..55 => Positions::One,
+            55..85 => Positions::Six,
+            _ => Positions::Tilted,
+        };
+        let dwell_s = prng.random_range(30.0..240.0);
+        let plan = UserPlan {
+            case_tau_s: prng.random_range(300.0..1500.0),
+            rise_c: prng.random_range(0.5..2.0),
+            rise_tau_s: log_uniform(&mut prng, 200.0, 1200.0),
+            thermistor_share: prng.random_range(0.2..0.9),
+            quantum_c: [0.0, 0.0078125, 0.01, 0.0625][prng.random_range(0..4)],
+            sessions,
+            chamber,
+        };
+        let rw_ratio = if rng.random_bool(0.4) { log_uniform(&mut rng, 0.5, 3.0) } else { 0.0 };
+        let sigma_ug = log_uniform(&mut rng, 5.0, 500.0);
+        let mut members: Vec<Member> = mechs
+            .iter()
+            .map(|m| {
+                let size_sigma = if *m == Mech::None { 0.0 } else { log_uniform(&mut rng, 0.5, 20.0) };
+                Member { mech: m.clone(), size_sigma, axis_weight: draw_axis_weight(m, &mut rng) }
+            })
+            .collect();
+        let first = members.remove(0);
+        let rows = (total_s * rate_hz).round() as usize;
+        Case {
+            seed,
+            mech: first.mech,
+            size_sigma: first.size_sigma,
+            axis_weight: first.axis_weight,
+            sigma_ug,
+            rw_ratio,
+            profile: Profile::Constant,
+            positions,
+            power_column: true,
+            power_on_s: Vec::new(),
+            power_offset_s: 0.0,
+            rows,
+            rate_hz,
+            dwell_s,
+            anchor_c: anchor_c(),
+            extra: members,
+            user: Some(plan),
+        }
+    }
+}
+
+/// The rows' times, session by session, and each row's session.
+fn user_times(u: &UserPlan, rate_hz: f64) -> (Vec<f64>, Vec<usize>) {
+    let dt = 1.0 / rate_hz;
+    let (mut t, mut sess) = (Vec::new(), Vec::new());
+    for (k, s) in u.sessions.iter().enumerate() {
+        let n = (s.dur_s * rate_hz).round() as usize;
+        for i in 0..n {
+            t.push(s.start_s + i as f64 * dt);
+            sess.push(k);
+        }
+    }
+    (t, sess)
+}
+
+/// The unit's thermal path at the rows: the case (first-order lag of the chamber, integrated
+/// through the gaps too), the die (the case plus the self-heating since the session's
+/// power-on) and the thermistor between them; and `power_s`.
+fn user_thermal(u: &UserPlan, t: &[f64], sess: &[usize]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let n = t.len();
+    let mut case = Vec::with_capacity(n);
+    let mut x = interp(&u.chamber, u.chamber[0].0);
+    let mut prev = u.chamber[0].0;
+    for &tk in t {
+        // Sub-steps of at most 10 s (the gaps included), the chamber interpolated.
+        let h = tk - prev;
+        let steps = ((h / 10.0).ceil() as usize).max(1);
+        for s in 0..steps {
+            let tm = prev + h * (s as f64 + 0.5) / steps as f64;
+            x += (1.0 - (-(h / steps as f64) / u.case_tau_s).exp()) * (interp(&u.chamber, tm) - x);
+        }
+        prev = tk;
+        case.push(x);
+    }
+    let power: Vec<f64> = (0..n)
+        .map(|k| {
+            let s = &u.sessions[sess[k]];
+            t[k] - s.start_s + s.power_offset_s
+        })
+        .collect();
+    let die: Vec<f64> = (0..n)
+        .map(|k| {
+            let p = power[k] / u.rise_tau_s;
+            case[k] + u.rise_c * (1.0 - 0.8 * (-p).exp() - 0.2 * (-4.0 * p).exp())
+        })
+        .collect();
+    let therm: Vec<f64> = (0..n).map(|k| case[k] + u.thermistor_share * (die[k] - case[k])).collect();
+    (die, therm, power)
+}
+
+/// RMS of `v` after each session's mean is removed.
+fn rms_about_session_means(v: &[f64], sess: &[usize]) -> f64 {
+    let k = sess.iter().copied().max().unwrap_or(0) + 1;
+    let mut sum = vec![(0.0, 0usize); k];
+    for (x, &s) in v.iter().zip(sess) {
+        sum[s].0 += x;
+        sum[s].1 += 1;
+    }
+    let ss: f64 = v.iter().zip(sess).map(|(x, &s)| (x - sum[s].0 / sum[s].1.max(1) as f64).powi(2)).sum();
+    (ss / v.len().max(1) as f64).sqrt()
+}
+
+/// [`generate`] for a user profile: SIM is the unit at its die temperature (the twin knows its
+/// own self-heating), REAL the same plus the concealed members, both recording the
+/// thermistor's reading. The truth's sizes are what each member shows once each session's
+/// offset is removed (the level restarts at a power-on): what the profile lets one see.
+fn generate_user(c: &Case, u: &UserPlan) -> (Vec<Row>, Vec<Row>, Truth) {
+    let mut rng = ChaCha8Rng::seed_from_u64(c.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x05E2_B11D);
+    let unit = Unit::draw(&mut rng);
+    let (t, sess) = user_times(u, c.rate_hz);
+    let n = t.len();
+    let (die, therm, power) = user_thermal(u, &t, &sess);
+    let read: Vec<f64> = therm
+        .iter()
+        .map(|x| {
+            let v = x + THERMISTOR_SIGMA_C * gauss(&mut rng);
+            if u.quantum_c > 0.0 { (v / u.quantum_c).round() * u.quantum_c } else { v }
+        })
+        .collect();
+    let set = position_set(c.positions, &mut rng);
+    let dwell_rows = ((c.dwell_s * c.rate_hz).round() as usize).max(2);
+    let pos_of: Vec<usize> = (0..n).map(|k| (k / dwell_rows) % set.len()).collect();
+    let f: Vec<[f64; 3]> = pos_of.iter().map(|&p| set[p].1).collect();
+    let kd = [unit.k[0][0], unit.k[1][1], unit.k[2][2]];
+    let d: Vec<f64> = die.iter().map(|x| x - c.anchor_c).collect();
+    let ctx = Ctx { unit: &unit, t: &t, temp: &die, f: &f, power: &power, d: &d, kd };
+    let sigma_g = c.sigma_ug * 1e-6;
+    let mut members = Vec::new();
+    let mut truth = Truth { axis_size_sigma: [0.0; 3], members: Vec::new() };
+    for (m, member) in c.members().iter().enumerate() {
+        let mut r = ChaCha8Rng::seed_from_u64(c.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (0x05E2_0000 + m as u64));
+        let pa = draw_per_axis(&mut r);
+        let con = contribution(&member.mech, &ctx, &pa);
+        let (mut g, _) = scale_to_size(&member.mech, member.size_sigma, &member.axis_weight, &con, &pa, kd, sigma_g);
+        // A contribution this profile holds constant (a scale-factor term in one orientation)
+        // has only rounding about its mean: nothing to scale up.
+        for i in 0..3 {
+            let v: Vec<f64> = con.iter().map(|row| row[i]).collect();
+            let peak = v.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+            if !(std_about_mean(&v) > 1e-9 * peak) {
+                g[i] = 0.0;
+            }
+        }
+        let mut visible = [0.0; 3];
+        for i in 0..3 {
+            let v: Vec<f64> = con.iter().map(|row| g[i] * row[i] / kd[i]).collect();
+            visible[i] = rms_about_session_means(&v, &sess) / sigma_g;
+        }
+        if m == 0 {
+            truth.axis_size_sigma = visible;
+        }
+        truth.members.push(visible);
+        members.push((g, con));
+    }
+    let dur = t[n - 1].max(1.0);
+    let q = c.rw_ratio * sigma_g / dur.sqrt();
+    let mut rw = [0.0; 3];
+    let (mut sim, mut real) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for k in 0..n {
+        let mut row = Row {
+            line: k as u64 + 2,
+            t_s: t[k],
+            temp_c: read[k],
+            f_g: f[k].map(Some),
+            vib_kind: Some(VibKind::None),
+            vib_g: [Some(0.0); 3],
+            pos: Some(set[pos_of[k]].0.clone()),
+            power_s: Some(power[k]),
+            ..Row::default()
+        };
+        let base = unit.signals(die[k], &f[k]);
+        row.u_v = base;
+        let mut r = row.clone();
+        for i in 0..3 {
+            if k > 0 {
+                // The bias's random walk goes on through an unpowered gap.
+                rw[i] += q * (t[k] - t[k - 1]).sqrt() * gauss(&mut rng);
+            }
+            let mut v = base[i] + kd[i] * (sigma_g * gauss(&mut rng) + rw[i]);
+            for (g, con) in &members {
+                v += g[i] * con[k][i];
+            }
+            r.u_v[i] = v;
         }
         sim.push(row);
         real.push(r);

@@ -1048,3 +1048,166 @@ pub fn plot_snr(res: &[CaseResult], dir: &Path) -> Result<PathBuf, String> {
         }
     }
 }
+
+/// Cases `seed0 .. seed0 + n` with profiles drawn the way users record
+/// ([`Case::draw_user`]), one member or none (`combined` false) or 2–3, diagnosed on
+/// `threads` threads (in seed order in the result).
+pub fn run_user(n: usize, seed0: u64, combined: bool, threads: usize, progress: bool) -> Vec<CaseResult> {
+    let cases: Vec<Case> = (0..n as u64).map(|k| Case::draw_user(seed0 + k, combined)).collect();
+    run_list(&cases, threads, progress)
+}
+
+/// How a case with a user profile came out, by the answer a user gets.
+pub fn user_category(r: &CaseResult) -> &'static str {
+    if !r.false_ids.is_empty() {
+        return "definite false name";
+    }
+    let visible: Vec<&MemberResult> = r.members.iter().filter(|m| m.visible()).collect();
+    let nothing = r.effects.is_empty() && r.ambiguous.is_empty();
+    if visible.iter().all(|m| m.named) {
+        if visible.iter().any(|m| m.ambiguous) {
+            "truthful ambiguity"
+        } else if visible.is_empty() && nothing {
+            "honest nothing"
+        } else {
+            "exact"
+        }
+    } else if nothing {
+        "honest nothing"
+    } else {
+        "partial"
+    }
+}
+
+impl MemberResult {
+    /// What the profile lets one see of it reaches [`STRONG_SIGMA`] on some accelerometer
+    /// (the generator's own truth: its contribution with each session's offset removed).
+    pub fn visible(&self) -> bool {
+        self.axis_size_sigma.iter().any(|&s| s >= STRONG_SIGMA)
+    }
+}
+
+/// The scorecard of the user-profile draw.
+#[derive(Clone, Debug, Default)]
+pub struct UserSummary {
+    /// Members the profile lets one see at ≥ 5 σ: named exactly or inside a truthful group,
+    /// of all.
+    pub visible: (usize, usize),
+    /// Of those, named only inside a group.
+    pub visible_ambiguous: usize,
+    /// Cases with a definite false name, of all.
+    pub false_cases: (usize, usize),
+    /// Cases per category ([`user_category`]).
+    pub categories: BTreeMap<&'static str, usize>,
+    /// The text.
+    pub text: String,
+}
+
+/// Summarises user-profile cases: per category, per member mechanism, per profile.
+pub fn summarize_user(res: &[CaseResult]) -> UserSummary {
+    let mut s = UserSummary::default();
+    // (visible named, visible, in groups only, cases, false cases)
+    let mut per_mech: BTreeMap<&str, (usize, usize, usize, usize, usize)> = BTreeMap::new();
+    let mut per_profile: BTreeMap<String, (usize, usize, usize, usize)> = BTreeMap::new();
+    for r in res {
+        let cat = user_category(r);
+        *s.categories.entry(cat).or_default() += 1;
+        let false_case = !r.false_ids.is_empty();
+        s.false_cases.1 += 1;
+        s.false_cases.0 += usize::from(false_case);
+        let plan = r.case.user.as_ref();
+        let sessions = plan.map_or(1, |u| u.sessions.len());
+        let first_kind = plan.and_then(|u| u.sessions.first()).map_or("?", |s| s.kind);
+        let powered = plan.and_then(|u| u.sessions.first()).is_some_and(|s| s.power_offset_s > 0.0);
+        let profile = if sessions > 1 {
+            format!("{sessions} sessions joined")
+        } else {
+            format!("one session: {first_kind}{}", if powered { " (powered before)" } else { "" })
+        };
+        let pp = per_profile.entry(profile).or_default();
+        pp.2 += 1;
+        pp.3 += usize::from(false_case);
+        let ids: Vec<&str> = if r.members.is_empty() { vec!["none"] } else { r.members.iter().map(|m| m.id).collect() };
+        for id in &ids {
+            let e = per_mech.entry(id).or_default();
+            e.3 += 1;
+            e.4 += usize::from(false_case);
+        }
+        for m in r.members.iter().filter(|m| m.visible()) {
+            s.visible.1 += 1;
+            s.visible.0 += usize::from(m.named);
+            s.visible_ambiguous += usize::from(m.named && m.ambiguous);
+            let e = per_mech.entry(m.id).or_default();
+            e.1 += 1;
+            e.0 += usize::from(m.named);
+            e.2 += usize::from(m.named && m.ambiguous);
+            pp.1 += 1;
+            pp.0 += usize::from(m.named);
+        }
+    }
+    let mut w = String::new();
+    let _ = writeln!(w, "user-profile scorecard ({} cases; profiles drawn independently of the members)", res.len());
+    let frac = |(a, b): (usize, usize)| if b == 0 { "—".to_string() } else { format!("{a}/{b} {:.0}%", pct(a, b)) };
+    let _ =
+        writeln!(w, "{:<34} {:>5} {:>14} {:>8} {:>12}", "member", "cases", "visible named", "in group", "false-name");
+    let mut order: Vec<&str> = vec!["none"];
+    order.extend(MECH_IDS);
+    for id in order {
+        if let Some(&(named, vis, amb, cases, fal)) = per_mech.get(id) {
+            let _ =
+                writeln!(w, "{:<34} {:>5} {:>14} {:>8} {:>12}", id, cases, frac((named, vis)), amb, frac((fal, cases)));
+        }
+    }
+    let _ = writeln!(w, "{:<34} {:>5} {:>14} {:>8} {:>12}", "profile", "cases", "visible named", "", "false-name");
+    for (p, &(named, vis, cases, fal)) in &per_profile {
+        let _ = writeln!(w, "{:<34} {:>5} {:>14} {:>8} {:>12}", p, cases, frac((named, vis)), "", frac((fal, cases)));
+    }
+    let cats: Vec<String> = s.categories.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    let _ = writeln!(w, "cases: {}", cats.join(", "));
+    let _ = writeln!(
+        w,
+        "members the profile lets one see at ≥ {STRONG_SIGMA} σ named exactly or inside a truthful group: {} ({} of them in a group)",
+        frac(s.visible),
+        s.visible_ambiguous
+    );
+    let _ = writeln!(w, "cases with a definite false name: {}", frac(s.false_cases));
+    s.text = w;
+    s
+}
+
+/// One line of a user-profile case: its plan, members (drawn and visible size) and answer.
+pub fn user_line(r: &CaseResult) -> String {
+    let c = &r.case;
+    let members: Vec<String> = r
+        .members
+        .iter()
+        .map(|m| {
+            format!(
+                "{}{} {:.1}σ vis {:.1}/{:.1}/{:.1}",
+                m.id,
+                if m.named { if m.ambiguous { "(grp)" } else { "(ok)" } } else { "" },
+                m.size_sigma,
+                m.axis_size_sigma[0],
+                m.axis_size_sigma[1],
+                m.axis_size_sigma[2]
+            )
+        })
+        .collect();
+    format!(
+        "seed {:>6} {:<28} {:<6} rw {:.1} σ {:>5.0} µg {:>7} rows {:>5.1} Hz | {} | {:<19} eff [{}] amb [{}] false [{}] {:.1}s{}",
+        c.seed,
+        c.user.as_ref().map_or_else(|| c.profile.name(), |u| u.name()),
+        c.positions.name(),
+        c.rw_ratio,
+        c.sigma_ug,
+        c.rows,
+        c.rate_hz,
+        members.join("; "),
+        user_category(r),
+        r.effects.join(" "),
+        r.ambiguous.join(" "),
+        r.false_ids.join(" "),
+        r.secs,
+        r.error.as_deref().map(|e| format!(" ERROR {e}")).unwrap_or_default()
+    )
+}

@@ -2,6 +2,7 @@
 //! tests read and rewrite CSV files ([`csv_text`]).
 
 pub mod csv_text;
+pub mod fclog_writer;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

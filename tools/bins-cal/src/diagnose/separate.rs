@@ -1,0 +1,282 @@
+//! Separability of two explanations on a design: the deviance a rival cannot absorb of what
+//! another explanation predicts (the T-criterion of Atkinson & Fedorov, 1975).
+//!
+//! An explanation A (a set of fitted mechanisms) predicts `η_A` on a design (the rows,
+//! temperatures, power-ons and positions of a recording, or of a test not yet run). A rival B is
+//! refitted to `η_A` — its coefficients by generalised least squares under the noise model, its
+//! θ searched on its grid and refined — with the columns both explanations share (the nuisance
+//! and the other members) free beside it. What B cannot absorb, in the whitened metric and in
+//! units of the residual variance (times the autocorrelation inflation), is the expected
+//! likelihood-ratio statistic of A against B were A true: the deviance the design lets the data
+//! show between them. Below the naming threshold, data drawn from A would seldom name A over B,
+//! and the two are one ambiguous group whatever one recording's ranking says. Holding B at
+//! fixed values instead of refitting it overstates the separation.
+//!
+//! The design is a [`Context`] (built from a [`super::prep::Prepared`]), so a design other than
+//! the recording's can be passed.
+
+use super::fit::PartialLs;
+use super::mech::{Context, Mech};
+use super::noise::Filter;
+
+/// One fitted member of an explanation: the mechanism, its θ and the coefficients of its raw
+/// columns ([`Context::columns`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fitted {
+    /// The mechanism.
+    pub mech: Mech,
+    /// Its time constant \[s\] or width [°C].
+    pub theta: Option<f64>,
+    /// Coefficients of its columns.
+    pub coef: Vec<f64>,
+}
+
+/// What a rival absorbs of an explanation's prediction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Separation {
+    /// The deviance the rival cannot absorb (expected likelihood-ratio statistic of the
+    /// explanation against the refitted rival).
+    pub deviance: f64,
+    /// The rival's θ at its best (for mechanisms with one).
+    pub rival_theta: Option<f64>,
+}
+
+/// The prediction of `members` on the design `ctx` \[g\].
+pub fn predict(ctx: &Context, members: &[Fitted]) -> Vec<f64> {
+    let n = ctx.p.t.len();
+    let mut eta = vec![0.0; n];
+    for m in members {
+        let cols = ctx.columns(m.mech, m.theta.unwrap_or(0.0));
+        for (c, b) in cols.iter().zip(&m.coef) {
+            for (e, v) in eta.iter_mut().zip(c) {
+                *e += b * v;
+            }
+        }
+    }
+    eta
+}
+
+/// What a rival is refitted against: the prediction of an explanation on a design, whitened
+/// once under the noise model with the columns both explanations share; each rival's columns
+/// are then whitened and solved beside them ([`Refit::deviance`]).
+pub struct Refit<'c, 'p> {
+    ctx: &'c Context<'p>,
+    filt: Filter,
+    part: PartialLs,
+    scale: f64,
+}
+
+impl<'c, 'p> Refit<'c, 'p> {
+    /// The refit of rivals to `eta` (an explanation's prediction on the design `ctx`,
+    /// [`predict`]) with the columns `shared` free in both, under the noise model of random-walk
+    /// intensity `q` [g²/s]; `scale` is the residual variance of the whitened innovations times
+    /// the autocorrelation inflation (the deviance's unit,
+    /// [`super::fit::AxisFit::deviance_scale`]).
+    pub fn new(ctx: &'c Context<'p>, q: f64, scale: f64, eta: &[f64], shared: &[Vec<f64>]) -> Self {
+        let filt = Filter::new(&ctx.p.t, &ctx.p.r_white[ctx.axis], q, |_| true);
+        let part = PartialLs::new(&filt, eta, shared);
+        Refit { ctx, filt, part, scale: scale.max(1e-300) }
+    }
+
+    /// The whitened residual sum of squares with the rival's columns `cols` beside the shared
+    /// ones; where this design makes some of them collinear (a cross-sensitivity tempco's
+    /// `f_j ΔT` and `f_k ΔT` in one orientation), the best of the subsets that are not;
+    /// infinite for no column at all.
+    fn sse(&self, cols: &[Vec<f64>]) -> f64 {
+        if cols.iter().all(|c| c.iter().all(|v| *v == 0.0)) {
+            return f64::INFINITY;
+        }
+        let sse = self.part.sse_plus(&self.filt, cols);
+        if sse.is_finite() || cols.len() < 2 {
+            return sse;
+        }
+        (1u32..(1 << cols.len()) - 1)
+            .map(|mask| {
+                let sub: Vec<Vec<f64>> =
+                    cols.iter().enumerate().filter(|(j, _)| mask >> j & 1 == 1).map(|(_, c)| c.clone()).collect();
+                self.part.sse_plus(&self.filt, &sub)
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// The deviance the rival given by its columns at θ (`columns(θ)`) cannot absorb, θ
+    /// searched on `grid` where `offered` and refined by golden section in ln θ within the
+    /// grid's span (a rival without θ: `grid` empty, `columns` called once with 0). `None` when
+    /// the rival has no column on this design.
+    pub fn deviance(
+        &self,
+        grid: &[f64],
+        offered: &dyn Fn(f64) -> bool,
+        columns: &dyn Fn(f64) -> Vec<Vec<f64>>,
+    ) -> Option<Separation> {
+        let sse_at = |theta: f64| self.sse(&columns(theta));
+        if grid.is_empty() {
+            let sse = sse_at(0.0);
+            return sse.is_finite().then_some(Separation { deviance: sse / self.scale, rival_theta: None });
+        }
+        let mut best: Option<(f64, f64)> = None;
+        for &th in grid {
+            let s = sse_at(th);
+            if s.is_finite() && best.is_none_or(|b| s < b.1) {
+                best = Some((th, s));
+            }
+        }
+        let (th0, s0) = best?;
+        // Within the grid's span: a play wider than the grid's never engages over the
+        // temperatures swept (a polynomial in T under another name, not a rival play).
+        let step = if grid.len() > 1 { (grid[1] / grid[0]).ln() } else { 0.3 };
+        let (g_lo, g_hi) = (grid[0].ln(), grid[grid.len() - 1].ln());
+        let eval = |lt: f64| if offered(lt.exp()) { sse_at(lt.exp()) } else { f64::INFINITY };
+        let phi = 0.618_033_988_749_894_9;
+        let (mut lo, mut hi) = ((th0.ln() - step).max(g_lo), (th0.ln() + step).min(g_hi));
+        let (mut c, mut d) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
+        let (mut fc, mut fd) = (eval(c), eval(d));
+        for _ in 0..12 {
+            if fc < fd {
+                hi = d;
+                d = c;
+                fd = fc;
+                c = hi - phi * (hi - lo);
+                fc = eval(c);
+            } else {
+                lo = c;
+                c = d;
+                fc = fd;
+                d = lo + phi * (hi - lo);
+                fd = eval(d);
+            }
+        }
+        let (th, s) = if fc.min(fd) < s0 { if fc < fd { (c.exp(), fc) } else { (d.exp(), fd) } } else { (th0, s0) };
+        Some(Separation { deviance: s / self.scale, rival_theta: Some(th) })
+    }
+
+    /// The deviance the library's mechanism `rival` cannot absorb (θ searched on its grid where
+    /// it has one).
+    pub fn mechanism(&self, rival: Mech) -> Option<Separation> {
+        let ctx = self.ctx;
+        let grid: Vec<f64> = if rival.theta().is_some() {
+            ctx.grid(rival).into_iter().filter(|&th| ctx.offered(rival, th)).collect()
+        } else {
+            Vec::new()
+        };
+        if rival.theta().is_some() && grid.is_empty() {
+            return None;
+        }
+        self.deviance(&grid, &|th| ctx.offered(rival, th), &|th| ctx.columns(rival, th))
+    }
+
+    /// The deviance the temperature form `rival` cannot absorb acting on a die that self-heats
+    /// after each power-on, unseen by the thermistor: its columns built from
+    /// `T + ρ·(1 − e^(−P/τ))` (ρ = 0.3, 1 and [`DIE_RISE_MAX_C`] °C; τ on the turn-on grid; a
+    /// play's width 0.1–3 °C). On a soak after a power-on a tempco acting through the die's
+    /// rise is a turn-on transient; over a wide temperature range the same coefficients must
+    /// also fit the ramps, and then it is not.
+    pub fn through_die_rise(&self, rival: Mech) -> Option<f64> {
+        let ctx = self.ctx;
+        let power = ctx.p.power.as_deref()?;
+        let taus: Vec<f64> = ctx.grid(Mech::Warmup);
+        if taus.is_empty() || !rival.temperature_form() || !ctx.rival_possible(rival) {
+            return None;
+        }
+        let thetas: Vec<f64> = match rival {
+            Mech::ThermalHysteresis | Mech::BiasHysteresis => vec![0.1, 0.3, 1.0, 3.0],
+            Mech::ThermalLag => return None,
+            _ => vec![0.0],
+        };
+        let mut best = f64::INFINITY;
+        for rho in [0.3, 1.0, DIE_RISE_MAX_C] {
+            for &tau in &taus {
+                let temp: Vec<f64> =
+                    ctx.p.temp_s.iter().zip(power).map(|(t, p)| t - rho * (-p / tau).exp_m1()).collect();
+                for &th in &thetas {
+                    let s = self.sse(&ctx.columns_at(rival, th, &temp));
+                    best = best.min(s / self.scale);
+                }
+            }
+        }
+        best.is_finite().then_some(best)
+    }
+}
+
+impl Refit<'_, '_> {
+    /// The deviance a die that runs steadily warmer than its thermistor cannot absorb: the
+    /// library's self-heating settled (`S'(T, f)`, SIM's sensitivity's slope), which long after
+    /// power-on is a temperature function like a tempco SIM lacks. `None` without `power_s`.
+    pub fn self_heating_settled(&self) -> Option<f64> {
+        let ctx = self.ctx;
+        ctx.p.power.as_ref()?;
+        let col = ctx.columns(Mech::SelfHeating, 1e-9);
+        self.deviance(&[], &|_| true, &|_| col.clone()).map(|s| s.deviance)
+    }
+
+    /// The deviance a second first-order stage of the lag `tau_s` cannot absorb (a lag of the
+    /// lagged temperature, its own τ on the lag's grid, beside the first stage the shared
+    /// columns hold): a sensing element two stages behind the thermistor leaves, after a
+    /// first-order fit, a remainder at the ramps' starts and ends that a play or a turn-on term
+    /// would take.
+    pub fn second_lag_stage(&self, tau_s: f64) -> Option<f64> {
+        let ctx = self.ctx;
+        let p = ctx.p;
+        let first = super::mech::by_session(p, |r| super::mech::lagged(&p.t[r.clone()], &p.temp_s[r], tau_s));
+        let grid = ctx.grid(Mech::ThermalLag);
+        self.deviance(&grid, &|_| true, &|th| ctx.columns_at(Mech::ThermalLag, th, &first)).map(|s| s.deviance)
+    }
+
+    /// The deviance a die heating after power-on cannot absorb, acting through a sensitivity
+    /// of its own: `(1 − e^(−P/τ))·(c0 + c1 ΔT + c2 ΔT²)`, τ on the turn-on grid (the library's
+    /// self-heating with SIM's sensitivity replaced by a free quadratic). `None` without
+    /// `power_s` or a turn-on τ the recording shows.
+    pub fn self_heating_free(&self) -> Option<f64> {
+        let ctx = self.ctx;
+        let power = ctx.p.power.as_deref()?;
+        let grid = ctx.grid(Mech::SelfHeating);
+        if grid.is_empty() {
+            return None;
+        }
+        let dt: Vec<f64> = ctx.p.temp_s.iter().map(|t| t - super::mech::T0_C).collect();
+        let columns = |tau: f64| -> Vec<Vec<f64>> {
+            let rise: Vec<f64> = power.iter().map(|p| -(-p / tau).exp_m1()).collect();
+            (0..3).map(|e| rise.iter().zip(&dt).map(|(r, d)| r * d.powi(e)).collect()).collect()
+        };
+        self.deviance(&grid, &|th| ctx.offered(Mech::SelfHeating, th), &columns).map(|s| s.deviance)
+    }
+}
+
+/// The deviance the rival `rival` (one mechanism, θ searched on its grid where it has one)
+/// cannot absorb of what `a` predicts on the design `ctx`, with the columns `shared` free in
+/// both explanations, under the noise model of random-walk intensity `q` [g²/s], in units of
+/// `scale` ([`Refit::new`]). `None` when the rival has no column on this design.
+pub fn separability(
+    ctx: &Context,
+    q: f64,
+    scale: f64,
+    a: &[Fitted],
+    rival: Mech,
+    shared: &[Vec<f64>],
+) -> Option<Separation> {
+    Refit::new(ctx, q, scale, &predict(ctx, a), shared).mechanism(rival)
+}
+
+/// The largest rise of the die over the thermistor after power-on that a rival may assume
+/// [°C] ([`Refit::through_die_rise`]).
+pub const DIE_RISE_MAX_C: f64 = 3.0;
+
+/// The separation a name needs from a rival: the expected deviance `T` at which data drawn from
+/// the named explanation exceed the naming threshold `thr` with 95 % probability (the
+/// likelihood-ratio statistic is then about a noncentral χ² of `df` degrees of freedom and
+/// noncentrality `T`: mean `df + T`, variance `2(df + 2T)`). Below it a recording of this design
+/// names the wrong one of the two too often, and they are one group.
+pub fn separation_needed(thr: f64, df: usize) -> f64 {
+    let k = df.max(1) as f64;
+    let power_ok = |t: f64| k + t - 1.645 * (2.0 * (k + 2.0 * t)).sqrt() >= thr;
+    let (mut lo, mut hi) = (0.0, thr.max(1.0) * 4.0 + 100.0);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if power_ok(mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    hi
+}

@@ -1,0 +1,94 @@
+//! Blind cases whose test profiles are drawn the way users record, independently of the
+//! concealed mechanisms (docs/diagnosis-blind.md, "Profiles users run"): one power-on, one
+//! monotone ramp from a hot or cold start, a reversal, a soak or steps, sessions joined with
+//! unpowered gaps, 1–100 Hz, the thermistor between case and die, self-heating after every
+//! power-on in SIM and REAL.
+//!
+//! `blind_profiles` (ignored by default; `cargo test -p bins-cal --release --test
+//! blind_profiles -- --ignored --nocapture`): `BLIND_CASES` single-member cases (default 200)
+//! and as many combined ones from seed `BLIND_SEED` (default 1), one line per case on stderr,
+//! the scorecard on stdout. `BLIND_ONLY=seed,…` (with `BLIND_COMBINED=1` for combined draws)
+//! runs those seeds and prints their draws (`BLIND_REPORT=1`: and the reports).
+//!
+//! `user_profile_cases_are_drawn_and_scored` (always run): a few small cases, so the
+//! generator and the scoring stay honest in CI.
+
+#[allow(dead_code)]
+mod blind;
+
+use blind::generator::Case;
+use blind::{run_list, run_user, summarize_user, user_category, user_line};
+
+fn env_num<T: std::str::FromStr>(name: &str, default: T) -> T {
+    std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
+#[test]
+#[ignore = "400 diagnoses: run in release with --ignored"]
+fn blind_profiles() {
+    let threads = env_num("BLIND_THREADS", 2usize);
+    let combined_only = std::env::var("BLIND_COMBINED").is_ok_and(|v| v == "1");
+    if let Ok(only) = std::env::var("BLIND_ONLY") {
+        let cases: Vec<Case> =
+            only.split(',').filter_map(|s| s.trim().parse().ok()).map(|s| Case::draw_user(s, combined_only)).collect();
+        for r in run_list(&cases, threads, false) {
+            println!("{}", user_line(&r));
+            println!("{:#?}", r.case);
+            if std::env::var("BLIND_REPORT").is_ok_and(|v| v == "1") {
+                println!("{}", blind::report_json(&r.case));
+            }
+        }
+        return;
+    }
+    let n = env_num("BLIND_CASES", 200usize);
+    let seed = env_num("BLIND_SEED", 1u64);
+    let t0 = std::time::Instant::now();
+    let mut all = Vec::new();
+    for combined in [false, true] {
+        if combined_only && !combined {
+            continue;
+        }
+        let cases: Vec<Case> = (0..n as u64).map(|k| Case::draw_user(seed + k, combined)).collect();
+        let res = run_list_progress(&cases, threads);
+        let s = summarize_user(&res);
+        println!("\n{} draw, seed base {seed}:\n{}", if combined { "combined" } else { "single" }, s.text);
+        all.extend(res);
+    }
+    let s = summarize_user(&all);
+    println!("\nboth draws:\n{}", s.text);
+    println!("wall time {:.0} s on {threads} threads", t0.elapsed().as_secs_f64());
+}
+
+fn run_list_progress(cases: &[Case], threads: usize) -> Vec<blind::CaseResult> {
+    let res = run_list(cases, threads, false);
+    for r in &res {
+        eprintln!("{}", user_line(r));
+    }
+    res
+}
+
+#[test]
+fn user_profile_cases_are_drawn_and_scored() {
+    // Small, fast cases: the draws are shortened to 2 000 rows at most.
+    let mut cases: Vec<Case> = (1..=4u64).map(|s| Case::draw_user(s, false)).collect();
+    cases.extend((1..=2u64).map(|s| Case::draw_user(s, true)));
+    for c in &mut cases {
+        if let Some(u) = &mut c.user {
+            let total: f64 = u.sessions.iter().map(|s| s.dur_s).sum();
+            c.rate_hz = c.rate_hz.min(2000.0 / total).max(0.05);
+            c.rows = (total * c.rate_hz).round() as usize;
+        }
+    }
+    let res = run_list(&cases, 2, false);
+    for r in &res {
+        println!("{}", user_line(r));
+        assert!(r.error.is_none(), "{}", user_line(r));
+        assert!(!user_category(r).is_empty());
+    }
+    // The profile is drawn independently of the members: the same seed gives the same plan
+    // whether one member or several are concealed.
+    let (a, b) = (Case::draw_user(7, false), Case::draw_user(7, true));
+    assert_eq!(a.user, b.user);
+    assert_eq!((a.rate_hz, a.positions, a.dwell_s), (b.rate_hz, b.positions, b.dwell_s));
+    let _ = run_user;
+}

@@ -1,0 +1,152 @@
+//! Several sessions of one unit joined in one recording (docs/recording-format.md,
+//! "Sessions"): the diagnosis restarts the noise model's level, the lags and plays and the
+//! temperature's smoothing at each, and says how many it read.
+//!
+//! The pairs are written here, by code that shares nothing with the diagnosis: a unit whose
+//! bias is cubic in temperature (SIM and REAL alike), recorded at 1 Hz in sessions of 1.5 h
+//! with an hour unpowered between them, the chamber ramping on through the gap.
+
+use bins_cal::diagnose::{diagnose, prep};
+use bins_cal::recording::{Row, VibKind};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use std::path::Path;
+
+/// White noise of REAL [V] (scale 1 V/g: 20 µg).
+const SIGMA: f64 = 20e-6;
+
+/// The unit's bias [V] at `temp_c` (SIM and REAL).
+fn bias(temp_c: f64) -> f64 {
+    1e-4 * (temp_c - 20.0) + 2e-7 * (temp_c - 20.0).powi(3)
+}
+
+/// `sessions` sessions of `len_s` at 1 Hz, `gap_s` between them; the chamber runs a triangle of
+/// ±0.3 °C/min between −5 and +22 °C (on through the gaps); REAL departs from SIM by
+/// `offset(session)` and, with `lag_tau_s`, by the bias at a temperature lagging the
+/// thermistor's (first order, from equilibrium at each session's start); with `power_only`, no
+/// time gap: a power cycle between the sessions.
+fn pair(
+    sessions: usize,
+    len_s: usize,
+    gap_s: f64,
+    power_only: bool,
+    offset: impl Fn(usize) -> f64,
+    lag_tau_s: Option<f64>,
+    seed: u64,
+) -> (Vec<Row>, Vec<Row>) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let white = Normal::new(0.0, SIGMA).unwrap();
+    let (mut sim, mut real) = (Vec::new(), Vec::new());
+    let mut t0 = 0.0;
+    let mut line = 2;
+    for s in 0..sessions {
+        let mut lagged = None;
+        for k in 0..len_s {
+            let t = t0 + k as f64;
+            // A triangle in time: up 0.3 °C/min for 1.5 h, then down.
+            let period = 2.0 * 5400.0;
+            let ph = (t % period) / 5400.0;
+            let temp_c = if ph < 1.0 { -5.0 + 27.0 * ph } else { 22.0 - 27.0 * (ph - 1.0) };
+            // Euler in 10 sub-steps of the 1 s row interval (the input held).
+            let te: f64 = match (lagged, lag_tau_s) {
+                (Some(x), Some(tau)) => (0..10).fold(x, |x: f64, _| x + 0.1 / tau * (temp_c - x)),
+                _ => temp_c,
+            };
+            lagged = Some(te);
+            let b = bias(temp_c);
+            let lag_extra = bias(te) - b;
+            let f = [0.0, 0.0, 1.0];
+            let row = Row {
+                line,
+                t_s: t,
+                temp_c,
+                f_g: f.map(Some),
+                vib_kind: Some(VibKind::None),
+                vib_g: [Some(0.0); 3],
+                power_s: Some(k as f64),
+                u_v: [b, -b, 1.0 + b],
+                ..Row::default()
+            };
+            let mut r = row.clone();
+            for i in 0..3 {
+                r.u_v[i] += offset(s) + [1.0, -1.0, 1.0][i] * lag_extra + white.sample(&mut rng);
+            }
+            sim.push(row);
+            real.push(r);
+            line += 1;
+        }
+        t0 += len_s as f64 + if power_only { 0.0 } else { gap_s };
+    }
+    (sim, real)
+}
+
+#[test]
+fn sessions_joined_with_unpowered_gaps_are_read_as_sessions() {
+    // A turn-on bias that differs from session to session (200 σ): not a mechanism, not a
+    // step, and it must not leave structure for one.
+    let (sim, real) = pair(3, 5400, 3600.0, false, |s| [0.0, 4e-3, -2e-3][s], None, 1);
+    let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
+    assert_eq!(d.prepared.session_starts, vec![0, 5400, 10_800]);
+    let r = &d.report;
+    assert!(r.notes.iter().any(|n| n.starts_with("3 sessions")), "{:?}", r.notes);
+    assert!(r.effects.is_empty() && r.ambiguous.is_empty(), "{:?} {:?}", r.effects, r.ambiguous);
+    assert!(r.steps.is_empty(), "{:?}", r.steps);
+    for ax in ["x", "y", "z"] {
+        // "Before" removes one offset per session: what is left is the white noise.
+        let before = r.heldout_rms_before_mg[ax];
+        assert!((before - SIGMA * 1e3).abs() < 0.15 * SIGMA * 1e3, "{ax}: {before} mg");
+    }
+}
+
+#[test]
+fn a_power_cycle_within_the_sampling_is_one_session_and_a_late_one_two() {
+    // `power_s` goes back with no time missing: the temperature was recorded throughout, one
+    // session (a turn-on jump of the bias is a step).
+    let (sim, real) = pair(2, 5400, 0.0, true, |s| [0.0, 3e-3][s], None, 2);
+    let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
+    assert_eq!(d.prepared.session_starts, vec![0]);
+    assert!(d.report.effects.is_empty(), "{:?}", d.report.effects);
+    let step = d.report.steps.iter().find(|s| (s.time_s - 5400.0).abs() < 2.0);
+    assert!(step.is_some_and(|s| (s.size_mg - 3.0).abs() < 0.1), "{:?}", d.report.steps);
+    // Off for 30 s (30 steps of 1 s): a session of its own.
+    let (sim, real) = pair(2, 5400, 30.0, false, |s| [0.0, 3e-3][s], None, 2);
+    let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
+    assert_eq!(d.prepared.session_starts, vec![0, 5400]);
+    assert!(d.report.effects.is_empty() && d.report.steps.is_empty(), "{:?}", d.report.effects);
+}
+
+#[test]
+fn a_logger_pause_while_the_unit_stays_powered_is_one_session() {
+    // Two files of one powered run: `power_s` advances with `t_s` across the hour.
+    let (sim, mut real) = pair(2, 3600, 3600.0, false, |_| 0.0, None, 3);
+    let mut sim = sim;
+    for rows in [&mut sim, &mut real] {
+        for r in rows.iter_mut() {
+            r.power_s = Some(r.t_s + 100.0);
+        }
+    }
+    let p = prep::prepare(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("prepared");
+    assert_eq!(p.session_starts, vec![0]);
+}
+
+#[test]
+fn a_lag_restarts_at_each_session() {
+    // The die lags the thermistor by 300 s; each session starts after an hour unpowered, the
+    // die at the thermistor's temperature (equilibrium). The lag is found, with τ near 300 s,
+    // and no step at the joins.
+    let tau = 300.0;
+    let (sim, real) = pair(2, 5400, 2700.0, false, |_| 0.0, Some(tau), 4);
+    let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).expect("diagnosis runs");
+    let r = &d.report;
+    assert!(r.steps.is_empty(), "{:?}", r.steps);
+    let lag = r.effects.iter().find(|e| e.id == "thermal_lag");
+    let grouped = r.ambiguous.iter().any(|g| g.ids.iter().any(|i| i == "thermal_lag"));
+    assert!(lag.is_some() || grouped, "{:?} {:?}", r.effects, r.ambiguous);
+    if let Some(e) = lag {
+        for (ax, p) in &e.params {
+            let t = p["tau_s"];
+            assert!((t - tau).abs() < 0.25 * tau, "{ax}: τ = {t}");
+        }
+    }
+}
