@@ -653,6 +653,7 @@ impl<F: Float> Calibration<F> {
     /// replaced and the map applied again, or, when every signal is finite (an overflow),
     /// zero, flagged.
     #[inline]
+    #[allow(clippy::eq_op, reason = "`x − x` is 0 for a finite x and NaN otherwise: the finiteness test")]
     pub fn apply(&self, u_v: Vec3<F>, at: &AtTemperature<F>) -> Sample<F> {
         let mut u = u_v;
         let mut status = at.status;
@@ -695,6 +696,7 @@ impl<F: Float> Calibration<F> {
 
 /// True when the three numbers are finite: `x − x` is 0 for a finite x and NaN otherwise.
 #[inline(always)]
+#[allow(clippy::eq_op, reason = "`x − x` is the test")]
 fn all_finite<F: Float>(a: &Vec3<F>) -> bool {
     (a[0] - a[0]) + (a[1] - a[1]) + (a[2] - a[2]) == F::ZERO
 }
