@@ -318,7 +318,7 @@ fn apply_delta<F: Float>(c: &Constants<F>, d: &CoefDelta<F>) -> Constants<F> {
 /// reading, so the per-sample work is one 3×3 product and an offset.
 ///
 /// Precision: N = K⁻¹ is computed at load time to about twice the working precision (from K
-/// in `f64`, without `f64` arithmetic: [`inverse_hi_lo`]) and its diagonal kept as a
+/// in `f64`, without `f64` arithmetic: `inverse_hi_lo`) and its diagonal kept as a
 /// double-word (hi + lo) pair; A is N plus a small temperature-dependent part, which joins the
 /// low part of the diagonal. Per sample every other term is small beside the dominant product
 /// `hi·U_i`, which is added to their sum in one fused multiply-add (the product exact, one

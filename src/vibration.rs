@@ -763,7 +763,7 @@ impl<F: Float> VibrationConfig<F> {
 const NEWTON_STEPS: usize = 4;
 
 /// Solves `a + VE(a) = y` for the static IA acceleration `a` (clamped to ±[`MAX_STATIC_G`])
-/// by at most [`NEWTON_STEPS`] Newton steps (fewer once a step leaves `a` unchanged: the rest
+/// by at most four (`NEWTON_STEPS`) Newton steps (fewer once a step leaves `a` unchanged: the rest
 /// would repeat it) with `dVE/da = δ(1) + 2δ(2)a + 3δ(3)a²` (the exact
 /// asymmetry's slope, below `δ_1A`, is left out); `terms(a)` gives the VE terms at `a`.
 /// Returns `VE(a)` \[g\] and whether the solution was clamped. Bounded time, no panic; a
