@@ -1082,11 +1082,15 @@ impl<'a> Payload<'a> {
     }
 
     /// The f64 x at `at` if `|a·x|·scale ≤ max`, else [`BlobError::OutOfRange`] naming
-    /// `field` (the temperature model's plausibility checks, one out-of-line copy).
+    /// `field` (the temperature model's plausibility checks, one out-of-line copy). Evaluated
+    /// in `f32`, the precision the firmware computes in (it has no `f64` arithmetic), on host
+    /// and target alike: a value within about 10⁻⁶ of its limit, relative, may fall on either
+    /// side of it.
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn value_scaled(&self, at: usize, field: Field, a: f64, scale: f64, max: f64) -> Result<f64, BlobError> {
-        self.value(at, field, |x| (a * x).abs() * scale <= max)
+    fn value_scaled(&self, at: usize, field: Field, a: f64, scale: f32, max: f32) -> Result<f64, BlobError> {
+        let a = a as f32;
+        self.value(at, field, |x| !((a * x as f32).abs() * scale > max))
     }
 
     fn reserved_zero(&self, range: core::ops::Range<usize>) -> Result<(), BlobError> {
@@ -1114,6 +1118,15 @@ fn ascii_str(b: &[u8]) -> Option<&str> {
     return b.as_ascii().map(|a| a.as_str());
     #[cfg(not(unstable_target))]
     return core::str::from_utf8(b).ok();
+}
+
+/// `limits::CROSS_RATIO_MAX·|x|`, the largest |K_ij| beside `K_ii = x`, without `f64`
+/// arithmetic (the target has none): the ratio is 1/2, so the exponent of |x| one lower,
+/// exactly. `x` is a normal number (|K_ii| ≥ 10⁻³ is checked first); 0 otherwise.
+fn cross_limit(x: f64) -> f64 {
+    const { assert!(limits::CROSS_RATIO_MAX == 0.5) };
+    let b = x.to_bits() & !(1 << 63);
+    if b >> 52 > 1 && b >> 52 < 0x7ff { f64::from_bits(b - (1 << 52)) } else { 0.0 }
 }
 
 /// |K_ii| within the scale-factor limits.
@@ -1152,7 +1165,7 @@ fn read_coef_set(
     p: &Payload<'_>,
     at: usize,
     k: &[[f64; 3]; 3],
-    scale: f64,
+    scale: f32,
     set: CoefSet,
 ) -> Result<CoefDelta<f64>, BlobError> {
     let mut a = [0.0; 12];
@@ -1160,16 +1173,16 @@ fn read_coef_set(
         let off = at + 8 * n;
         // |a·x|·scale ≤ max: a = 1 for ΔU0 and the scale changes, K_ij for a cross term.
         let (field, a, max) = if n < 3 {
-            (set.du0(n as u8), 1.0, limits::DU0_MAX_V)
+            (set.du0(n as u8), 1.0, limits::DU0_MAX_V as f32)
         } else {
             let (i, j) = ((n - 3) / 3, (n - 3) % 3);
             let row = k.get(i).copied().unwrap_or_default();
             let (k_ij, k_ii) = (row.get(j).copied().unwrap_or(0.0), row.get(i).copied().unwrap_or(0.0));
             let field = set.rel_k(i as u8, j as u8);
             if i == j {
-                (field, 1.0, limits::REL_SCALE_MAX)
+                (field, 1.0, limits::REL_SCALE_MAX as f32)
             } else {
-                (field, k_ij, limits::CROSS_RATIO_MAX * k_ii.abs())
+                (field, k_ij, limits::CROSS_RATIO_MAX as f32 * (k_ii as f32).abs())
             }
         };
         *slot = p.value_scaled(off, field, a, scale, max)?;
@@ -1199,7 +1212,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
     for i in 0..3 {
         for j in 0..3 {
             if i != j {
-                let c = limits::CROSS_RATIO_MAX * k[i][i].abs();
+                let c = cross_limit(k[i][i]);
                 k[i][j] = p.value_in(8 + 8 * (3 * i + j), Field::K { row: i as u8, col: j as u8 }, -c, c)?;
             }
         }
@@ -1233,9 +1246,11 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
             }
             p.reserved_zero(2..MODEL_HEADER_BYTES)?;
             p.expect_len(MODEL_HEADER_BYTES + COEF_SET_BYTES * order)?;
-            let span = (lo - t0_c).abs().max((hi - t0_c).abs());
+            // ΔT_max and its powers in `f32` (see `Payload::value_scaled`).
+            let (lo32, hi32, t032) = (lo as f32, hi as f32, t0_c as f32);
+            let span = (lo32 - t032).abs().max((hi32 - t032).abs());
             let mut coef = [CoefDelta::zero(); MAX_POLY_ORDER];
-            let mut scale = 1.0;
+            let mut scale = 1.0f32;
             for (n, c) in coef.iter_mut().enumerate().take(order) {
                 scale *= span;
                 let t = n as u8;

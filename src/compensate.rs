@@ -195,29 +195,21 @@ impl CalibrationParams {
     /// conditioning of K and K(T) over the range in `f32`, the precision the firmware runs
     /// in, with the same T(3)/T(4) code as the per-sample step: host and target give a blob
     /// the same verdict, and the target needs no `f64` copy of the temperature model or of
-    /// the conditioning test.
-    pub fn validate(&self) -> Result<(), CalibrationError> {
-        self.checked_inverse().map(|_| ())
-    }
-
-    /// [`validate`](Self::validate), returning N = K⁻¹ at T0 (`f64`), which the check
-    /// computes anyway and [`Calibration::new`] needs. Kept out of line: the boot code of the
-    /// firmware calls it from two places and needs one copy of it, not one per caller.
+    /// the conditioning test. Kept out of line: the boot code of the firmware calls it from
+    /// two places and needs one copy of it, not one per caller.
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn checked_inverse(&self) -> Result<Mat3<f64>, CalibrationError> {
+    pub fn validate(&self) -> Result<(), CalibrationError> {
         let p = self;
         let constants = p.constants;
         if !constants.is_finite() {
             return Err(CalibrationError::NonFiniteConstants);
         }
-        // Invertibility is decided in `f32`, like K(T) over the range below; N itself is
-        // computed in `f64`, where the precomputation needs it.
+        // Invertibility is decided in `f32`, like K(T) over the range below.
         let c = constants.cast::<f32>();
         if c.inverse().is_none() {
             return Err(CalibrationError::SingularK);
         }
-        let n = linalg::inverse_unchecked(&constants.k_v_per_g).ok_or(CalibrationError::SingularK)?;
         let k = &constants.k_v_per_g;
         if k[0][0] == 0.0 || k[1][1] == 0.0 || k[2][2] == 0.0 {
             return Err(CalibrationError::ZeroScaleFactor);
@@ -228,13 +220,13 @@ impl CalibrationParams {
             return Err(CalibrationError::BadRange);
         }
         let (model, t0_c) = (p.model.cast::<f32>(), f32::from_f64(p.t0_c));
-        // The fraction i/64 as a running sum of 1/64 (exact), not a conversion of i: the
-        // target then needs no integer-to-f64 conversion.
-        let mut frac = 0.0;
+        // The grid in `f32` (the target has no `f64` arithmetic), the fraction i/64 as a
+        // running sum of 1/64 (exact).
+        let (lo32, hi32) = (f32::from_f64(lo), f32::from_f64(hi));
+        let mut frac = 0.0f32;
         for _ in 0..=RANGE_CHECK_POINTS {
-            let t = lo + (hi - lo) * frac;
-            check_k_at(&c, &model, t0_c, f32::from_f64(t))?;
-            frac += 1.0 / RANGE_CHECK_POINTS as f64;
+            check_k_at(&c, &model, t0_c, lo32 + (hi32 - lo32) * frac)?;
+            frac += 1.0 / RANGE_CHECK_POINTS as f32;
         }
         if let TempModel::Pwl { n_knots, knots_c, .. } = &p.model {
             for &kn in knots_c.iter().take(*n_knots as usize) {
@@ -243,7 +235,7 @@ impl CalibrationParams {
                 }
             }
         }
-        Ok(n)
+        Ok(())
     }
 
     /// The constants at `temp_c` by T(3)/T(4), in `f64`:
@@ -251,6 +243,48 @@ impl CalibrationParams {
     pub fn constants_at(&self, temp_c: f64) -> Constants<f64> {
         apply_delta(&self.constants, &self.model.delta(temp_c, self.t0_c))
     }
+}
+
+/// N = K⁻¹ in the working precision with its diagonal as a double-word pair: N (diagonal =
+/// hi part) and the diagonal's low part, from K in `f64` without `f64` arithmetic (the target
+/// has none). K is split into hi + lo pairs ([`Float::split_f64`]); N₀, the inverse of K's hi
+/// part, is refined by one Newton step `N = N₀ + N₀·R` with the residual `R = I − K·N₀`
+/// computed from both parts by fused multiply-adds (R ~ 10⁻⁷ against the ~1 of each product
+/// it is the difference of, so its rounding is ~10⁻¹⁰ of N): N within ~10⁻⁹ of K⁻¹,
+/// relative. `None` when K's hi part is singular.
+#[inline(never)]
+#[cfg_attr(unstable_target, optimize(size))]
+fn inverse_hi_lo<F: Float>(k: &Mat3<f64>) -> Option<(Mat3<F>, Vec3<F>)> {
+    let split = k.map(|row| row.map(F::split_f64));
+    let k_hi = split.map(|row| row.map(|(h, _)| h));
+    let n0 = linalg::inverse_unchecked(&k_hi)?;
+    let mut r = [[F::ZERO; 3]; 3];
+    for (i, (row, k_row)) in r.iter_mut().zip(&split).enumerate() {
+        for (j, cell) in row.iter_mut().enumerate() {
+            // The largest product first (K_ii·N₀_ij: the one near 1 on the diagonal).
+            let mut acc = if i == j { F::ONE } else { F::ZERO };
+            let n = |m: usize| n0.get(m).and_then(|row| row.get(j)).copied().unwrap_or(F::ZERO);
+            for m in [i, (i + 1) % 3, (i + 2) % 3] {
+                if let Some(&(k_hi, _)) = k_row.get(m) {
+                    acc = (-k_hi).mul_add(n(m), acc);
+                }
+            }
+            for (m, &(_, k_lo)) in k_row.iter().enumerate() {
+                acc = (-k_lo).mul_add(n(m), acc);
+            }
+            *cell = acc;
+        }
+    }
+    let corr = linalg::mat_mul_fused(&n0, &r);
+    let mut n = n0;
+    for (i, (row, c_row)) in n.iter_mut().zip(&corr).enumerate() {
+        for (j, (x, c)) in row.iter_mut().zip(c_row).enumerate() {
+            if i != j {
+                *x += *c;
+            }
+        }
+    }
+    Some((n, [corr[0][0], corr[1][1], corr[2][2]]))
 }
 
 /// K(T) at `temp_c` (T(3)/T(4) from the constants `c` at T0) is invertible and each scale
@@ -278,23 +312,29 @@ fn apply_delta<F: Float>(c: &Constants<F>, d: &CoefDelta<F>) -> Constants<F> {
 
 /// A validated calibration: everything the per-sample step needs, immutable after boot.
 ///
-/// Precision: N = K⁻¹ is computed in `f64` at load time and its diagonal kept as a
-/// double-word (hi + lo) pair, and `N·(U − U0)` is evaluated with error-free transformations
-/// on the diagonal (TwoSum, Veltkamp/Dekker TwoProduct). All temperature-dependent parts are
-/// small corrections to that product. In `f32` the result is then within about one rounding
-/// of the output (≈0.5 µg at 10 g) of the `f64` reference, instead of the several µg a plain
-/// `f32` inverse and product would lose.
+/// Every method is an affine map of the signals at a given temperature, `a = A(T)·U − c(T)`
+/// (method 1: `A = K(T)⁻¹`, `c = A·U0(T)`; method 2: T(5)…T(8) are linear in `U − U0`; see
+/// [`at_temperature`](Self::at_temperature)). A and c are computed once per temperature
+/// reading, so the per-sample work is one 3×3 product and an offset.
+///
+/// Precision: N = K⁻¹ is computed at load time to about twice the working precision (from K
+/// in `f64`, without `f64` arithmetic: `inverse_hi_lo`) and its diagonal kept as a
+/// double-word (hi + lo) pair; A is N plus a small temperature-dependent part, which joins the
+/// low part of the diagonal. Per sample every other term is small beside the dominant product
+/// `hi·U_i`, which is added to their sum in one fused multiply-add (the product exact, one
+/// rounding). In `f32` the result is then within about one rounding of the output (≈0.5 µg at
+/// 10 g) of the `f64` reference, instead of the several µg a plain `f32` inverse and product
+/// would lose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Calibration<F> {
-    params: CalibrationParams,
     t0_c: F,
     constants: Constants<F>,
     /// N = K⁻¹ at T0, rounded (diagonal = hi part).
     n_g_per_v: Mat3<F>,
-    /// Veltkamp split of the diagonal's hi part.
-    n_diag_split: [(F, F); 3],
-    /// Low part of the diagonal: N_ii − hi.
-    n_diag_lo: Vec3<F>,
+    /// The map at T0 (no temperature correction): N with its diagonal's low part (N_ii − hi)
+    /// in place of the diagonal, and `−N·U0` \[g\] (see [`AtTemperature`]).
+    lin0: Mat3<F>,
+    neg_offset0_g: Vec3<F>,
     /// 1/K_ii at T0 ([`float::recip`] in `f64`, rounded).
     inv_diag: Vec3<F>,
     model: TempModel<F>,
@@ -302,7 +342,8 @@ pub struct Calibration<F> {
     temp_min_c: F,
     temp_max_c: F,
     valid: bool,
-    /// A hash of `params` (0 for [`uncalibrated`](Self::uncalibrated)): what [`TempCache`]
+    /// A hash of the [`CalibrationParams`] it was built from (0 for
+    /// [`uncalibrated`](Self::uncalibrated)): what [`TempCache`]
     /// keys on, so that terms of one calibration are never applied with another.
     fingerprint: u64,
 }
@@ -376,21 +417,25 @@ impl<F: Float> Calibration<F> {
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
     pub fn new(p: &CalibrationParams) -> Result<Self, CalibrationError> {
-        let n = p.checked_inverse()?;
+        p.validate()?;
         let constants = p.constants;
-        let k = &constants.k_v_per_g;
         let (lo, hi) = p.temp_range_c;
-        let n_f: Mat3<F> = linalg::cast_mat(&n);
-        let lo_at = |i: usize| F::from_f64(n[i][i] - n_f[i][i].to_f64());
-        let n_diag_lo = [lo_at(0), lo_at(1), lo_at(2)];
+        let (n, n_diag_lo) = inverse_hi_lo(&constants.k_v_per_g).ok_or(CalibrationError::SingularK)?;
+        let k: Mat3<F> = linalg::cast_mat(&constants.k_v_per_g);
+        let constants_f: Constants<F> = constants.cast();
+        let mut lin0 = n;
+        for (i, row) in lin0.iter_mut().enumerate() {
+            if let (Some(x), Some(&lo)) = (row.get_mut(i), n_diag_lo.get(i)) {
+                *x = lo;
+            }
+        }
         Ok(Calibration {
-            params: *p,
             t0_c: F::from_f64(p.t0_c),
-            constants: constants.cast(),
-            n_g_per_v: n_f,
-            n_diag_split: [float::split(n_f[0][0]), float::split(n_f[1][1]), float::split(n_f[2][2])],
-            n_diag_lo,
-            inv_diag: [0, 1, 2].map(|i| F::from_f64(float::recip(k[i][i]))),
+            constants: constants_f,
+            n_g_per_v: n,
+            lin0,
+            neg_offset0_g: neg_offset(&n, &lin0, &constants_f.u0_v, &[F::ZERO; 3]),
+            inv_diag: [0, 1, 2].map(|i| float::recip(k[i][i])),
             model: p.model.cast(),
             method: p.method,
             temp_min_c: F::from_f64(lo),
@@ -405,20 +450,12 @@ impl<F: Float> Calibration<F> {
     /// and its output is the raw signal in volts, unscaled.
     pub fn uncalibrated() -> Self {
         let one = [[F::ONE, F::ZERO, F::ZERO], [F::ZERO, F::ONE, F::ZERO], [F::ZERO, F::ZERO, F::ONE]];
-        let one64 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         Calibration {
-            params: CalibrationParams {
-                constants: Constants { k_v_per_g: one64, u0_v: [0.0; 3] },
-                t0_c: 0.0,
-                model: TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] },
-                method: Method::Uncorrected,
-                temp_range_c: (-1.0e30, 1.0e30),
-            },
             t0_c: F::ZERO,
             constants: Constants { k_v_per_g: one, u0_v: [F::ZERO; 3] },
             n_g_per_v: one,
-            n_diag_split: [float::split(F::ONE); 3],
-            n_diag_lo: [F::ZERO; 3],
+            lin0: [[F::ZERO; 3]; 3],
+            neg_offset0_g: [F::ZERO; 3],
             inv_diag: [F::ONE; 3],
             model: TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] },
             method: Method::Uncorrected,
@@ -427,11 +464,6 @@ impl<F: Float> Calibration<F> {
             valid: false,
             fingerprint: 0,
         }
-    }
-
-    /// The parameters this calibration was built from.
-    pub fn params(&self) -> &CalibrationParams {
-        &self.params
     }
 
     /// The compensation method in use.
@@ -465,91 +497,44 @@ impl<F: Float> Calibration<F> {
         apply_delta(&self.constants, &self.model.delta(temp_c, self.t0_c))
     }
 
-    /// `N·(U − U0')` with N at T0 and any offsets `u0_v`, accurate to about one rounding of
-    /// the result (see the type's note on precision).
+    /// The affine map `A·U − c` of [`AtTemperature`] applied to the signals `u`: per axis the
+    /// small terms (the diagonal's low part, the off-diagonal terms, the offset) as one fused
+    /// sum, then the dominant `hi_i·U_i` (hi = N_ii rounded) added to it in one fused
+    /// multiply-add: the product exact, one rounding of the result. Non-finite when a signal
+    /// is (its own axis at least).
     #[inline(always)]
-    fn apply_n(&self, u_v: &Vec3<F>, u0_v: &Vec3<F>) -> Vec3<F> {
-        let v = [0, 1, 2].map(|i| float::two_sum(u_v[i], -u0_v[i]));
+    fn affine(&self, u: &Vec3<F>, at: &AtTemperature<F>) -> Vec3<F> {
         let n = &self.n_g_per_v;
-        let mut a = [F::ZERO; 3];
-        for i in 0..3 {
-            let (p, pe) = float::two_prod_split(v[i].0, self.n_diag_split[i]);
-            let mut small = pe + n[i][i] * v[i].1 + self.n_diag_lo[i] * v[i].0;
-            for j in 0..3 {
-                if j != i {
-                    small += n[i][j] * (v[j].0 + v[j].1);
-                }
-            }
-            a[i] = p + small;
-        }
-        a
+        let l = &at.lin;
+        let c = &at.neg_offset_g;
+        let row = |i: usize, j: usize, k: usize| {
+            let small = l[i][k].mul_add(u[k], l[i][j].mul_add(u[j], l[i][i].mul_add(u[i], c[i])));
+            n[i][i].mul_add(u[i], small)
+        };
+        [row(0, 1, 2), row(1, 2, 0), row(2, 0, 1)]
     }
 
-    /// Method 1's correction matrix at a temperature: with X = N·ΔK(T),
-    /// `K(T)⁻¹ = (I + X)⁻¹·N`, so `a = a₀ + M·a₀` with `M = −(I + X)⁻¹·X` and
-    /// `a₀ = N·(U − U0(T))`. M is small (|X| ≲ 10⁻²), so its rounding errors are negligible
-    /// beside a₀'s. `None` when K(T) is not invertible.
+    /// The status and temperature [°C] the model is evaluated at: the reading, or clamped to
+    /// the calibrated range, or T0 for a non-finite reading (see the module's policies).
     #[inline(always)]
-    fn method1_matrix(&self, d: &CoefDelta<F>) -> Option<Mat3<F>> {
-        let k = &self.constants.k_v_per_g;
-        let mut dk = [[F::ZERO; 3]; 3];
-        for i in 0..3 {
-            for j in 0..3 {
-                dk[i][j] = k[i][j] * d.rel_k[i][j];
-            }
+    fn clamped(&self, temp_c: F) -> (F, Status) {
+        let mut status = Status::OK;
+        if !self.valid {
+            status.insert(Status::INVALID_CALIBRATION);
         }
-        let x = linalg::mat_mul(&self.n_g_per_v, &dk);
-        let mut y = x;
-        for (i, row) in y.iter_mut().enumerate() {
-            row[i] += F::ONE;
-        }
-        let inv = linalg::inverse_checked(&y, F::from_f64(linalg::MIN_HADAMARD_RATIO))?;
-        let mut m = linalg::mat_mul(&inv, &x);
-        for row in m.iter_mut() {
-            for v in row.iter_mut() {
-                *v = -*v;
-            }
-        }
-        Some(m)
-    }
-
-    /// The output correction Δa_T of T(5)/T(6) (full) or T(7)/T(8) (simplified) for signals
-    /// `u_v` and coefficient changes `d`: the amount to **add** to `N·(U − U0)` (see the
-    /// module's note on the sign). With `v = U − U0`, per axis i:
-    ///
-    /// `Δa_i = −v_i/K_ii·β_ii − α_i/K_ii` (simplified), plus in the full form
-    /// `− Σ_{j≠i} v_j·K_ij·γ_ij/(K_ii·K_jj) + Σ_{j≠i} K_ij·α_j/(K_ii·K_jj)`.
-    ///
-    /// [`Form::Linearized`] is `−N·(ΔK·â + ΔU0)` with `â = N·v`.
-    #[inline(always)]
-    pub fn output_correction(&self, v: &Vec3<F>, d: &CoefDelta<F>, form: Form) -> Vec3<F> {
-        let k = &self.constants.k_v_per_g;
-        let r = &self.inv_diag;
-        if form == Form::Linearized {
-            let n = &self.n_g_per_v;
-            let a_hat = linalg::mat_vec(n, v);
-            let mut w = d.du0_v;
-            for (i, wi) in w.iter_mut().enumerate() {
-                for j in 0..3 {
-                    *wi += k[i][j] * d.rel_k[i][j] * a_hat[j];
-                }
-            }
-            let c = linalg::mat_vec(n, &w);
-            return [-c[0], -c[1], -c[2]];
-        }
-        let mut out = [F::ZERO; 3];
-        for i in 0..3 {
-            let mut c = -(v[i] * d.rel_k[i][i] + d.du0_v[i]) * r[i];
-            if form == Form::Full {
-                for j in 0..3 {
-                    if j != i {
-                        c += k[i][j] * r[i] * r[j] * (d.du0_v[j] - v[j] * d.rel_k[i][j]);
-                    }
-                }
-            }
-            out[i] = c;
-        }
-        out
+        let t = if !temp_c.is_finite() {
+            status.insert(Status::NONFINITE_INPUT | Status::TEMP_CLAMPED);
+            self.t0_c
+        } else if temp_c < self.temp_min_c {
+            status.insert(Status::TEMP_CLAMPED);
+            self.temp_min_c
+        } else if temp_c > self.temp_max_c {
+            status.insert(Status::TEMP_CLAMPED);
+            self.temp_max_c
+        } else {
+            temp_c
+        };
+        (t, status)
     }
 
     /// The per-sample step: signals `u_v` \[V\] and the unit's temperature `temp_c` [°C] to
@@ -585,99 +570,208 @@ impl<F: Float> Calibration<F> {
         self.apply(u_v, &self.at_temperature(temp_c))
     }
 
-    /// The temperature-dependent half of the step: everything [`apply`](Self::apply) needs
-    /// that depends on `temp_c` alone (the clamped temperature's flags; method 1's
-    /// `U0(T)` and correction matrix M; method 2's coefficient changes). A pure function of
-    /// `temp_c`, so a caller may keep it while the temperature reading does not change
-    /// ([`TempCache`]) without changing any result.
+    /// The temperature-dependent half of the step: the affine map `a = A·U − c` every method
+    /// reduces to at `temp_c` (clamped to the range, with its flags), with
+    ///
+    /// - no correction: `A = N`, `c = N·U0`;
+    /// - method 1: `A = K(T)⁻¹`, `c = A·U0(T)`. With `X = N·ΔK(T)`,
+    ///   `K(T)⁻¹ = (I + X)⁻¹·N = N − (I + X)⁻¹·X·N`: the correction to N is small
+    ///   (|X| ≲ 10⁻²), so its rounding errors are negligible beside N's. K(T) not invertible
+    ///   (the Hadamard test of [`linalg::inverse_checked`] on I + X): N, flagged
+    ///   [`Status::SINGULAR_AT_TEMP`];
+    /// - method 2: `a = N·(U − U0) + Δa_T` with Δa_T of T(5)…T(8) linear in `v = U − U0`:
+    ///   per axis i, `Δa_i = −v_i/K_ii·β_ii − α_i/K_ii` (simplified, T(7)/T(8)), plus in the
+    ///   full form T(5)/T(6) `− Σ_{j≠i} v_j·K_ij·γ_ij/(K_ii·K_jj) + Σ_{j≠i} K_ij·α_j/(K_ii·K_jj)`;
+    ///   linearised, `Δa_T = −N·(ΔK·N·v + ΔU0)`. So `A = N + D`, `c = A·U0 − b` with D the
+    ///   terms in v and b the others (see the module's note on the sign).
+    ///
+    /// A pure function of `temp_c`, so a caller may keep it while the temperature reading does
+    /// not change ([`TempCache`]) without changing any result.
     #[inline]
     pub fn at_temperature(&self, temp_c: F) -> AtTemperature<F> {
-        let mut status = Status::OK;
-        if !self.valid {
-            status.insert(Status::INVALID_CALIBRATION);
+        let (t, status) = self.clamped(temp_c);
+        // The map at T0 (no correction), and the method's temperature terms added to it.
+        let mut at = AtTemperature { status, lin: self.lin0, neg_offset_g: self.neg_offset0_g };
+        if self.method == Method::Uncorrected {
+            return at;
         }
-        let t = if !temp_c.is_finite() {
-            status.insert(Status::NONFINITE_INPUT | Status::TEMP_CLAMPED);
-            self.t0_c
-        } else if temp_c < self.temp_min_c {
-            status.insert(Status::TEMP_CLAMPED);
-            self.temp_min_c
-        } else if temp_c > self.temp_max_c {
-            status.insert(Status::TEMP_CLAMPED);
-            self.temp_max_c
-        } else {
-            temp_c
-        };
-        let terms = match self.method {
-            Method::Uncorrected => TempTerms::None,
+        let d = self.model.delta(t, self.t0_c);
+        let n = &self.n_g_per_v;
+        let k = &self.constants.k_v_per_g;
+        match self.method {
+            Method::Uncorrected => {}
             Method::CoefficientCorrection => {
-                let d = self.model.delta(t, self.t0_c);
-                let u0 = &self.constants.u0_v;
-                let u0_t = [u0[0] + d.du0_v[0], u0[1] + d.du0_v[1], u0[2] + d.du0_v[2]];
-                let m = self.method1_matrix(&d);
-                if m.is_none() {
-                    status.insert(Status::SINGULAR_AT_TEMP);
+                let u0 = linalg::vec_add(&self.constants.u0_v, &d.du0_v);
+                let x = linalg::mat_mul_fused(n, &delta_k(k, &d));
+                match identity_minus_inverse(&x, F::from_f64(linalg::MIN_HADAMARD_RATIO)) {
+                    Some(m) => at.lin = linalg::mat_mul_sub(&m, n, &at.lin),
+                    None => at.status.insert(Status::SINGULAR_AT_TEMP),
                 }
-                TempTerms::Method1 { u0_t, m }
+                at.neg_offset_g = neg_offset(n, &at.lin, &u0, &[F::ZERO; 3]);
             }
-            Method::OutputCorrection(form) => TempTerms::Method2 { d: self.model.delta(t, self.t0_c), form },
-        };
-        AtTemperature { status, terms }
+            Method::OutputCorrection(Form::Linearized) => {
+                // A = N + D with D = −X·N, X = N·ΔK; −c = −c₀ + b − D·U0 with b = −N·ΔU0 and
+                // D·U0 = X·c₀.
+                let x = linalg::mat_mul_fused(n, &delta_k(k, &d));
+                let nd = linalg::mat_vec_fused(n, &d.du0_v);
+                at.lin = linalg::mat_sub(&at.lin, &linalg::mat_mul_fused(&x, n));
+                let xc = linalg::mat_vec_fused(&x, &self.neg_offset0_g);
+                for i in 0..3 {
+                    at.neg_offset_g[i] -= nd[i] + xc[i];
+                }
+            }
+            Method::OutputCorrection(form) => {
+                // A = N + D, −c = −c₀ + b − D·U0: per axis i, D_ii = −β_ii/K_ii and
+                // b_i = −α_i/K_ii, and in the full form D_ij = −γ_ij·K_ij/(K_ii·K_jj),
+                // b_i += α_j·K_ij/(K_ii·K_jj) (j ≠ i).
+                let r = &self.inv_diag;
+                let u0 = &self.constants.u0_v;
+                for i in 0..3 {
+                    let dii = -(d.rel_k[i][i] * r[i]);
+                    at.lin[i][i] += dii;
+                    let mut neg = (-dii).mul_add(u0[i], at.neg_offset_g[i] - d.du0_v[i] * r[i]);
+                    if form == Form::Full {
+                        for j in 0..3 {
+                            if j != i {
+                                let q = k[i][j] * r[i] * r[j];
+                                let dij = -(q * d.rel_k[i][j]);
+                                at.lin[i][j] += dij;
+                                neg = q.mul_add(d.du0_v[j], (-dij).mul_add(u0[j], neg));
+                            }
+                        }
+                    }
+                    at.neg_offset_g[i] = neg;
+                }
+            }
+        }
+        at
     }
 
     /// The signal-dependent half of the step: signals `u_v` \[V\] to specific force \[g\] with
-    /// the temperature terms `at` of [`at_temperature`](Self::at_temperature) (T(1) with
-    /// method 1 or 2 of §5).
+    /// the affine map `at` of [`at_temperature`](Self::at_temperature) (T(1) with method 1 or
+    /// 2 of §5). A non-finite result takes the module's policies: its non-finite signals
+    /// replaced and the map applied again, or, when every signal is finite (an overflow),
+    /// zero, flagged.
     #[inline]
+    #[allow(clippy::eq_op, reason = "`x − x` is 0 for a finite x and NaN otherwise: the finiteness test")]
     pub fn apply(&self, u_v: Vec3<F>, at: &AtTemperature<F>) -> Sample<F> {
-        let mut status = at.status;
         let mut u = u_v;
-        for i in 0..3 {
-            if !u[i].is_finite() {
-                u[i] = self.constants.u0_v[i];
-                status.insert(Status::NONFINITE_INPUT);
+        let mut status = at.status;
+        // A second pass only after a non-finite signal was replaced (the module's policies).
+        for _ in 0..2 {
+            let a = self.affine(&u, at);
+            // One test for the three: the sum is finite when each is (or it overflowed, and
+            // the test of each number says so).
+            let sum = a[0] + a[1] + a[2];
+            if sum - sum == F::ZERO || all_finite(&a) {
+                return Sample { accel_g: a, status };
             }
-        }
-        // One N·(U − U0) for every method (method 1 with U0(T)), then the method's correction.
-        let u0 = match &at.terms {
-            TempTerms::Method1 { u0_t, .. } => u0_t,
-            TempTerms::None | TempTerms::Method2 { .. } => &self.constants.u0_v,
-        };
-        let a0 = self.apply_n(&u, u0);
-        let correction = match &at.terms {
-            TempTerms::None | TempTerms::Method1 { m: None, .. } => None,
-            TempTerms::Method1 { m: Some(m), .. } => Some(linalg::mat_vec(m, &a0)),
-            TempTerms::Method2 { d, form } => Some(self.output_correction(&linalg::vec_sub(&u, u0), d, *form)),
-        };
-        let mut a = match correction {
-            Some(c) => [a0[0] + c[0], a0[1] + c[1], a0[2] + c[2]],
-            None => a0,
-        };
-        if !(a[0].is_finite() && a[1].is_finite() && a[2].is_finite()) {
-            a = [F::ZERO; 3];
+            let mut replaced = u;
+            if !self.replace_nonfinite(&mut replaced) {
+                // Every signal finite: the result overflowed.
+                break;
+            }
+            u = replaced;
             status.insert(Status::NONFINITE_INPUT);
         }
-        Sample { accel_g: a, status }
+        status.insert(Status::NONFINITE_INPUT);
+        Sample { accel_g: [F::ZERO; 3], status }
+    }
+
+    /// Replaces each non-finite signal by its zero offset at T0; false when every signal was
+    /// finite. Out of line: only a sample with a non-finite result comes here.
+    #[cold]
+    #[inline(never)]
+    fn replace_nonfinite(&self, u: &mut Vec3<F>) -> bool {
+        let mut any = false;
+        for (x, u0) in u.iter_mut().zip(self.constants.u0_v) {
+            if !x.is_finite() {
+                *x = u0;
+                any = true;
+            }
+        }
+        any
     }
 }
 
-/// What the step needs at one temperature, by method.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum TempTerms<F> {
-    /// No temperature correction.
-    None,
-    /// Method 1: `U0(T)` \[V\] and M (`None` when K(T) is singular: the T0 inverse is used).
-    Method1 { u0_t: Vec3<F>, m: Option<Mat3<F>> },
-    /// Method 2: the coefficient changes of T(3)/T(4) and the form of the correction.
-    Method2 { d: CoefDelta<F>, form: Form },
+/// True when the three numbers are finite: `x − x` is 0 for a finite x and NaN otherwise.
+#[inline(always)]
+#[allow(clippy::eq_op, reason = "`x − x` is the test")]
+fn all_finite<F: Float>(a: &Vec3<F>) -> bool {
+    (a[0] - a[0]) + (a[1] - a[1]) + (a[2] - a[2]) == F::ZERO
 }
 
-/// The temperature-dependent half of the per-sample step
-/// ([`Calibration::at_temperature`]): the temperature's status flags and the method's terms.
+/// `b − A·U0'` for the map whose linear part is `lin` plus N's diagonal hi part (`n`'s
+/// diagonal): the small terms first, the hi part last.
+#[inline(always)]
+fn neg_offset<F: Float>(n: &Mat3<F>, lin: &Mat3<F>, u0: &Vec3<F>, b: &Vec3<F>) -> Vec3<F> {
+    let row = |i: usize, j: usize, k: usize| {
+        let small = (-lin[i][k]).mul_add(u0[k], (-lin[i][j]).mul_add(u0[j], (-lin[i][i]).mul_add(u0[i], b[i])));
+        (-n[i][i]).mul_add(u0[i], small)
+    };
+    [row(0, 1, 2), row(1, 2, 0), row(2, 0, 1)]
+}
+
+/// `I − (I + X)⁻¹` for a small X (method 1's correction, `K(T)⁻¹ = (I − M)·N`), from the
+/// cofactors C of `Y = I + X`: `M = (det Y·I − adj Y)/det Y` with `det Y − C_ii = Σ_j X_ij·C_ij`
+/// (the expansion of det Y along row i less C_ii): every numerator a sum of products of small
+/// numbers, so M keeps `f32`'s relative precision although Y's elements are near 1 or 0.
+/// `None` when Y fails [`linalg::inverse_checked`]'s test (not finite, or its Hadamard ratio
+/// below `min_ratio`).
+#[inline(always)]
+fn identity_minus_inverse<F: Float>(x: &Mat3<F>, min_ratio: F) -> Option<Mat3<F>> {
+    let one = |i: usize| F::ONE + x[i][i];
+    let (y00, y11, y22) = (one(0), one(1), one(2));
+    // Cofactors C_ij of Y.
+    let c00 = y11.mul_add(y22, -(x[1][2] * x[2][1]));
+    let c01 = x[1][2].mul_add(x[2][0], -(x[1][0] * y22));
+    let c02 = x[1][0].mul_add(x[2][1], -(y11 * x[2][0]));
+    let c10 = x[0][2].mul_add(x[2][1], -(x[0][1] * y22));
+    let c11 = y00.mul_add(y22, -(x[0][2] * x[2][0]));
+    let c12 = x[0][1].mul_add(x[2][0], -(y00 * x[2][1]));
+    let c20 = x[0][1].mul_add(x[1][2], -(x[0][2] * y11));
+    let c21 = x[0][2].mul_add(x[1][0], -(y00 * x[1][2]));
+    let c22 = y00.mul_add(y11, -(x[0][1] * x[1][0]));
+    // det Y − C_ii, row by row.
+    let n0 = x[0][2].mul_add(c02, x[0][1].mul_add(c01, x[0][0] * c00));
+    let n1 = x[1][2].mul_add(c12, x[1][1].mul_add(c11, x[1][0] * c10));
+    let n2 = x[2][2].mul_add(c22, x[2][1].mul_add(c21, x[2][0] * c20));
+    let det = c00 + n0;
+    let norm2 = |a: F, b: F, c: F| c.mul_add(c, b.mul_add(b, a * a));
+    let p =
+        norm2(y00, x[0][1], x[0][2]).sqrt() * norm2(x[1][0], y11, x[1][2]).sqrt() * norm2(x[2][0], x[2][1], y22).sqrt();
+    // `!(x >= y)` is also true for NaN, so a non-finite X is rejected here too.
+    if !(det.abs() >= min_ratio * p) || !(p > F::ZERO) || !det.is_finite() || !p.is_finite() {
+        return None;
+    }
+    let r = F::ONE / det;
+    Some([[n0 * r, -(c10 * r), -(c20 * r)], [-(c01 * r), n1 * r, -(c21 * r)], [-(c02 * r), -(c12 * r), n2 * r]])
+}
+
+/// ΔK(T) = K ∘ (ΔK/K): the elementwise product of the constants at T0 and the relative
+/// changes of T(3)/T(4).
+#[inline(always)]
+fn delta_k<F: Float>(k: &Mat3<F>, d: &CoefDelta<F>) -> Mat3<F> {
+    let mut dk = [[F::ZERO; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            dk[i][j] = k[i][j] * d.rel_k[i][j];
+        }
+    }
+    dk
+}
+
+/// The temperature-dependent half of the per-sample step ([`Calibration::at_temperature`]):
+/// the temperature's status flags and the affine map `a = A·U − c` of the method at that
+/// temperature.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AtTemperature<F> {
     status: Status,
-    terms: TempTerms<F>,
+    /// A without the hi part of N's diagonal (off the diagonal: A_ij; on it: A_ii − hi_i, the
+    /// low part of N_ii plus the method's change) \[g/V\].
+    lin: Mat3<F>,
+    /// −c \[g\] (negated: the per-sample sum starts from it).
+    neg_offset_g: Vec3<F>,
 }
 
 impl<F: Float> AtTemperature<F> {
@@ -695,9 +789,11 @@ impl<F: Float> AtTemperature<F> {
 /// bit for bit, as without the cache.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TempCache<F> {
-    /// The calibration's fingerprint and the reading the terms were computed for (`None`:
-    /// nothing cached yet).
-    key: Option<(u64, F)>,
+    /// The reading the terms were computed for (NaN: nothing cached yet; a NaN reading never
+    /// equals it, so it is never reused).
+    key_c: F,
+    /// The fingerprint of the calibration they were computed with.
+    key_fingerprint: u64,
     at: AtTemperature<F>,
 }
 
@@ -710,24 +806,35 @@ impl<F: Float> Default for TempCache<F> {
 impl<F: Float> TempCache<F> {
     /// Empty: the first lookup computes.
     pub const fn new() -> Self {
-        TempCache { key: None, at: AtTemperature { status: Status::OK, terms: TempTerms::None } }
+        TempCache {
+            key_c: F::NAN,
+            key_fingerprint: 0,
+            at: AtTemperature { status: Status::OK, lin: [[F::ZERO; 3]; 3], neg_offset_g: [F::ZERO; 3] },
+        }
     }
 
     /// The terms of `cal` at `temp_c`, recomputed only when `temp_c` differs from the last
-    /// reading or `cal` from the last calibration (by fingerprint); a non-finite reading is
-    /// never reused.
+    /// reading or `cal` from the last calibration (by fingerprint); a NaN reading is never
+    /// reused.
     #[inline]
     pub fn get(&mut self, cal: &Calibration<F>, temp_c: F) -> &AtTemperature<F> {
-        let key = Some((cal.fingerprint, temp_c));
-        if self.key != key {
-            self.at = cal.at_temperature(temp_c);
-            self.key = key;
+        if !(temp_c == self.key_c) || self.key_fingerprint != cal.fingerprint {
+            self.refresh(cal, temp_c);
         }
         &self.at
     }
 
+    /// The terms recomputed: once per temperature reading, so out of line (the per-sample
+    /// path keeps its registers).
+    #[inline(never)]
+    fn refresh(&mut self, cal: &Calibration<F>, temp_c: F) {
+        self.at = cal.at_temperature(temp_c);
+        self.key_c = temp_c;
+        self.key_fingerprint = cal.fingerprint;
+    }
+
     /// Forgets the cached terms.
     pub fn invalidate(&mut self) {
-        self.key = None;
+        self.key_c = F::NAN;
     }
 }

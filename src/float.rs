@@ -2,10 +2,12 @@
 //! on the target and as `f64` on the host (the reference).
 //!
 //! Only operations whose results are identical on x86-64 (SSE) and on the Cortex-M4F FPU are
-//! used: IEEE add, subtract, multiply, divide, `libm`'s correctly rounded square root and
-//! `libm`'s software `acos`, `exp`, `erfc` (built from the same basic operations). No
-//! fused multiply-add is ever requested, so the host's `f32` results equal the target's bit for
-//! bit.
+//! used: IEEE add, subtract, multiply, divide, the correctly rounded square root and fused
+//! multiply-add ([`Float::mul_add`]: the FPU's `vfma.f32` on the target, `libm`'s `fmaf` on
+//! the host; both round `a·b + c` once) and `libm`'s software `acos`, `exp`, `erfc` (built from
+//! the same basic operations). The compiler never fuses a product and a sum by itself (Rust
+//! does not contract floating-point expressions), so every fused operation is one written as
+//! such, and the host's `f32` results equal the target's bit for bit.
 
 use core::fmt::Debug;
 use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
@@ -31,17 +33,26 @@ pub trait Float:
     const ONE: Self;
     /// The machine epsilon of the type.
     const EPSILON: Self;
-    /// Veltkamp's splitting constant `2^⌈p/2⌉ + 1` (p = mantissa bits), see [`split`].
-    const SPLITTER: Self;
+    /// A quiet NaN.
+    const NAN: Self;
     /// Converts an `f64` (a constant, or a value computed in `f64`) to this type, rounding to
     /// nearest for `f32`; the inverse of [`to_f64`](Self::to_f64) where that is exact.
     fn from_f64(x: f64) -> Self;
     /// Widens to `f64` (exact).
     fn to_f64(self) -> f64;
+    /// `x` as a pair `hi + lo` of this type: `hi` is `x` rounded, `lo` the rest rounded, so
+    /// the pair holds about twice the mantissa of this type (`f64`: `(x, 0)`). Without `f64`
+    /// arithmetic: the rest is taken from the bits (see the `f32` implementation).
+    fn split_f64(x: f64) -> (Self, Self);
     /// Absolute value.
     fn abs(self) -> Self;
     /// Square root (`libm`, correctly rounded).
     fn sqrt(self) -> Self;
+    /// `self·a + b` rounded once (IEEE 754 fusedMultiplyAdd): one `vfma.f32` on the
+    /// Cortex-M4F, `libm`'s correctly rounded `fmaf`/`fma` on the host (the CPU's FMA
+    /// instruction where it has one), so the same bits on both. The product is exact inside
+    /// it: `x.mul_add(y, s)` with a small `s` is `x·y + s` to one rounding of the result.
+    fn mul_add(self, a: Self, b: Self) -> Self;
     /// True unless NaN or ±∞.
     fn is_finite(self) -> bool;
     /// The larger of two values; a NaN operand yields the other one.
@@ -61,7 +72,7 @@ impl Float for f32 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const EPSILON: Self = f32::EPSILON;
-    const SPLITTER: Self = 4097.0; // 2^12 + 1
+    const NAN: Self = f32::NAN;
     #[inline(always)]
     fn from_f64(x: f64) -> Self {
         x as f32
@@ -69,6 +80,29 @@ impl Float for f32 {
     #[inline(always)]
     fn to_f64(self) -> f64 {
         self as f64
+    }
+    /// `hi` is `x` rounded to `f32`; `lo` is `x − hi`, an integer multiple of `x`'s last
+    /// place with at most 30 bits, from the two mantissas, rounded to `f32`: `hi + lo` is
+    /// within 2⁻⁴⁷·|x| of `x`. For |x| below 2⁻⁷⁴ (or `hi` not a normal number) `lo` is 0:
+    /// the rest is then below 2⁻⁹⁸. Load-time code: out of line, optimised for size.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
+    fn split_f64(x: f64) -> (f32, f32) {
+        let hi = x as f32;
+        let (xb, hb) = (x.to_bits(), hi.to_bits());
+        let (ex, eh) = (((xb >> 52) & 0x7ff) as i32, ((hb >> 23) & 0xff) as i32);
+        // x = mx·2^(ex − 1075), hi = mh·2^(eh − 150), of the same sign; hi's last place is 2^29
+        // or 2^30 times x's (30 when the rounding carried into the next binade).
+        let unit = ex - 1075;
+        let shift = (eh - 150) - unit;
+        if ex == 0 || eh == 0 || eh == 0xff || !(29..=30).contains(&shift) || unit < -126 {
+            return (hi, 0.0);
+        }
+        let mx = ((xb & ((1 << 52) - 1)) | (1 << 52)) as i64;
+        let mh = ((hb & 0x7f_ffff) | 0x80_0000) as i64;
+        let rest = (mx - (mh << shift)) as i32 as f32;
+        let lo = rest * f32::from_bits(((unit + 127) as u32) << 23);
+        (hi, if xb >> 63 != 0 { -lo } else { lo })
     }
     #[inline(always)]
     fn abs(self) -> Self {
@@ -82,6 +116,15 @@ impl Float for f32 {
         return core::f32::math::sqrt(self);
         #[cfg(not(unstable_target))]
         return libm::sqrtf(self);
+    }
+    #[inline(always)]
+    fn mul_add(self, a: Self, b: Self) -> Self {
+        // The FPU's fused multiply-add where the compiler offers it (see `build.rs`); libm's is
+        // correctly rounded too, so both give the same bits.
+        #[cfg(unstable_target)]
+        return core::f32::math::mul_add(self, a, b);
+        #[cfg(not(unstable_target))]
+        return libm::fmaf(self, a, b);
     }
     #[inline(always)]
     fn is_finite(self) -> bool {
@@ -113,7 +156,7 @@ impl Float for f64 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const EPSILON: Self = f64::EPSILON;
-    const SPLITTER: Self = 134_217_729.0; // 2^27 + 1
+    const NAN: Self = f64::NAN;
     #[inline(always)]
     fn from_f64(x: f64) -> Self {
         x
@@ -123,12 +166,20 @@ impl Float for f64 {
         self
     }
     #[inline(always)]
+    fn split_f64(x: f64) -> (f64, f64) {
+        (x, 0.0)
+    }
+    #[inline(always)]
     fn abs(self) -> Self {
         libm::fabs(self)
     }
     #[inline(always)]
     fn sqrt(self) -> Self {
         libm::sqrt(self)
+    }
+    #[inline(always)]
+    fn mul_add(self, a: Self, b: Self) -> Self {
+        libm::fma(self, a, b)
     }
     #[inline(always)]
     fn is_finite(self) -> bool {
@@ -185,24 +236,4 @@ pub fn two_sum<F: Float>(a: F, b: F) -> (F, F) {
 pub fn fast_two_sum<F: Float>(a: F, b: F) -> (F, F) {
     let s = a + b;
     (s, b - (s - a))
-}
-
-/// Veltkamp's split: `hi + lo = a` exactly, each half holding at most half the mantissa, so
-/// that products of halves are exact. Overflows (to a non-finite result) only for
-/// `|a| > MAX/SPLITTER`, which the callers' final finiteness check catches.
-#[inline(always)]
-pub fn split<F: Float>(a: F) -> (F, F) {
-    let c = F::SPLITTER * a;
-    let hi = c - (c - a);
-    (hi, a - hi)
-}
-
-/// Dekker's TwoProduct without FMA: `p + e = a·b` exactly, `p = fl(a·b)`, with `b` given
-/// already split.
-#[inline(always)]
-pub fn two_prod_split<F: Float>(a: F, b: (F, F)) -> (F, F) {
-    let p = a * (b.0 + b.1);
-    let (ah, al) = split(a);
-    let e = ((ah * b.0 - p) + ah * b.1 + al * b.0) + al * b.1;
-    (p, e)
 }

@@ -37,6 +37,44 @@ pub fn mat_mul<F: Float>(a: &Mat3<F>, b: &Mat3<F>) -> Mat3<F> {
     c
 }
 
+/// `a · b` with fused multiply-adds ([`Float::mul_add`]): each element rounded about once.
+/// Written out element by element (constant indices: no bounds check in any build).
+#[inline(always)]
+pub fn mat_mul_fused<F: Float>(a: &Mat3<F>, b: &Mat3<F>) -> Mat3<F> {
+    let e = |r: &Vec3<F>, j: usize| r[2].mul_add(b[2][j], r[1].mul_add(b[1][j], r[0] * b[0][j]));
+    let row = |r: &Vec3<F>| [e(r, 0), e(r, 1), e(r, 2)];
+    [row(&a[0]), row(&a[1]), row(&a[2])]
+}
+
+/// `c − a · b` with fused multiply-adds ([`Float::mul_add`]), element by element.
+#[inline(always)]
+pub fn mat_mul_sub<F: Float>(a: &Mat3<F>, b: &Mat3<F>, c: &Mat3<F>) -> Mat3<F> {
+    let e =
+        |r: &Vec3<F>, j: usize, x: F| (-r[2]).mul_add(b[2][j], (-r[1]).mul_add(b[1][j], (-r[0]).mul_add(b[0][j], x)));
+    let row = |r: &Vec3<F>, x: &Vec3<F>| [e(r, 0, x[0]), e(r, 1, x[1]), e(r, 2, x[2])];
+    [row(&a[0], &c[0]), row(&a[1], &c[1]), row(&a[2], &c[2])]
+}
+
+/// `m · v` with fused multiply-adds ([`Float::mul_add`]).
+#[inline(always)]
+pub fn mat_vec_fused<F: Float>(m: &Mat3<F>, v: &Vec3<F>) -> Vec3<F> {
+    let e = |r: &Vec3<F>| r[2].mul_add(v[2], r[1].mul_add(v[1], r[0] * v[0]));
+    [e(&m[0]), e(&m[1]), e(&m[2])]
+}
+
+/// `a + b` element-wise.
+#[inline(always)]
+pub fn vec_add<F: Float>(a: &Vec3<F>, b: &Vec3<F>) -> Vec3<F> {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+/// `a − b` element-wise.
+#[inline(always)]
+pub fn mat_sub<F: Float>(a: &Mat3<F>, b: &Mat3<F>) -> Mat3<F> {
+    let row = |x: &Vec3<F>, y: &Vec3<F>| [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
+    [row(&a[0], &b[0]), row(&a[1], &b[1]), row(&a[2], &b[2])]
+}
+
 /// `a − b` element-wise.
 #[inline(always)]
 pub fn vec_sub<F: Float>(a: &Vec3<F>, b: &Vec3<F>) -> Vec3<F> {

@@ -12,7 +12,7 @@
 //! - `Profile(i)`: flight-phase profile `i` of the configuration (Tables V2/V3-like), with the
 //!   configuration's [`Variant`](crate::vibration::Variant). The compensated sample is a mean
 //!   over the vibration, `y = a_p + VE(a_p)` per axis; `a_p` is solved for
-//!   ([`solve_static_g`](crate::vibration::solve_static_g), a fixed number of Newton steps)
+//!   ([`solve_static_g`](crate::vibration::solve_static_g), at most four Newton steps)
 //!   and `VE(a_p)` subtracted, so `y − VE = a_p`.
 //! - `Online`: the moments of the last complete block of `W` compensated samples
 //!   ([`MomentWindow`]), for a system that samples fast enough to see the vibration, referred
@@ -21,11 +21,12 @@
 //!   vibration by 2.5 %, which would overstate the VE by 5 %); the exact moment form is used
 //!   and `a_p` is solved from the block mean the same way. The VE depends on the block alone,
 //!   so it is computed once per block, spread over four steps so that no step carries all of
-//!   it (the moments on the step that completes the block, one accelerometer's VE on each of
-//!   the next three), and subtracted from every sample from then until the next block's is
-//!   ready. The window is fed only while `Online` is selected and emptied by any other
-//!   source, so after switching to `Online` the first estimate comes three steps after the
-//!   first complete block (flagged not ready until then).
+//!   it (the moments on the step after the one that completes the block, which adds the last
+//!   samples to the block's sums; one accelerometer's VE on each of the next three), and
+//!   subtracted from every sample from then until the next block's is ready. The window is
+//!   fed only while `Online` is selected and emptied by any other source, so after switching
+//!   to `Online` the first estimate comes four steps after the first complete block (flagged
+//!   not ready until then).
 //!
 //! # Policies
 //!
@@ -148,11 +149,19 @@ pub struct Pipeline<F> {
 pub struct PipelineState<F, const W: usize> {
     /// Moments of the compensated samples, by blocks of `W`.
     pub window: MomentWindow<F, W>,
-    /// The online VE \[g\] of the last complete block and whether it was clamped (`None`
-    /// before the first block's VE is complete).
-    online_ve: Option<(Vec3<F>, bool)>,
-    /// The VE of the block that completed last, being computed one accelerometer per step.
-    next_ve: Option<NextVe<F>>,
+    /// The online VE \[g\] of the last complete block (zero before the first block's VE is
+    /// complete); always finite.
+    online_ve_g: Vec3<F>,
+    /// The flags of the online VE: [`Status::VIBRATION_ESTIMATE_NOT_READY`] before the first
+    /// block's VE is complete, [`Status::VIBRATION_OUT_OF_RANGE`] when it was clamped.
+    online_status: Status,
+    /// The online VE's work on the block that completed last, one piece per step: 0 none
+    /// left; 1 its moments; 2, 3, 4 the x, y, z accelerometer's VE.
+    ve_work: u8,
+    /// That block's VE in progress.
+    next_ve: NextVe<F>,
+    /// The online source has fed the window or set a VE since the last reset.
+    online_used: bool,
     /// Temperature terms of the last reading.
     temps: TempCache<F>,
     /// The thermal dynamics' state (untouched without dynamics).
@@ -170,23 +179,51 @@ impl<F: Float, const W: usize> PipelineState<F, W> {
     pub const fn new() -> Self {
         PipelineState {
             window: MomentWindow::new(),
-            online_ve: None,
-            next_ve: None,
+            online_ve_g: [F::ZERO; 3],
+            online_status: Status::VIBRATION_ESTIMATE_NOT_READY,
+            ve_work: 0,
+            next_ve: NextVe::ZERO,
+            online_used: false,
             temps: TempCache::new(),
             dynamics: DynamicsState::new(),
         }
     }
+
+    /// The online estimate forgotten: empty window, no VE. Out of line: it runs when the
+    /// source changes from the online one, not per sample.
+    #[cold]
+    #[inline(never)]
+    fn reset_online(&mut self) {
+        self.window.reset();
+        self.online_ve_g = [F::ZERO; 3];
+        self.online_status = Status::VIBRATION_ESTIMATE_NOT_READY;
+        self.ve_work = 0;
+        self.online_used = false;
+    }
 }
 
 /// A completed block's VE in progress: its moments (referred to the acceleration and
-/// clamped) and the accelerometers done so far.
+/// clamped), the VE of the accelerometers done so far and whether any was clamped.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct NextVe<F> {
     moments: WindowMoments<F>,
-    /// Accelerometers done (0..3, in the order x, y, z).
-    done: usize,
     ve_g: Vec3<F>,
     clamped: bool,
+}
+
+impl<F: Float> NextVe<F> {
+    const ZERO: Self = NextVe {
+        moments: WindowMoments {
+            mean_g: [F::ZERO; 3],
+            var_g2: [F::ZERO; 3],
+            m3_g3: [F::ZERO; 3],
+            m4_g4: [F::ZERO; 3],
+            cov_g2: [F::ZERO; 3],
+            abs_excess_g: [F::ZERO; 3],
+        },
+        ve_g: [F::ZERO; 3],
+        clamped: false,
+    };
 }
 
 impl<F: Float> Pipeline<F> {
@@ -279,31 +316,42 @@ impl<F: Float> Pipeline<F> {
         self.step_with_ve(state, u_v, temp_c, source).0
     }
 
-    /// The online VE's share of the step that completes a block: the block's moments,
-    /// referred to the acceleration and clamped. Once per block, so it is kept out of the
-    /// per-sample code and optimised for size.
-    #[inline(never)]
-    #[cfg_attr(unstable_target, optimize(size))]
-    fn block_ve_start<const W: usize>(&self, window: &MomentWindow<F, W>) -> Option<NextVe<F>> {
-        window.moments().map(|mut m| {
-            m.unscale(&self.vib.output_gains(&m));
-            let clamped = m.clamp_sigma(F::from_f64(MAX_LEVEL_G));
-            NextVe { moments: m, done: 0, ve_g: [F::ZERO; 3], clamped }
-        })
-    }
-
-    /// The online VE's share of each of the three steps after a block: the next
-    /// accelerometer's VE. Three steps per block, so it is kept out of the per-sample code and
+    /// The online VE's share of a step (`state.ve_work`, see [`PipelineState`]): on the step
+    /// after a block completes, its moments, referred to the acceleration and clamped; on each
+    /// of the next three, one accelerometer's VE, and after the third the block's VE replaces
+    /// the one subtracted. Four steps per block, so it is kept out of the per-sample code and
     /// optimised for size.
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn next_axis_ve(&self, n: &mut NextVe<F>) {
-        if let (Some(&axis), Some(slot)) = (Axis::ALL.get(n.done), n.ve_g.get_mut(n.done)) {
-            let (e, c) = self.vib.correction_from_moments_on_g(&n.moments, &n.moments.mean_g, axis);
-            *slot = e;
-            n.clamped |= c;
+    fn online_ve_work<const W: usize>(&self, state: &mut PipelineState<F, W>) {
+        let n = &mut state.next_ve;
+        match state.ve_work {
+            1 => match state.window.moments() {
+                Some(mut m) => {
+                    m.unscale(&self.vib.output_gains(&m));
+                    n.clamped = m.clamp_sigma(F::from_f64(MAX_LEVEL_G));
+                    n.moments = m;
+                    state.ve_work = 2;
+                }
+                None => state.ve_work = 0,
+            },
+            w => {
+                let i = (w as usize).wrapping_sub(2);
+                if let (Some(&axis), Some(slot)) = (Axis::ALL.get(i), n.ve_g.get_mut(i)) {
+                    let (e, c) = self.vib.correction_from_moments_on_g(&n.moments, &n.moments.mean_g, axis);
+                    *slot = e;
+                    n.clamped |= c;
+                }
+                if w >= 4 {
+                    // Finite: each axis's VE is `solve_static_g`'s.
+                    state.online_ve_g = n.ve_g;
+                    state.online_status = if n.clamped { Status::VIBRATION_OUT_OF_RANGE } else { Status::OK };
+                    state.ve_work = 0;
+                } else {
+                    state.ve_work = w + 1;
+                }
+            }
         }
-        n.done += 1;
     }
 
     /// [`step`](Self::step), also returning the VE \[g\] that was subtracted from each axis.
@@ -327,66 +375,95 @@ impl<F: Float> Pipeline<F> {
             }
         };
         let mut s = self.cal.apply(u_v, state.temps.get(&self.cal, temp_c));
-        let usable = self.cal.is_valid() && !s.status.contains(Status::NONFINITE_INPUT);
-        if let (true, Some((bias_g, d))) = (usable, play) {
+        // Without dynamics one test, not two.
+        if let Some((bias_g, d)) = play
+            && usable(&s)
+        {
             for (a, b) in s.accel_g.iter_mut().zip(bias_g) {
-                *a -= *b * d;
+                *a = (-*b).mul_add(d, *a);
             }
         }
-        if source != VibrationSource::Online {
-            // The window serves the online source only: a block must not span a time when
-            // it was not selected.
-            if !state.window.is_empty() || state.online_ve.is_some() || state.next_ve.is_some() {
-                state.window.reset();
-                state.online_ve = None;
-                state.next_ve = None;
-            }
-        } else if usable {
-            // One piece of the online VE per step, so that no step carries a whole block's:
-            // the moments on the step that completes a block, then one accelerometer's VE on
-            // each of the next three.
-            if let Some(n) = &mut state.next_ve {
-                self.next_axis_ve(n);
-                if n.done >= 3 {
-                    state.online_ve = Some((n.ve_g, n.clamped));
-                    state.next_ve = None;
+        self.subtract_ve(state, s, source)
+    }
+
+    /// The VE stage of [`step`](Self::step): the VE for `source` subtracted from the
+    /// compensated sample `s` (the window fed with it, for the online source), the VE's flags
+    /// set; returns the sample and the VE \[g\] subtracted from each axis. Nothing is
+    /// subtracted from a sample of an invalid calibration or with a non-finite input, and it
+    /// does not enter the window. Public so that the benchmark can time it alone.
+    #[inline]
+    pub fn subtract_ve<const W: usize>(
+        &self,
+        state: &mut PipelineState<F, W>,
+        mut s: Sample<F>,
+        source: VibrationSource,
+    ) -> (Sample<F>, Vec3<F>) {
+        let ve = match source {
+            VibrationSource::Online => {
+                if !usable(&s) {
+                    return (s, [F::ZERO; 3]);
                 }
+                // One piece of the online VE per step, so that no step carries a whole
+                // block's (nor a block's last sums and its moments together): the moments on
+                // the step after a block completes, then one accelerometer's VE on each of the
+                // next three.
+                if state.ve_work != 0 {
+                    self.online_ve_work(state);
+                }
+                state.online_used = true;
+                // The sample is finite (`usable`).
+                if state.window.push_finite(&s.accel_g) == Pushed::BlockDone {
+                    state.ve_work = 1;
+                }
+                s.status.insert(state.online_status);
+                state.online_ve_g
             }
-            if state.window.push(&s.accel_g) == Pushed::BlockDone {
-                state.next_ve = self.block_ve_start(&state.window);
+            // The window serves the online source only: a block must not span a time when it
+            // was not selected.
+            VibrationSource::None => {
+                if state.online_used {
+                    state.reset_online();
+                }
+                return (s, [F::ZERO; 3]);
             }
-        }
-        let mut ve = [F::ZERO; 3];
-        if usable {
-            match source {
-                VibrationSource::None => {}
-                VibrationSource::Profile(i) => match self.vib.profile(i as usize) {
-                    Some(v) => {
-                        let (e, clamped) = self.vib.correction_for_output_g(v, &s.accel_g);
-                        if clamped {
-                            s.status.insert(Status::VIBRATION_OUT_OF_RANGE);
-                        }
-                        ve = e;
-                    }
-                    None => s.status.insert(Status::VIBRATION_ESTIMATE_NOT_READY),
-                },
-                VibrationSource::Online => match state.online_ve {
-                    Some((e, clamped)) => {
-                        if clamped {
-                            s.status.insert(Status::VIBRATION_OUT_OF_RANGE);
-                        }
-                        ve = e;
-                    }
-                    None => s.status.insert(Status::VIBRATION_ESTIMATE_NOT_READY),
-                },
+            VibrationSource::Profile(i) => {
+                if state.online_used {
+                    state.reset_online();
+                }
+                if !usable(&s) {
+                    return (s, [F::ZERO; 3]);
+                }
+                let (e, flags) = self.profile_ve(i, s.accel_g);
+                s.status.insert(flags);
+                e
             }
-        }
-        if !(ve[0].is_finite() && ve[1].is_finite() && ve[2].is_finite()) {
-            ve = [F::ZERO; 3];
-        }
+        };
         for (a, e) in s.accel_g.iter_mut().zip(ve) {
             *a -= e;
         }
         (s, ve)
     }
+}
+
+impl<F: Float> Pipeline<F> {
+    /// The VE \[g\] of flight profile `i` for the compensated output `accel_g` and the flags
+    /// it sets. Out of line: its locals (four Newton steps per axis) would otherwise enlarge
+    /// the step's frame for every source, and a call is negligible beside its cost. The
+    /// output by value, so that the step's sample stays in registers.
+    #[inline(never)]
+    fn profile_ve(&self, i: u8, accel_g: Vec3<F>) -> (Vec3<F>, Status) {
+        let Some(v) = self.vib.profile(i as usize) else {
+            return ([F::ZERO; 3], Status::VIBRATION_ESTIMATE_NOT_READY);
+        };
+        // Finite: each axis's VE is `solve_static_g`'s.
+        let (e, clamped) = self.vib.correction_for_output_g(v, &accel_g);
+        (e, if clamped { Status::VIBRATION_OUT_OF_RANGE } else { Status::OK })
+    }
+}
+
+/// A sample the bias play and the VE apply to: a valid calibration and finite inputs (an
+/// invalid calibration flags every sample).
+#[inline(always)]
+fn usable<F>(s: &Sample<F>) -> bool {
+    s.status.0 & (Status::INVALID_CALIBRATION.0 | Status::NONFINITE_INPUT.0) == 0
 }

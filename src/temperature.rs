@@ -51,14 +51,14 @@ impl<F: Float> CoefDelta<F> {
         d
     }
 
-    /// `a + s·(b − a)`, element-wise.
+    /// `a + s·(b − a)`, element-wise (one fused multiply-add each).
     #[inline(always)]
     fn lerp(a: &Self, b: &Self, s: F) -> Self {
         let mut out = *a;
         for i in 0..3 {
-            out.du0_v[i] += s * (b.du0_v[i] - a.du0_v[i]);
+            out.du0_v[i] = s.mul_add(b.du0_v[i] - a.du0_v[i], a.du0_v[i]);
             for j in 0..3 {
-                out.rel_k[i][j] += s * (b.rel_k[i][j] - a.rel_k[i][j]);
+                out.rel_k[i][j] = s.mul_add(b.rel_k[i][j] - a.rel_k[i][j], a.rel_k[i][j]);
             }
         }
         out
@@ -118,23 +118,14 @@ impl<F: Float> TempModel<F> {
             TempModel::Poly { order, coef } => {
                 let n = (*order as usize).min(MAX_POLY_ORDER);
                 let dt = temp_c - t0_c;
-                // Horner: ΔT·(c1 + ΔT·(c2 + …)).
-                let mut acc = CoefDelta::zero();
+                // Horner: ΔT·(c1 + ΔT·(c2 + …)), each step one fused multiply-add.
+                let mut acc = [F::ZERO; 12];
                 for c in coef.iter().take(n).rev() {
-                    for i in 0..3 {
-                        acc.du0_v[i] = c.du0_v[i] + dt * acc.du0_v[i];
-                        for j in 0..3 {
-                            acc.rel_k[i][j] = c.rel_k[i][j] + dt * acc.rel_k[i][j];
-                        }
+                    for (a, c) in acc.iter_mut().zip(c.to_array()) {
+                        *a = a.mul_add(dt, c);
                     }
                 }
-                for i in 0..3 {
-                    acc.du0_v[i] *= dt;
-                    for j in 0..3 {
-                        acc.rel_k[i][j] *= dt;
-                    }
-                }
-                acc
+                CoefDelta::from_array(&acc.map(|a| a * dt))
             }
             TempModel::Pwl { n_knots, knots_c, at_knot } => {
                 let n = (*n_knots as usize).clamp(2, MAX_KNOTS);

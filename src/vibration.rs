@@ -763,7 +763,8 @@ impl<F: Float> VibrationConfig<F> {
 const NEWTON_STEPS: usize = 4;
 
 /// Solves `a + VE(a) = y` for the static IA acceleration `a` (clamped to ±[`MAX_STATIC_G`])
-/// by a fixed number of Newton steps with `dVE/da = δ(1) + 2δ(2)a + 3δ(3)a²` (the exact
+/// by at most four (`NEWTON_STEPS`) Newton steps (fewer once a step leaves `a` unchanged: the rest
+/// would repeat it) with `dVE/da = δ(1) + 2δ(2)a + 3δ(3)a²` (the exact
 /// asymmetry's slope, below `δ_1A`, is left out); `terms(a)` gives the VE terms at `a`.
 /// Returns `VE(a)` \[g\] and whether the solution was clamped. Bounded time, no panic; a
 /// non-finite `y` gives zero.
@@ -783,7 +784,13 @@ pub fn solve_static_g<F: Float>(y_g: F, terms: impl Fn(F) -> VeTerms<F>) -> (F, 
         // A model that is not monotone here (never for a real accelerometer) falls back to a
         // fixed-point step.
         let slope = if slope > F::from_f64(0.5) { slope } else { F::ONE };
-        a = clamp(a - f / slope);
+        let next = clamp(a - f / slope);
+        if next == a {
+            // Converged: the remaining steps would repeat this one from the same `a` (and
+            // `terms(a)`), so the result is the same bits as after all of them.
+            break;
+        }
+        a = next;
         t = terms(a);
     }
     let ve = t.total_g(a);

@@ -363,3 +363,30 @@ fn division_free_reciprocal_is_within_2_ulp_of_the_quotient() {
     assert!(worst <= 2, "{worst} ulp");
     assert!(bins_comp::float::recip(1e-300f64).is_nan() || !bins_comp::float::recip(1e-300f64).is_finite());
 }
+
+#[test]
+fn an_f64_split_into_two_f32_holds_it_to_2_pow_minus_47() {
+    // `Float::split_f64` (the load-time K of the target, without f64 arithmetic): hi is x
+    // rounded; hi + lo against x itself, over magnitudes from 2^-60 to 2^60 and both signs,
+    // and exact when x is an f32 plus a remainder of 24 bits.
+    use bins_comp::Float;
+    let mut worst: f64 = 0.0;
+    let mut x = 1.0e-18f64;
+    while x < 1.0e18 {
+        for v in [x, -x, x * (1.0 + 1.0 / 3.0), -x * std::f64::consts::PI, x * 1.000_000_123_456_789] {
+            let (hi, lo) = <f32 as Float>::split_f64(v);
+            assert_eq!(hi, v as f32);
+            let err = ((hi as f64 + lo as f64) - v).abs() / v.abs();
+            worst = worst.max(err);
+        }
+        x *= 1.37;
+    }
+    println!("split_f64: worst relative error {worst:.2e}");
+    assert!(worst <= 2f64.powi(-47), "{worst:e}");
+    let exact = 0.55060863f32 as f64 + 3.0 * 2f64.powi(-40);
+    let (hi, lo) = <f32 as Float>::split_f64(exact);
+    assert_eq!(hi as f64 + lo as f64, exact);
+    // Zero, and the rest (below 2^-98) of a number below 2^-74, is dropped.
+    assert_eq!(<f32 as Float>::split_f64(0.0), (0.0, 0.0));
+    assert_eq!(<f32 as Float>::split_f64(1e-25).1, 0.0);
+}

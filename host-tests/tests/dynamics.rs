@@ -246,7 +246,7 @@ fn cached_terms_at_the_rounded_effective_temperature_stay_within_2_ug_of_the_exa
             let reading = chamber_reading(n);
             // ±1 g along each axis in turn, 10 s each, signals of the unit at the reading.
             let a = orientations[(n / 10_000) % 6];
-            let c = cal64.params().constants_at(reading);
+            let c = paper::params(model, method).constants_at(reading);
             let u: [f64; 3] =
                 std::array::from_fn(|i| (0..3).map(|j| c.k_v_per_g[i][j] * a[j]).sum::<f64>() + c.u0_v[i]);
             let r64 = reference.step(&mut st64, u, reading, VibrationSource::None);
@@ -279,7 +279,8 @@ fn cached_terms_at_the_rounded_effective_temperature_stay_within_2_ug_of_the_exa
 #[test]
 fn the_effective_temperature_drives_the_model_and_the_bias_play_is_subtracted() {
     // f64, exact: the pipeline's output with dynamics equals the plain calibration at the
-    // effective temperature minus bias_play_g·d, computed here from the stage alone.
+    // effective temperature minus bias_play_g·d (rounded once: a fused multiply-add),
+    // computed here from the stage alone.
     let dynamics = unit_dynamics();
     let model = paper::two_range_model().unwrap();
     let cal: Calibration<f64> = paper::calibration(model, Method::CoefficientCorrection).unwrap();
@@ -298,7 +299,7 @@ fn the_effective_temperature_drives_the_model_and_the_bias_play_is_subtracted() 
         let plain = cal.compensate(u, e.temp_eff_c);
         saw_play |= e.bias_play.abs() == 1.0;
         for i in 0..3 {
-            assert_eq!(s.accel_g[i], plain.accel_g[i] - dynamics.bias_play_g[i] * e.bias_play);
+            assert_eq!(s.accel_g[i], (-dynamics.bias_play_g[i]).mul_add(e.bias_play, plain.accel_g[i]));
         }
     }
     assert!(saw_play);

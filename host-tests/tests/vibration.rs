@@ -1043,9 +1043,9 @@ fn pipeline_online_removes_the_ve_from_fast_samples() {
     let mut sum64 = [0.0; 3];
     let mut sum32 = [0.0; 3];
     let mut raw = [0.0; 3];
-    // The first block completes at sample W − 1; its VE is computed over the next three
-    // steps (one accelerometer each) and subtracted from sample W + 2 on.
-    let ready = W + 2;
+    // The first block completes at sample W − 1; its moments are taken on the next step and
+    // its VE over the three after (one accelerometer each), subtracted from sample W + 3 on.
+    let ready = W + 3;
     for k in 0..ready + W {
         let s = (std::f64::consts::TAU * f * k as f64 / fs).sin();
         let a: [f64; 3] = [0, 1, 2].map(|i| a_p[i] + amp[i] * s);
@@ -1105,8 +1105,8 @@ fn pipeline_status_policies() {
     for k in 0..16 {
         let x = if k % 2 == 0 { 12.0 } else { -12.0 };
         let s = p.step(&mut st, signals(&[x, 0.0, 0.0], 20.0).map(|x| x as f32), 20.0, VibrationSource::Online);
-        // Block complete at sample 7, its VE ready three steps later.
-        if k >= 10 {
+        // Block complete at sample 7, its VE ready four steps later.
+        if k >= 11 {
             assert!(s.status.contains(Status::VIBRATION_OUT_OF_RANGE), "sample {k}: {:?}", s.status);
             assert!(s.accel_g.iter().all(|a| a.is_finite()));
         }
