@@ -8,11 +8,11 @@
 //! | [`rig`] | the timeline: tilter TP1–TP6, check positions CP1–CP6, shake-table plan, flight ramps |
 //! | [`scenario`] | the scenario file (TOML): parsing, checks naming the key, building a [`Simulation`] |
 //!
-//! Row `k` is logged at `t = k/rate`; its signals are the logger's mean over the sample
-//! period: the static parts are evaluated at `t`, the vibration enters through its rectified
-//! mean (and, optionally, its sampling fluctuation). The generator draws every random number
-//! from one ChaCha8 stream in a fixed order, so a seed gives the same file bit for bit on any
-//! machine.
+//! Row `k` is logged at `t = k/rate` unless the unit is off then (a power cycle: no row); its
+//! signals are the logger's mean over the sample period: the static parts are evaluated at
+//! `t`, the vibration enters through its rectified mean (and, optionally, its sampling
+//! fluctuation). The generator draws every random number from one ChaCha8 stream in a fixed
+//! order, so a seed gives the same file bit for bit on any machine.
 
 pub mod rectify;
 pub mod rig;
@@ -59,8 +59,39 @@ impl Simulation {
         self.segments.iter().map(|s| s.duration_s).sum()
     }
 
-    /// Rows the run writes: every `t = k/rate` inside the duration.
+    /// Rows the run writes: every `t = k/rate` inside the duration while the unit is on.
     pub fn n_rows(&self) -> u64 {
+        let n = self.n_instants();
+        if self.segments.iter().all(|s| s.powered) {
+            return n;
+        }
+        // The instants in each segment the unit is off, by the row generator's own test: row k
+        // is in the last segment whose start (summed in order) is at or before k/rate.
+        let first_at = |start: f64| {
+            let mut k = (start * self.rate_hz).ceil().max(0.0) as u64;
+            while k > 0 && (k - 1) as f64 / self.rate_hz >= start {
+                k -= 1;
+            }
+            while (k as f64 / self.rate_hz) < start {
+                k += 1;
+            }
+            k.min(n)
+        };
+        let (mut start, mut off) = (0.0, 0);
+        for (j, s) in self.segments.iter().enumerate() {
+            let end = start + s.duration_s;
+            if !s.powered {
+                let from = if j == 0 { 0 } else { first_at(start) };
+                let to = if j + 1 == self.segments.len() { n } else { first_at(end) };
+                off += to.saturating_sub(from);
+            }
+            start = end;
+        }
+        n - off
+    }
+
+    /// The instants `t = k/rate` inside the duration.
+    fn n_instants(&self) -> u64 {
         let d = self.duration_s() * self.rate_hz;
         // A duration that is a whole number of periods ends just before its last instant.
         let n = d.ceil();
@@ -202,6 +233,10 @@ pub struct RowGen<'a> {
     cache: Option<RectCache>,
     chamber_q: Quantiser,
     bias_play: unit::BiasPlay,
+    /// The run time of the last power-on after a time off (`None`: on since the start).
+    power_on_t: Option<f64>,
+    /// Rows written.
+    written: u64,
 }
 
 impl<'a> RowGen<'a> {
@@ -219,43 +254,74 @@ impl<'a> RowGen<'a> {
             noise,
             dt,
             k: 0,
-            n: sim.n_rows(),
+            n: sim.n_instants(),
             seg: 0,
             seg_start: 0.0,
             cache: None,
             chamber_q: Quantiser::new(0.001),
+            power_on_t: None,
+            written: 0,
         }
     }
 
     /// Rows left to produce.
     pub fn remaining(&self) -> u64 {
-        self.n - self.k
+        self.sim.n_rows() - self.written
+    }
+
+    /// A new set point and the rate of the move to it.
+    fn set_point(&mut self, seg: usize) {
+        let s = &self.sim.segments[seg];
+        if let Some(c) = s.chamber_c {
+            self.thermal.target_c = c;
+            self.thermal.rate_c_per_s = s.chamber_rate_c_per_s.unwrap_or(self.sim.thermal.rate_c_per_s);
+        }
     }
 
     /// Fills `row` with the next row; false after the last.
     pub fn next_row(&mut self, row: &mut Row) -> bool {
-        if self.k >= self.n {
-            return false;
+        loop {
+            if self.k >= self.n {
+                return false;
+            }
+            if self.next_instant(row) {
+                self.written += 1;
+                return true;
+            }
         }
-        let t = self.k as f64 / self.sim.rate_hz;
+    }
+
+    /// Advances to the next instant `t = k/rate`; fills `row` and returns true when the unit is
+    /// on then.
+    fn next_instant(&mut self, row: &mut Row) -> bool {
+        let sim = self.sim;
+        let t = self.k as f64 / sim.rate_hz;
         // The segment holding t (segments of zero duration were never pushed).
-        let segs = &self.sim.segments;
-        // Every set point on the way counts, also that of a segment shorter than a period.
-        if self.k == 0
-            && let Some(c) = segs[0].chamber_c
-        {
-            self.thermal.target_c = c;
+        let segs = &sim.segments;
+        // Every set point on the way counts, also that of a segment shorter than a period; so
+        // does every power-on.
+        if self.k == 0 {
+            self.set_point(0);
         }
         while self.seg + 1 < segs.len() && t >= self.seg_start + segs[self.seg].duration_s {
             self.seg_start += segs[self.seg].duration_s;
             self.seg += 1;
-            if let Some(c) = segs[self.seg].chamber_c {
-                self.thermal.target_c = c;
+            self.set_point(self.seg);
+            if segs[self.seg].powered && !segs[self.seg - 1].powered {
+                self.power_on_t = Some(self.seg_start);
             }
         }
         let seg = &segs[self.seg];
         if self.k > 0 {
             self.thermal.step();
+        }
+        // The die is heated over the next step if the unit is on now.
+        self.thermal.powered = seg.powered;
+        if !seg.powered {
+            // Off: the plays follow the die, nothing is logged, the noise pauses.
+            self.bias_play.step(self.thermal.effective_c);
+            self.k += 1;
+            return false;
         }
         let s = ((t - self.seg_start) / seg.duration_s).clamp(0.0, 1.0);
         let f = seg.f_at(s);
@@ -291,7 +357,10 @@ impl<'a> RowGen<'a> {
                 }
             }
         }
-        let power_s = self.sim.power_on_s + t;
+        let power_s = match self.power_on_t {
+            None => self.sim.power_on_s + t,
+            Some(on) => t - on,
+        };
         let bias_d = self.bias_play.step(self.thermal.effective_c);
         let mut u = self.sim.unit.signals_v(self.thermal.effective_c, &f, &vib_mean, &rect_g, power_s, bias_d);
         self.noise.apply_signals(&mut self.rng, &mut u);

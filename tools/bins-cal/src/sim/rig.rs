@@ -1,6 +1,7 @@
 //! What the rigs do to the unit over time: a timeline of segments (holds, moves between
 //! positions, commanded acceleration ramps), each with its vibration and an optional new
-//! chamber set point, built from the tilter's test positions TP1–TP6, the check positions
+//! chamber set point (reached at the timeline's rate or its own), and the unit's power cycles,
+//! built from the tilter's test positions TP1–TP6, the check positions
 //! CP1–CP6, the shake table's ten-position plan, flight segments, and placements by hand
 //! (random orientations without a reference; tilter positions that are not level).
 
@@ -63,6 +64,10 @@ pub struct Segment {
     pub duration_s: f64,
     /// A new chamber set point from the start of this segment [°C].
     pub chamber_c: Option<f64>,
+    /// The rate of the move to `chamber_c` [°C/s] (`None`: the thermal model's).
+    pub chamber_rate_c_per_s: Option<f64>,
+    /// Whether the unit is on (false: no row is written, the die is not heated).
+    pub powered: bool,
     /// The static specific force.
     pub motion: Motion,
     /// The vibration applied (reference cells say so when the reference is known).
@@ -145,7 +150,7 @@ pub struct Timeline {
     /// The segments so far.
     pub segments: Vec<Segment>,
     current_f: [f64; 3],
-    pending_chamber: Option<f64>,
+    pending_chamber: Option<(f64, Option<f64>)>,
 }
 
 impl Timeline {
@@ -166,14 +171,42 @@ impl Timeline {
 
     fn push(&mut self, duration_s: f64, motion: Motion, vib: Vibration<f64>, label: Option<String>) {
         if duration_s > 0.0 {
-            let chamber_c = self.pending_chamber.take();
-            self.segments.push(Segment { duration_s, chamber_c, motion, vib, label, written: Written::Truth });
+            let (chamber_c, chamber_rate_c_per_s) = self.pending_chamber.take().unzip();
+            self.segments.push(Segment {
+                duration_s,
+                chamber_c,
+                chamber_rate_c_per_s: chamber_rate_c_per_s.flatten(),
+                powered: true,
+                motion,
+                vib,
+                label,
+                written: Written::Truth,
+            });
         }
     }
 
     /// A new chamber set point from the next segment on.
     pub fn set_chamber(&mut self, c: f64) {
-        self.pending_chamber = Some(c);
+        self.pending_chamber = Some((c, None));
+    }
+
+    /// A new chamber set point from the next segment on, reached at `rate_c_per_s` [°C/s]
+    /// (infinite: jumps) instead of the thermal model's rate.
+    pub fn set_chamber_at_rate(&mut self, c: f64, rate_c_per_s: f64) {
+        self.pending_chamber = Some((c, Some(rate_c_per_s)));
+    }
+
+    /// The unit off for `off_s` where it is (no rows; a pending set point applies from the
+    /// turn-off), then on again from the next segment.
+    pub fn power_off(&mut self, off_s: f64) {
+        let n = self.segments.len();
+        self.push(off_s, Motion::Hold(self.current_f), Vibration::None, None);
+        if self.segments.len() > n
+            && let Some(last) = self.segments.last_mut()
+        {
+            last.written = Written::Nothing;
+            last.powered = false;
+        }
     }
 
     /// Turns the unit to `f_g` in `move_s` (reference unknown meanwhile). Nothing when it is

@@ -332,6 +332,23 @@ pub enum StepSpec {
         chamber_c: f64,
         /// Hold \[s\].
         dwell_s: f64,
+        /// The rate of the move to this set point [°C/min] (default `thermal.rate_C_per_min`;
+        /// `inf` jumps).
+        #[serde(default, rename = "rate_C_per_min")]
+        rate_c_per_min: Option<f64>,
+    },
+    /// A power cycle: the unit off for `off_s` where it is (no rows), the chamber holding or
+    /// moving to `chamber_C`, then on again: `power_s`, the warm-up and the self-heating
+    /// restart.
+    Power {
+        /// Time off \[s\].
+        off_s: f64,
+        /// A new set point from the turn-off on [°C] (default: the chamber holds).
+        #[serde(default, rename = "chamber_C")]
+        chamber_c: Option<f64>,
+        /// The rate of the move to it [°C/min] (default `thermal.rate_C_per_min`).
+        #[serde(default, rename = "rate_C_per_min")]
+        rate_c_per_min: Option<f64>,
     },
     /// Tilter test positions TP1…TP6.
     Tilter {
@@ -695,6 +712,12 @@ impl ScenarioFile {
         }
         let mut tl = Timeline::new(start_f);
         for (i, s) in self.step.iter().enumerate() {
+            if matches!(s, StepSpec::Power { .. }) && i + 1 == self.step.len() {
+                return Err(kerr(
+                    format!("step[{i}]"),
+                    "a power cycle must be followed by a step (the one the unit is back on for)",
+                ));
+            }
             build_step(&mut tl, s, &format!("step[{i}]"), rate_hz)?;
             if tl.segments.len() > MAX_SEGMENTS {
                 return Err(kerr(format!("step[{i}]"), format!("more than {MAX_SEGMENTS} rig segments in all")));
@@ -715,7 +738,7 @@ impl ScenarioFile {
             comments.extend(d.lines().map(str::to_string));
         }
         comments.extend(r.comments.iter().cloned());
-        Ok(Simulation {
+        let sim = Simulation {
             unit,
             thermal,
             noise,
@@ -724,7 +747,11 @@ impl ScenarioFile {
             power_on_s,
             log_chamber: r.log_chamber,
             comments,
-        })
+        };
+        if sim.n_rows() == 0 {
+            return Err(kerr("step", "the unit is off at every row"));
+        }
+        Ok(sim)
     }
 }
 
@@ -743,6 +770,11 @@ fn positions(key: &str, p: &Option<Vec<usize>>) -> Check<Vec<usize>> {
     }
 }
 
+/// A chamber rate given in °C/min, as °C/s: > 0, `inf` jumps.
+fn chamber_rate(key: &str, per_min: f64) -> Check<f64> {
+    if per_min > 0.0 { Ok(per_min / 60.0) } else { Err(kerr(key, format!("must be > 0 (inf: jumps), got {per_min}"))) }
+}
+
 fn theta(key: &str, v: f64) -> Check<f64> {
     if v.is_finite() && (0.0..45.0).contains(&v) {
         Ok(v)
@@ -754,9 +786,27 @@ fn theta(key: &str, v: f64) -> Check<f64> {
 fn build_step(tl: &mut Timeline, s: &StepSpec, key: &str, rate_hz: f64) -> Check<()> {
     let k = |f: &str| format!("{key}.{f}");
     match s {
-        StepSpec::Soak { chamber_c, dwell_s } => {
-            tl.set_chamber(temp_c(&k("chamber_C"), *chamber_c)?);
+        StepSpec::Soak { chamber_c, dwell_s, rate_c_per_min } => {
+            let c = temp_c(&k("chamber_C"), *chamber_c)?;
+            match rate_c_per_min {
+                Some(r) => tl.set_chamber_at_rate(c, chamber_rate(&k("rate_C_per_min"), *r)?),
+                None => tl.set_chamber(c),
+            }
             tl.hold(positive(&k("dwell_s"), *dwell_s)?, Vibration::None, None);
+        }
+        StepSpec::Power { off_s, chamber_c, rate_c_per_min } => {
+            let off = positive(&k("off_s"), *off_s)?;
+            within(&k("off_s"), off, 0.0, crate::numarg::MAX_DURATION_S, "s")?;
+            match (chamber_c, rate_c_per_min) {
+                (Some(c), Some(r)) => {
+                    let c = temp_c(&k("chamber_C"), *c)?;
+                    tl.set_chamber_at_rate(c, chamber_rate(&k("rate_C_per_min"), *r)?);
+                }
+                (Some(c), None) => tl.set_chamber(temp_c(&k("chamber_C"), *c)?),
+                (None, Some(_)) => return Err(kerr(k("rate_C_per_min"), "only with chamber_C (a new set point)")),
+                (None, None) => {}
+            }
+            tl.power_off(off);
         }
         StepSpec::Tilter { positions: p, dwell_s, move_s, tilt_deg, tilt_seed } => {
             let which = positions(&k("positions"), p)?;

@@ -1,10 +1,12 @@
 //! The unit's thermal model: chamber air → case → sensor die, each a first-order lag, the die
-//! heated by the unit's own dissipation after power-on, and the thermistor, which sits
+//! heated by the unit's own dissipation while it is powered, and the thermistor, which sits
 //! between case and die and has its own lag. The constants follow the die temperature
 //! (through an optional hysteresis); the `temp_C` column is the thermistor's reading.
 //!
 //! Each lag `τ·dx/dt = u − x` is advanced exactly for an input held over the step:
-//! `x ← x + (u − x)·(1 − e^(−Δt/τ))`; `τ = 0` means no lag (`x = u`).
+//! `x ← x + (u − x)·(1 − e^(−Δt/τ))`; `τ = 0` means no lag (`x = u`). The die's input over a
+//! step is the case plus the self-heating when the unit is powered at the step's start, the
+//! case alone when it is off.
 
 /// Thermal parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -53,6 +55,10 @@ pub struct Thermal {
     dt: f64,
     /// Chamber set point [°C].
     pub target_c: f64,
+    /// Rate at which the chamber moves to the set point [°C/s] (infinite: jumps).
+    pub rate_c_per_s: f64,
+    /// Whether the unit is powered (its die heated) over the next step.
+    pub powered: bool,
     /// Chamber air [°C].
     pub chamber_c: f64,
     /// Case [°C].
@@ -83,6 +89,8 @@ impl Thermal {
             k_th: lag_gain(dt, p.thermistor_tau_s),
             dt,
             target_c: p.start_c,
+            rate_c_per_s: p.rate_c_per_s,
+            powered: true,
             chamber_c: p.start_c,
             case_c: p.start_c,
             die_c: die,
@@ -93,11 +101,12 @@ impl Thermal {
 
     /// Advances one sample period.
     pub fn step(&mut self) {
-        let max_step = self.p.rate_c_per_s * self.dt;
+        let max_step = self.rate_c_per_s * self.dt;
         let d = self.target_c - self.chamber_c;
         self.chamber_c = if d.abs() <= max_step { self.target_c } else { self.chamber_c + max_step.copysign(d) };
         self.case_c += (self.chamber_c - self.case_c) * self.k_case;
-        self.die_c += (self.case_c + self.p.self_heating_c - self.die_c) * self.k_die;
+        let heating_c = if self.powered { self.p.self_heating_c } else { 0.0 };
+        self.die_c += (self.case_c + heating_c - self.die_c) * self.k_die;
         let at = self.case_c + self.p.thermistor_at * (self.die_c - self.case_c);
         self.thermistor_c += (at - self.thermistor_c) * self.k_th;
         let h = 0.5 * self.p.hysteresis_c;
@@ -128,6 +137,25 @@ mod tests {
         assert!((t.case_c - expect).abs() < 1e-9, "{}", t.case_c);
         assert_eq!(t.die_c, t.case_c);
         assert_eq!(t.thermistor_c, t.case_c);
+    }
+
+    #[test]
+    fn self_heating_decays_while_off_and_returns_when_on() {
+        let p = ThermalParams { die_tau_s: 100.0, self_heating_c: 5.0, ..ThermalParams::default() };
+        let mut t = Thermal::new(p, 1.0, 1e9);
+        assert_eq!(t.die_c, 25.0);
+        t.powered = false;
+        for _ in 0..100 {
+            t.step();
+        }
+        // One τ off: e^(−1) of the heating left.
+        assert!((t.die_c - (20.0 + 5.0 * (-1.0f64).exp())).abs() < 1e-9, "{}", t.die_c);
+        t.powered = true;
+        for _ in 0..100 {
+            t.step();
+        }
+        let want = 25.0 - 5.0 * (1.0 - (-1.0f64).exp()) * (-1.0f64).exp();
+        assert!((t.die_c - want).abs() < 1e-9, "{} vs {want}", t.die_c);
     }
 
     #[test]
