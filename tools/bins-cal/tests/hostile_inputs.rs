@@ -176,7 +176,12 @@ fn start_long_simulation(dir: &Path) -> (Child, PathBuf) {
         assert!(t0.elapsed() < Duration::from_secs(30), "no temporary file {}", tmp.display());
         std::thread::sleep(Duration::from_millis(5));
     }
-    // Some data written, the run well under way.
+    // Some data written, the run well under way (on a loaded machine the first buffer can
+    // take longer than any fixed pause).
+    while std::fs::metadata(&tmp).map_or(0, |m| m.len()) == 0 {
+        assert!(t0.elapsed() < Duration::from_secs(30), "nothing written to {}", tmp.display());
+        std::thread::sleep(Duration::from_millis(5));
+    }
     std::thread::sleep(Duration::from_millis(50));
     (child, tmp)
 }
