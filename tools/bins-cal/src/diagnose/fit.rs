@@ -1141,8 +1141,6 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
             let (m, Some(th0)) = members[k] else { continue };
             let grid = ctx.grid(m);
             let step = if grid.len() > 1 { (grid[1] / grid[0]).ln() } else { 0.3 };
-            let (mut a, mut b) = (th0.ln() - step, th0.ln() + step);
-            let phi = 0.618_033_988_749_894_9;
             let mut rest = members.clone();
             rest.remove(k);
             let part = PartialLs::new(&filt, y, &cols_of(&rest));
@@ -1151,24 +1149,7 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
             let eval = |lt: f64| {
                 if ctx.offered(m, lt.exp()) { part.sse_plus(&filt, &ctx.columns(m, lt.exp())) } else { f64::INFINITY }
             };
-            let (mut c, mut d) = (b - phi * (b - a), a + phi * (b - a));
-            let (mut fc, mut fd) = (eval(c), eval(d));
-            for _ in 0..16 {
-                if fc < fd {
-                    b = d;
-                    d = c;
-                    fd = fc;
-                    c = b - phi * (b - a);
-                    fc = eval(c);
-                } else {
-                    a = c;
-                    c = d;
-                    fc = fd;
-                    d = a + phi * (b - a);
-                    fd = eval(d);
-                }
-            }
-            let best = if fc < fd { c } else { d };
+            let (best, _) = super::stats::golden_min(th0.ln() - step, th0.ln() + step, 16, eval);
             if eval(best) <= eval(th0.ln()) {
                 members[k].1 = Some(best.exp());
             }

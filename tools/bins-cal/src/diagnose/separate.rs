@@ -127,26 +127,9 @@ impl<'c, 'p> Refit<'c, 'p> {
         let step = if grid.len() > 1 { (grid[1] / grid[0]).ln() } else { 0.3 };
         let (g_lo, g_hi) = (grid[0].ln(), grid[grid.len() - 1].ln());
         let eval = |lt: f64| if offered(lt.exp()) { sse_at(lt.exp()) } else { f64::INFINITY };
-        let phi = 0.618_033_988_749_894_9;
-        let (mut lo, mut hi) = ((th0.ln() - step).max(g_lo), (th0.ln() + step).min(g_hi));
-        let (mut c, mut d) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
-        let (mut fc, mut fd) = (eval(c), eval(d));
-        for _ in 0..12 {
-            if fc < fd {
-                hi = d;
-                d = c;
-                fd = fc;
-                c = hi - phi * (hi - lo);
-                fc = eval(c);
-            } else {
-                lo = c;
-                c = d;
-                fc = fd;
-                d = lo + phi * (hi - lo);
-                fd = eval(d);
-            }
-        }
-        let (th, s) = if fc.min(fd) < s0 { if fc < fd { (c.exp(), fc) } else { (d.exp(), fd) } } else { (th0, s0) };
+        let (lo, hi) = ((th0.ln() - step).max(g_lo), (th0.ln() + step).min(g_hi));
+        let (lt, s) = super::stats::golden_min(lo, hi, 12, eval);
+        let (th, s) = if s < s0 { (lt.exp(), s) } else { (th0, s0) };
         Some(Separation { deviance: s / self.scale, rival_theta: Some(th) })
     }
 

@@ -263,6 +263,31 @@ pub fn median(v: &[f64]) -> f64 {
     if n % 2 == 1 { w[n / 2] } else { 0.5 * (w[n / 2 - 1] + w[n / 2]) }
 }
 
+/// The minimum of `f` on `[lo, hi]` by `steps` golden-section steps: the better of the last two
+/// interior points and its value (`f` assumed unimodal there; the ends are not evaluated).
+pub fn golden_min(lo: f64, hi: f64, steps: usize, f: impl Fn(f64) -> f64) -> (f64, f64) {
+    let phi = 0.618_033_988_749_894_9;
+    let (mut lo, mut hi) = (lo, hi);
+    let (mut c, mut d) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
+    let (mut fc, mut fd) = (f(c), f(d));
+    for _ in 0..steps {
+        if fc < fd {
+            hi = d;
+            d = c;
+            fd = fc;
+            c = hi - phi * (hi - lo);
+            fc = f(c);
+        } else {
+            lo = c;
+            c = d;
+            fc = fd;
+            d = lo + phi * (hi - lo);
+            fd = f(d);
+        }
+    }
+    if fc < fd { (c, fc) } else { (d, fd) }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
