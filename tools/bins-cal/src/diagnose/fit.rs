@@ -40,6 +40,8 @@ struct Cand {
     mech: Mech,
     theta: Option<f64>,
     cols: Vec<usize>,
+    /// Its one coefficient has a physical sign: positive ([`Mech::positive_through_sim`]).
+    positive: bool,
 }
 
 /// The candidate columns of one accelerometer, each scaled to unit RMS; the first
@@ -75,7 +77,8 @@ impl Bank {
                     idx.push(cols.len() - 1);
                 }
                 if !idx.is_empty() {
-                    cands.push(Cand { mech: m, theta: th, cols: idx });
+                    let positive = ctx.s.from_sim && m.positive_through_sim();
+                    cands.push(Cand { mech: m, theta: th, cols: idx, positive });
                 }
             }
         }
@@ -579,7 +582,9 @@ impl Selector<'_> {
         self.bank.cands[c].cols.len() + usize::from(self.bank.cands[c].theta.is_some())
     }
 
-    /// Best grid candidate of mechanism `m` added to `model`: (cand, sse).
+    /// Best grid candidate of mechanism `m` added to `model`: (cand, sse). A candidate whose
+    /// coefficient has a physical sign ([`Cand::positive`]) is offered only where it fits with
+    /// that sign.
     fn best_of(&self, model: &[usize], m: Mech) -> Option<(usize, f64)> {
         let mut best: Option<(usize, f64)> = None;
         for (ci, c) in self.bank.cands.iter().enumerate() {
@@ -588,7 +593,13 @@ impl Selector<'_> {
             }
             let mut idx = self.cols(model);
             idx.extend(c.cols.iter().copied());
-            if let Some(sse) = self.grams.sse(&idx)
+            let sse = if c.positive {
+                Grams::fit(&self.grams.all, self.grams.p, &idx)
+                    .and_then(|(x, sse)| (x.last() > Some(&0.0)).then_some(sse))
+            } else {
+                self.grams.sse(&idx)
+            };
+            if let Some(sse) = sse
                 && best.is_none_or(|b| sse < b.1)
             {
                 best = Some((ci, sse));
@@ -748,16 +759,24 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
     let n_used = n.saturating_sub(1).max(2) as f64;
     loop {
         let mut fit = finish(ctx, &bank, &model, q, &fold);
-        let weakest = fit
+        // A lag, play or self-heating acting through SIM's sensitivity with a negative gain
+        // (the temperature reaching the sensor ahead of the thermistor, a die colder than it
+        // after power-on) is not that physics: such a term goes first.
+        let unphysical = fit
             .terms
             .iter()
-            .enumerate()
-            .filter(|(_, t)| {
-                let df = t.coef.len() + usize::from(t.theta.is_some());
-                t.p_drop >= alpha || t.lr_drop - df as f64 * n_used.ln() < 0.0
-            })
-            .max_by(|a, b| a.1.p_drop.total_cmp(&b.1.p_drop))
-            .map(|(k, _)| k);
+            .position(|t| ctx.s.from_sim && t.mech.positive_through_sim() && t.coef.first().is_some_and(|c| *c <= 0.0));
+        let weakest = unphysical.or_else(|| {
+            fit.terms
+                .iter()
+                .enumerate()
+                .filter(|(_, t)| {
+                    let df = t.coef.len() + usize::from(t.theta.is_some());
+                    t.p_drop >= alpha || t.lr_drop - df as f64 * n_used.ln() < 0.0
+                })
+                .max_by(|a, b| a.1.p_drop.total_cmp(&b.1.p_drop))
+                .map(|(k, _)| k)
+        });
         // The report's own figure decides: a term is kept only if it cuts the raw held-out
         // RMS by more than that cut's fold-to-fold standard error, and the model never leaves
         // "after" above "before". Whitened innovations under the random walk alone would keep
@@ -928,6 +947,30 @@ fn separability_of(ctx: &Context, fit: &AxisFit) -> Vec<(Mech, Vec<(Mech, f64)>)
                 add(Mech::ThermalLag, d);
             }
         }
+        // Beside a lag or a play, any term may be that lag or play acting on the die's own
+        // rise after each power-on, which the thermistor sees only in part.
+        for (j, other) in fit.terms.iter().enumerate() {
+            if j != k
+                && matches!(other.mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis)
+                && let Some(d) =
+                    refit.fitted_through_die_rise(other.mech, other.theta, &other.coef, &other.contribution)
+            {
+                add(other.mech, d);
+            }
+        }
+        // Or the rest of that lag's or play's shape: a gain varying with temperature, or its
+        // state carried through the unpowered gaps.
+        for (j, other) in fit.terms.iter().enumerate() {
+            if j == k || !matches!(other.mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis) {
+                continue;
+            }
+            for d in [refit.gain_with_temperature(other.mech), refit.carried_across_sessions(other.mech)]
+                .into_iter()
+                .flatten()
+            {
+                add(other.mech, d);
+            }
+        }
         rivals.sort_by(|x, y| x.1.total_cmp(&y.1));
         out.push((term.mech, rivals));
     }
@@ -959,8 +1002,9 @@ fn through_self_heating(ctx: &Context, refit: &super::separate::Refit, other: &T
     refit.deviance(&grid, &offered, &columns).map(|s| s.deviance)
 }
 
-/// For each member of `model`, every mechanism that can replace it (θ re-searched on the grid)
-/// with the deviance change on the data; those below [`AMBIGUOUS_LR`] are ambiguous.
+/// For each member of `model`, every mechanism that can replace it (θ re-searched on the grid;
+/// a mechanism named elsewhere in the model at another θ of its own) with the deviance change
+/// on the data; those below [`AMBIGUOUS_LR`] are ambiguous.
 fn ambiguity(bank: &Bank, model: &[usize], grams: &Grams, infl: f64) -> Vec<(Mech, Vec<(Mech, f64)>)> {
     if model.is_empty() {
         return Vec::new();
@@ -972,12 +1016,19 @@ fn ambiguity(bank: &Bank, model: &[usize], grams: &Grams, infl: f64) -> Vec<(Mec
         let mut alts = Vec::new();
         let rest: Vec<usize> = model.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, c)| *c).collect();
         for m in Mech::ALL {
-            if model.iter().any(|&mc| bank.cands[mc].mech == m) {
+            // A mechanism already named elsewhere in the model competes through a second θ of
+            // its own (the rest of a two-exponential warm-up, a second lag stage): the term may
+            // be only the remainder of that one's shape. Its own mechanism does not compete.
+            let named_elsewhere = model.iter().enumerate().any(|(j, &mc)| j != k && bank.cands[mc].mech == m);
+            if m == bank.cands[c].mech || (named_elsewhere && m.theta().is_none()) {
+                continue;
+            }
+            if !named_elsewhere && model.iter().any(|&mc| bank.cands[mc].mech == m) {
                 continue;
             }
             let mut best: Option<f64> = None;
             for (ci, cand) in bank.cands.iter().enumerate() {
-                if cand.mech != m {
+                if cand.mech != m || model.contains(&ci) {
                     continue;
                 }
                 let mut with = rest.clone();

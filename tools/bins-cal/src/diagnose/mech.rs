@@ -112,6 +112,14 @@ impl Mech {
         )
     }
 
+    /// Whether the mechanism's one coefficient, acting through SIM's sensitivity, is positive
+    /// by its physics: a lag's or a play's gain (the sensing element sees a delayed or held
+    /// temperature, not one ahead of the thermistor) and a self-heating's rise (the die heats
+    /// itself after power-on).
+    pub fn positive_through_sim(self) -> bool {
+        matches!(self, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::SelfHeating)
+    }
+
     /// The report id.
     pub fn id(self) -> &'static str {
         match self {

@@ -182,6 +182,107 @@ impl<'c, 'p> Refit<'c, 'p> {
 }
 
 impl Refit<'_, '_> {
+    /// The deviance a fitted term (`mech` at `theta` with coefficients `coef`, contributing
+    /// `contribution` at the recording's temperatures) cannot absorb acting on a die that
+    /// self-heats after each power-on unseen by the thermistor: the rival column is the term's
+    /// contribution at `T + ρ·(1 − e^(−P/τ))` less its contribution at `T` (τ on the turn-on
+    /// grid; ρ = 1 °C for a lag, which is linear in `T`, and 0.3, 1 and [`DIE_RISE_MAX_C`] °C for
+    /// a play, which is not). A lag or a play of the die's own rise is a transient after each
+    /// power-on that a turn-on term, a drift or another play would otherwise take; the term's
+    /// own columns are among the shared ones, so only the transient is new.
+    pub fn fitted_through_die_rise(
+        &self,
+        mech: Mech,
+        theta: Option<f64>,
+        coef: &[f64],
+        contribution: &[f64],
+    ) -> Option<f64> {
+        let ctx = self.ctx;
+        let power = ctx.p.power.as_deref()?;
+        let grid = ctx.grid(Mech::Warmup);
+        if grid.is_empty() || !mech.temperature_form() {
+            return None;
+        }
+        let rhos: &[f64] = match mech {
+            Mech::ThermalLag => &[1.0],
+            Mech::ThermalHysteresis | Mech::BiasHysteresis => &[0.3, 1.0, DIE_RISE_MAX_C],
+            _ => &[1.0],
+        };
+        let mut best: Option<f64> = None;
+        for &rho in rhos {
+            let columns = |tau: f64| -> Vec<Vec<f64>> {
+                let temp: Vec<f64> =
+                    ctx.p.temp_s.iter().zip(power).map(|(t, p)| t - rho * (-p / tau).exp_m1()).collect();
+                let cols = ctx.columns_at(mech, theta.unwrap_or(0.0), &temp);
+                let mut d: Vec<f64> = contribution.iter().map(|v| -v).collect();
+                for (c, b) in cols.iter().zip(coef) {
+                    for (x, v) in d.iter_mut().zip(c) {
+                        *x += b * v;
+                    }
+                }
+                vec![d]
+            };
+            if let Some(s) = self.deviance(&grid, &|th| ctx.offered(Mech::Warmup, th), &columns)
+                && best.is_none_or(|b| s.deviance < b)
+            {
+                best = Some(s.deviance);
+            }
+        }
+        best
+    }
+
+    /// The deviance a richer form of the fitted lag or play `mech` cannot absorb: its columns
+    /// at θ times `(1, ΔT, ΔT²)` (a gain that varies with temperature, as a sensitivity's slope
+    /// at a die running warmer than the thermistor does), θ on its grid. Beside a lag or a play,
+    /// a term that only takes the rest of that one's shape is not a finding of its own.
+    pub fn gain_with_temperature(&self, mech: Mech) -> Option<f64> {
+        let ctx = self.ctx;
+        if !matches!(mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis) {
+            return None;
+        }
+        let dt: Vec<f64> = ctx.p.temp_s.iter().map(|t| t - super::mech::T0_C).collect();
+        let grid = ctx.grid(mech);
+        let columns = |th: f64| -> Vec<Vec<f64>> {
+            let base = ctx.columns(mech, th);
+            let mut out = Vec::new();
+            for c in &base {
+                for e in 0..3 {
+                    out.push(c.iter().zip(&dt).map(|(v, d)| v * d.powi(e)).collect());
+                }
+            }
+            out
+        };
+        self.deviance(&grid, &|_| true, &columns).map(|s| s.deviance)
+    }
+
+    /// The deviance the fitted lag or play `mech` cannot absorb carried through the unpowered
+    /// gaps instead of restarted at each session (its state across a gap is unknown: the
+    /// library restarts it; a unit's die may keep it), θ on its grid. `None` for one session.
+    pub fn carried_across_sessions(&self, mech: Mech) -> Option<f64> {
+        let ctx = self.ctx;
+        let p = ctx.p;
+        if p.sessions().len() < 2 || !matches!(mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis)
+        {
+            return None;
+        }
+        let n = p.t.len();
+        let grid = ctx.grid(mech);
+        let columns = |th: f64| -> Vec<Vec<f64>> {
+            let te = match mech {
+                Mech::ThermalLag => super::mech::lagged(&p.t, &p.temp_s, th),
+                _ => super::mech::play(&p.temp_s, th),
+            };
+            match mech {
+                Mech::BiasHysteresis => {
+                    let d: Vec<f64> = (0..n).map(|r| (te[r] - p.temp_s[r]) / (0.5 * th)).collect();
+                    vec![d.clone(), (0..n).map(|r| d[r] * (p.temp_s[r] - super::mech::T0_C)).collect()]
+                }
+                _ => vec![(0..n).map(|r| ctx.s.eval(te[r], &p.f[r]) - ctx.s_now[r]).collect()],
+            }
+        };
+        self.deviance(&grid, &|_| true, &columns).map(|s| s.deviance)
+    }
+
     /// The deviance a die that runs steadily warmer than its thermistor cannot absorb: the
     /// library's self-heating settled (`S'(T, f)`, SIM's sensitivity's slope), which long after
     /// power-on is a temperature function like a tempco SIM lacks. `None` without `power_s`.
