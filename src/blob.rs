@@ -7,7 +7,8 @@
 //! can be wrong is a typed [`BlobError`] naming the field (as the calibration file spells it,
 //! see [`Field`]) and the byte offset where that applies. A blob that parses is a calibration
 //! [`Calibration::new`] accepts (and, with the optional vibration sections, a configuration
-//! [`VibrationConfig::new`] accepts): [`parse`] runs their checks too. [`load_region`] gives
+//! [`VibrationConfig::new`] accepts): [`parse`] runs their checks too (the vibration ones
+//! value by value, with limits that imply them). [`load_region`] gives
 //! the firmware both configurations of the per-sample step from the CALIB region.
 //!
 //! # Layout (format version 1, all integers and floats little-endian)
@@ -34,8 +35,7 @@ use crate::float::Float;
 use crate::model::Constants;
 use crate::temperature::{CoefDelta, MAX_KNOTS, MAX_POLY_ORDER, TempModel};
 use crate::vibration::{
-    ConversionFunction, MAX_LEVEL_G, MAX_PROFILES, Variant, Vibration, VibrationConfig, VibrationConfigError,
-    VibrationParams,
+    ConversionFunction, MAX_LEVEL_G, MAX_PROFILES, Variant, Vibration, VibrationConfig, VibrationParams,
 };
 
 /// The first four bytes of every blob.
@@ -634,9 +634,6 @@ pub enum BlobError {
         /// Offset of the count byte.
         offset: usize,
     },
-    /// A rejection by [`VibrationConfig::new`] (not reached for a blob whose values passed
-    /// the checks above; kept so that nothing unchecked is ever used).
-    Vibration(VibrationConfigError),
     /// A rejection by [`ThermalDynamics::validate`] (not reached for a blob whose values
     /// passed the checks above; kept so that nothing unchecked is ever used).
     Dynamics(DynamicsError),
@@ -724,18 +721,6 @@ impl core::fmt::Display for BlobError {
                     f,
                     "vibration.profile at byte 0x{offset:04x}: {count} profiles unsupported (1 to {MAX_PROFILES})"
                 )
-            }
-            // Written out here rather than through the error's own Display, which prints the
-            // level limit as a float: the firmware logs these messages, and float formatting
-            // would add its code to the image.
-            BlobError::Vibration(VibrationConfigError::NonFiniteCoefficients(i)) => {
-                write!(f, "vibration: conversion function of accelerometer {i} has a non-finite coefficient")
-            }
-            BlobError::Vibration(VibrationConfigError::TooManyProfiles) => {
-                write!(f, "vibration.profile: more than {MAX_PROFILES} profiles")
-            }
-            BlobError::Vibration(VibrationConfigError::BadProfile(i)) => {
-                write!(f, "vibration.profile[{i}]: not finite, negative, or above the 10 g level limit")
             }
             BlobError::Dynamics(e) => write!(f, "thermal_dynamics.{e}"),
             BlobError::BufferTooSmall { needed } => write!(f, "output buffer too small: {needed} bytes needed"),
@@ -974,7 +959,7 @@ pub struct ParsedCalibration<'a> {
     pub params: CalibrationParams,
     /// The vibration-error coefficients and flight-phase profiles (sections
     /// [`section::VIBRATION`] and [`section::FLIGHT_PHASES`]); `None` when the blob has no
-    /// vibration section. [`VibrationConfig::new`] has accepted these.
+    /// vibration section. They pass [`VibrationParams::validate`].
     pub vibration: Option<VibrationParams>,
     /// The thermal dynamics (section [`section::THERMAL_DYNAMICS`]); `None` when the blob has
     /// no such section (no dynamics). They pass [`ThermalDynamics::validate`].
@@ -994,13 +979,11 @@ impl ParsedCalibration<'_> {
 
     /// The vibration-error configuration in the working precision:
     /// [`VibrationConfig::none`] (no VE model, nothing subtracted) for a blob without a
-    /// vibration section. [`parse`] has already run the same checks, so this does not fail for
-    /// a parsed blob.
+    /// vibration section. [`parse`] has checked every value against limits that imply
+    /// [`VibrationParams::validate`]'s, so they are not validated again
+    /// ([`VibrationConfig::from_validated`]) and this does not fail.
     pub fn vibration_config<F: Float>(&self) -> Result<VibrationConfig<F>, BlobError> {
-        match &self.vibration {
-            None => Ok(VibrationConfig::none()),
-            Some(p) => VibrationConfig::new(p).map_err(BlobError::Vibration),
-        }
+        Ok(self.vibration.as_ref().map_or_else(VibrationConfig::none, VibrationConfig::from_validated))
     }
 
     /// Both configurations of the per-sample step ([`crate::Pipeline::new`]): the calibration
@@ -1333,9 +1316,8 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
     let params =
         CalibrationParams { constants: Constants { k_v_per_g: k, u0_v }, t0_c, model, method, temp_range_c: (lo, hi) };
     params.validate()?;
-    if let Some(v) = &vibration {
-        v.validate().map_err(BlobError::Vibration)?;
-    }
+    // The vibration values' checks above imply `VibrationParams::validate`'s (a host test
+    // holds them so); it does not run again.
     Ok(ParsedCalibration { params, vibration, dynamics, meta, blob })
 }
 
