@@ -32,6 +32,7 @@
 use crate::compensate::{Calibration, CalibrationError, CalibrationParams, Form, Method};
 use crate::dynamics::{self, DynamicsError, FixedRate, ThermalDynamics};
 use crate::float::Float;
+use crate::float::cmp_f64::{eq, le, lt};
 use crate::model::Constants;
 use crate::temperature::{CoefDelta, MAX_KNOTS, MAX_POLY_ORDER, TempModel};
 use crate::vibration::{
@@ -1061,7 +1062,7 @@ impl<'a> Payload<'a> {
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
     fn value_in(&self, at: usize, field: Field, lo: f64, hi: f64) -> Result<f64, BlobError> {
-        self.value(at, field, |x| lo <= x && x <= hi)
+        self.value(at, field, |x| le(lo, x) && le(x, hi))
     }
 
     /// The f64 x at `at` if `|a·x|·scale ≤ max`, else [`BlobError::OutOfRange`] naming
@@ -1114,7 +1115,7 @@ fn cross_limit(x: f64) -> f64 {
 
 /// |K_ii| within the scale-factor limits.
 fn scale_ok(k_ii: f64) -> bool {
-    (limits::SCALE_FACTOR_MIN_V_PER_G..=limits::SCALE_FACTOR_MAX_V_PER_G).contains(&k_ii.abs())
+    le(limits::SCALE_FACTOR_MIN_V_PER_G, k_ii.abs()) && le(k_ii.abs(), limits::SCALE_FACTOR_MAX_V_PER_G)
 }
 
 /// Which coefficient set [`read_coef_set`] reads: a polynomial term (power − 1) or a knot.
@@ -1210,7 +1211,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
     p.expect_len(TEMP_RANGE_BYTES)?;
     let lo = p.value_in(0, Field::TempRange { end: 0 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
     let hi = p.value_in(8, Field::TempRange { end: 1 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
-    if !(lo < hi && lo <= t0_c && t0_c <= hi) {
+    if !(lt(lo, hi) && le(lo, t0_c) && le(t0_c, hi)) {
         return Err(BlobError::BadRange { offset: p.base });
     }
 
@@ -1259,7 +1260,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
             }
             for i in 1..n {
                 if let (Some(a), Some(b)) = (knots_c.get(i - 1), knots_c.get(i))
-                    && !(b > a)
+                    && !lt(*a, *b)
                 {
                     return Err(BlobError::KnotsNotIncreasing {
                         knot: i as u8,
@@ -1338,7 +1339,7 @@ fn parse_dynamics(blob: &Blob<'_>) -> Result<Option<ThermalDynamics<f64>>, BlobE
     let mut a = [0.0; 8];
     for n in 0..8 {
         // The bias play's gains (5, 6, 7) must be 0 without a play width (4, read before).
-        let (lo, hi) = if n >= 5 && a[4] == 0.0 { (0.0, 0.0) } else { dynamics::limits(n as u8) };
+        let (lo, hi) = if n >= 5 && eq(a[4], 0.0) { (0.0, 0.0) } else { dynamics::limits(n as u8) };
         a[n] = p.value_in(DYNAMICS_HEADER_BYTES + 8 * n, Field::Dynamics { param: n as u8 }, lo, hi)?;
     }
     let d = ThermalDynamics::from_array(&a);
@@ -1392,7 +1393,6 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
         let at = PROFILES_HEADER_BYTES + PROFILE_BYTES * i;
         let profile = i as u8;
         let v = at + 8;
-        let freq_ok = |x: f64| (0.0..=limits::FREQ_MAX_HZ).contains(&x);
         let kind = p.byte(at);
         p.reserved_zero(at + 1..at + 8)?;
         *slot = match kind {
@@ -1416,7 +1416,9 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
                     *s = p.value_in(v + 8 * j, Field::ProfileSigma { profile, axis: j as u8 }, 0.0, MAX_LEVEL_G)?;
                 }
                 let lo = p.value_in(v + 24, Field::ProfileBand { profile, end: 0 }, 0.0, limits::FREQ_MAX_HZ)?;
-                let hi = p.value(v + 32, Field::ProfileBand { profile, end: 1 }, |x| freq_ok(x) && x > lo)?;
+                let hi = p.value(v + 32, Field::ProfileBand { profile, end: 1 }, |x| {
+                    le(0.0, x) && le(x, limits::FREQ_MAX_HZ) && lt(lo, x)
+                })?;
                 Vibration::Random { sigma_g, band_hz: (lo, hi) }
             }
             code => {

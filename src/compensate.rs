@@ -24,6 +24,7 @@
 //! - K(T) singular at the current temperature (method 1; load-time checks make this
 //!   practically unreachable): the T0 inverse is used, flagged [`Status::SINGULAR_AT_TEMP`].
 
+use crate::float::cmp_f64::{eq, le, lt};
 use crate::float::{self, Float};
 use crate::linalg::{self, Mat3, Vec3};
 use crate::model::Constants;
@@ -211,12 +212,12 @@ impl CalibrationParams {
             return Err(CalibrationError::SingularK);
         }
         let k = &constants.k_v_per_g;
-        if k[0][0] == 0.0 || k[1][1] == 0.0 || k[2][2] == 0.0 {
+        if eq(k[0][0], 0.0) || eq(k[1][1], 0.0) || eq(k[2][2], 0.0) {
             return Err(CalibrationError::ZeroScaleFactor);
         }
         p.model.check().map_err(CalibrationError::TempModel)?;
         let (lo, hi) = p.temp_range_c;
-        if !(lo.is_finite() && hi.is_finite() && p.t0_c.is_finite() && lo < hi && lo <= p.t0_c && p.t0_c <= hi) {
+        if !(lo.is_finite() && hi.is_finite() && p.t0_c.is_finite() && lt(lo, hi) && le(lo, p.t0_c) && le(p.t0_c, hi)) {
             return Err(CalibrationError::BadRange);
         }
         let (model, t0_c) = (p.model.cast::<f32>(), f32::from_f64(p.t0_c));
@@ -230,7 +231,7 @@ impl CalibrationParams {
         }
         if let TempModel::Pwl { n_knots, knots_c, .. } = &p.model {
             for &kn in knots_c.iter().take(*n_knots as usize) {
-                if kn > lo && kn < hi {
+                if lt(lo, kn) && lt(kn, hi) {
                     check_k_at(&c, &model, t0_c, f32::from_f64(kn))?;
                 }
             }

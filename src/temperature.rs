@@ -6,6 +6,7 @@
 //! model works with any method.
 
 use crate::float::Float;
+use crate::float::cmp_f64::lt;
 use crate::linalg::{Mat3, Vec3};
 
 /// Highest polynomial order supported, T(3).
@@ -170,7 +171,8 @@ impl<F: Float> TempModel<F> {
         if !sets.iter().all(CoefDelta::is_finite) || !knots.iter().all(|k| k.is_finite()) {
             return Err(TempModelError::NonFinite);
         }
-        if knots.windows(2).any(|w| matches!(w, [a, b] if !(b > a))) {
+        // Compared by the bits (exact: `to_f64` widens), no soft-float `f64` comparison.
+        if knots.windows(2).any(|w| matches!(w, [a, b] if !lt(a.to_f64(), b.to_f64()))) {
             return Err(TempModelError::KnotsNotIncreasing);
         }
         Ok(())
