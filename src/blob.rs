@@ -1077,6 +1077,7 @@ impl<'a> Payload<'a> {
         self.value(at, field, |x| !((a * x as f32).abs() * scale > max))
     }
 
+    #[cfg_attr(unstable_target, optimize(size))]
     fn reserved_zero(&self, range: core::ops::Range<usize>) -> Result<(), BlobError> {
         for at in range {
             if self.byte(at) != 0 {
@@ -1086,6 +1087,7 @@ impl<'a> Payload<'a> {
         Ok(())
     }
 
+    #[cfg_attr(unstable_target, optimize(size))]
     fn text(&self, field: Field) -> Result<&'a str, BlobError> {
         let b = self.bytes;
         if b.is_empty() || b.len() > MAX_TEXT_BYTES || !b.iter().all(|c| (0x20..=0x7e).contains(c)) {
@@ -1145,6 +1147,7 @@ impl CoefSet {
 
 /// A change of the constants (one knot, or one polynomial term at its largest |ΔT|, `scale`
 /// = ΔT_max^n) is plausible: see [`Field::limit`]. One copy for terms and knots (`set`).
+#[cfg_attr(unstable_target, optimize(size))]
 fn read_coef_set(
     p: &Payload<'_>,
     at: usize,
