@@ -29,6 +29,8 @@
 //! reported as such (bad magic, bad version, a length error or a CRC mismatch) before any of
 //! its contents is interpreted.
 
+use core::cell::Cell;
+
 use crate::compensate::{Calibration, CalibrationError, CalibrationParams, Form, Method};
 use crate::dynamics::{self, DynamicsError, FixedRate, ThermalDynamics};
 use crate::float::Float;
@@ -1014,31 +1016,55 @@ pub fn load_region<F: Float>(region: &[u8]) -> Result<(Calibration<F>, Vibration
     parse_region(region)?.configs()
 }
 
-/// A section's payload and where it starts in the blob.
+/// A rejected blob, inside the parser: the error itself is kept in the parse's error cell
+/// ([`reject`]), so that each `?` between the parser's steps passes this mark (nothing)
+/// instead of copying the error, in every one of its checks.
+#[derive(Clone, Copy, Debug)]
+struct Rejected;
+
+/// A step of the parser: its result, or [`Rejected`] with the error in the cell.
+type Checked<T> = Result<T, Rejected>;
+
+/// Keeps `e` as the parse's error. One out-of-line copy for every rejection.
+#[cold]
+#[inline(never)]
+#[cfg_attr(unstable_target, optimize(size))]
+fn reject(err: &Cell<BlobError>, e: BlobError) -> Rejected {
+    err.set(e);
+    Rejected
+}
+
+/// A section's payload, where it starts in the blob, and the parse's error cell.
 #[derive(Clone, Copy)]
-struct Payload<'a> {
+struct Payload<'a, 'e> {
     id: u16,
     bytes: &'a [u8],
     base: usize,
+    err: &'e Cell<BlobError>,
 }
 
-impl<'a> Payload<'a> {
+impl<'a, 'e> Payload<'a, 'e> {
     /// One out-of-line copy for every lookup (and [`require`](Self::require)'s).
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn get(blob: &Blob<'a>, id: u16) -> Option<Self> {
+    fn get(blob: &Blob<'a>, id: u16, err: &'e Cell<BlobError>) -> Option<Self> {
         let e = blob.entry(id)?;
-        Some(Payload { id, bytes: blob.bytes.get(e.start()..e.end())?, base: e.start() })
+        Some(Payload { id, bytes: blob.bytes.get(e.start()..e.end())?, base: e.start(), err })
     }
 
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn require(blob: &Blob<'a>, id: u16) -> Result<Self, BlobError> {
-        Payload::get(blob, id).ok_or(BlobError::MissingSection(id))
+    fn require(blob: &Blob<'a>, id: u16, err: &'e Cell<BlobError>) -> Checked<Self> {
+        Payload::get(blob, id, err).ok_or_else(|| reject(err, BlobError::MissingSection(id)))
     }
 
-    fn expect_len(&self, len: usize) -> Result<(), BlobError> {
-        if self.bytes.len() == len { Ok(()) } else { Err(self.length_error()) }
+    /// Rejects the blob with `e`.
+    fn fail(&self, e: BlobError) -> Rejected {
+        reject(self.err, e)
+    }
+
+    fn expect_len(&self, len: usize) -> Checked<()> {
+        if self.bytes.len() == len { Ok(()) } else { Err(self.fail(self.length_error())) }
     }
 
     fn length_error(&self) -> BlobError {
@@ -1050,10 +1076,10 @@ impl<'a> Payload<'a> {
     }
 
     /// The f64 at `at` if `ok` accepts it, else [`BlobError::OutOfRange`] naming `field`.
-    fn value(&self, at: usize, field: Field, ok: impl Fn(f64) -> bool) -> Result<f64, BlobError> {
+    fn value(&self, at: usize, field: Field, ok: impl Fn(f64) -> bool) -> Checked<f64> {
         match f64_at(self.bytes, at) {
             Some(x) if x.is_finite() && ok(x) => Ok(x),
-            _ => Err(BlobError::OutOfRange { field, offset: self.base + at }),
+            _ => Err(self.fail(BlobError::OutOfRange { field, offset: self.base + at })),
         }
     }
 
@@ -1061,7 +1087,7 @@ impl<'a> Payload<'a> {
     /// One out-of-line copy for every plain range check.
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn value_in(&self, at: usize, field: Field, lo: f64, hi: f64) -> Result<f64, BlobError> {
+    fn value_in(&self, at: usize, field: Field, lo: f64, hi: f64) -> Checked<f64> {
         self.value(at, field, |x| le(lo, x) && le(x, hi))
     }
 
@@ -1072,28 +1098,30 @@ impl<'a> Payload<'a> {
     /// side of it.
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn value_scaled(&self, at: usize, field: Field, a: f64, scale: f32, max: f32) -> Result<f64, BlobError> {
+    fn value_scaled(&self, at: usize, field: Field, a: f64, scale: f32, max: f32) -> Checked<f64> {
         let a = a as f32;
         self.value(at, field, |x| !((a * x as f32).abs() * scale > max))
     }
 
     #[cfg_attr(unstable_target, optimize(size))]
-    fn reserved_zero(&self, range: core::ops::Range<usize>) -> Result<(), BlobError> {
+    fn reserved_zero(&self, range: core::ops::Range<usize>) -> Checked<()> {
         for at in range {
             if self.byte(at) != 0 {
-                return Err(BlobError::ReservedNotZero { offset: self.base + at });
+                return Err(self.fail(BlobError::ReservedNotZero { offset: self.base + at }));
             }
         }
         Ok(())
     }
 
     #[cfg_attr(unstable_target, optimize(size))]
-    fn text(&self, field: Field) -> Result<&'a str, BlobError> {
+    fn text(&self, field: Field) -> Checked<&'a str> {
         let b = self.bytes;
-        if b.is_empty() || b.len() > MAX_TEXT_BYTES || !b.iter().all(|c| (0x20..=0x7e).contains(c)) {
-            return Err(BlobError::OutOfRange { field, offset: self.base });
-        }
-        ascii_str(b).ok_or(BlobError::OutOfRange { field, offset: self.base })
+        let text = if b.is_empty() || b.len() > MAX_TEXT_BYTES || !b.iter().all(|c| (0x20..=0x7e).contains(c)) {
+            None
+        } else {
+            ascii_str(b)
+        };
+        text.ok_or_else(|| self.fail(BlobError::OutOfRange { field, offset: self.base }))
     }
 }
 
@@ -1149,12 +1177,12 @@ impl CoefSet {
 /// = ΔT_max^n) is plausible: see [`Field::limit`]. One copy for terms and knots (`set`).
 #[cfg_attr(unstable_target, optimize(size))]
 fn read_coef_set(
-    p: &Payload<'_>,
+    p: &Payload<'_, '_>,
     at: usize,
     k: &[[f64; 3]; 3],
     scale: f32,
     set: CoefSet,
-) -> Result<CoefDelta<f64>, BlobError> {
+) -> Checked<CoefDelta<f64>> {
     let mut a = [0.0; 12];
     for (n, slot) in a.iter_mut().enumerate() {
         let off = at + 8 * n;
@@ -1180,16 +1208,23 @@ fn read_coef_set(
 /// Checks a blob completely and returns its calibration: the container ([`Blob::new`]), every
 /// section of format version 1, each value against its physical range ([`limits`]), and
 /// finally [`Calibration::new`]'s checks. `bytes` must be exactly the blob.
-#[inline(never)]
-#[cfg_attr(unstable_target, optimize(size))]
 pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
     let blob = Blob::new(bytes)?;
+    // Every rejection overwrites it.
+    let err = Cell::new(BlobError::BadMagic);
+    parse_sections(blob, &err).map_err(|Rejected| err.get())
+}
+
+/// [`parse`] after the container: the sections and the calibration's checks.
+#[inline(never)]
+#[cfg_attr(unstable_target, optimize(size))]
+fn parse_sections<'a>(blob: Blob<'a>, err: &Cell<BlobError>) -> Checked<ParsedCalibration<'a>> {
     for id in section::MANDATORY {
-        Payload::require(&blob, id)?;
+        Payload::require(&blob, id, err)?;
     }
 
     // Constants at T0.
-    let p = Payload::require(&blob, section::CONSTANTS)?;
+    let p = Payload::require(&blob, section::CONSTANTS, err)?;
     p.expect_len(CONSTANTS_BYTES)?;
     let t0_c = p.value_in(0, Field::T0, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
     let mut k = [[0.0; 3]; 3];
@@ -1210,18 +1245,18 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
     }
 
     // Temperature range.
-    let p = Payload::require(&blob, section::TEMP_RANGE)?;
+    let p = Payload::require(&blob, section::TEMP_RANGE, err)?;
     p.expect_len(TEMP_RANGE_BYTES)?;
     let lo = p.value_in(0, Field::TempRange { end: 0 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
     let hi = p.value_in(8, Field::TempRange { end: 1 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
     if !(lt(lo, hi) && le(lo, t0_c) && le(t0_c, hi)) {
-        return Err(BlobError::BadRange { offset: p.base });
+        return Err(p.fail(BlobError::BadRange { offset: p.base }));
     }
 
     // Temperature model.
-    let p = Payload::require(&blob, section::TEMP_MODEL)?;
+    let p = Payload::require(&blob, section::TEMP_MODEL, err)?;
     if p.bytes.len() < MODEL_HEADER_BYTES {
-        return Err(p.length_error());
+        return Err(p.fail(p.length_error()));
     }
     let kind = p.byte(0);
     let count = p.byte(1);
@@ -1229,7 +1264,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
         KIND_POLY => {
             let order = count as usize;
             if !(1..=MAX_POLY_ORDER).contains(&order) {
-                return Err(BlobError::UnsupportedOrder { order: count, offset: p.base + 1 });
+                return Err(p.fail(BlobError::UnsupportedOrder { order: count, offset: p.base + 1 }));
             }
             p.reserved_zero(2..MODEL_HEADER_BYTES)?;
             p.expect_len(MODEL_HEADER_BYTES + COEF_SET_BYTES * order)?;
@@ -1248,7 +1283,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
         KIND_PWL => {
             let n = count as usize;
             if !(2..=MAX_KNOTS).contains(&n) {
-                return Err(BlobError::KnotCount { count, offset: p.base + 1 });
+                return Err(p.fail(BlobError::KnotCount { count, offset: p.base + 1 }));
             }
             p.reserved_zero(2..MODEL_HEADER_BYTES)?;
             p.expect_len(MODEL_HEADER_BYTES + (8 + COEF_SET_BYTES) * n)?;
@@ -1265,10 +1300,10 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
                 if let (Some(a), Some(b)) = (knots_c.get(i - 1), knots_c.get(i))
                     && !lt(*a, *b)
                 {
-                    return Err(BlobError::KnotsNotIncreasing {
+                    return Err(p.fail(BlobError::KnotsNotIncreasing {
                         knot: i as u8,
                         offset: p.base + MODEL_HEADER_BYTES + 8 * i,
-                    });
+                    }));
                 }
             }
             let mut at_knot = [CoefDelta::zero(); MAX_KNOTS];
@@ -1279,11 +1314,11 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
             }
             TempModel::Pwl { n_knots: count, knots_c, at_knot }
         }
-        code => return Err(BlobError::BadCode { field: Field::ModelKind, offset: p.base, code }),
+        code => return Err(p.fail(BlobError::BadCode { field: Field::ModelKind, offset: p.base, code })),
     };
 
     // Method.
-    let p = Payload::require(&blob, section::METHOD)?;
+    let p = Payload::require(&blob, section::METHOD, err)?;
     p.expect_len(METHOD_BYTES)?;
     let (m, form) = (p.byte(0), p.byte(1));
     let method = match (m, form) {
@@ -1292,34 +1327,34 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
         (2, 1) => Method::OutputCorrection(Form::Full),
         (2, 2) => Method::OutputCorrection(Form::Simplified),
         (2, 3) => Method::OutputCorrection(Form::Linearized),
-        (0..=2, code) => return Err(BlobError::BadCode { field: Field::Form, offset: p.base + 1, code }),
-        (code, _) => return Err(BlobError::BadCode { field: Field::Method, offset: p.base, code }),
+        (0..=2, code) => return Err(p.fail(BlobError::BadCode { field: Field::Form, offset: p.base + 1, code })),
+        (code, _) => return Err(p.fail(BlobError::BadCode { field: Field::Method, offset: p.base, code })),
     };
     p.reserved_zero(2..METHOD_BYTES)?;
 
     // Traceability.
     let mut meta = Meta::default();
-    if let Some(p) = Payload::get(&blob, section::SERIAL) {
+    if let Some(p) = Payload::get(&blob, section::SERIAL, err) {
         meta.serial = p.text(Field::Serial)?;
     }
-    if let Some(p) = Payload::get(&blob, section::TOOL_VERSION) {
+    if let Some(p) = Payload::get(&blob, section::TOOL_VERSION, err) {
         meta.tool_version = p.text(Field::ToolVersion)?;
     }
-    if let Some(p) = Payload::get(&blob, section::CAL_DATE) {
+    if let Some(p) = Payload::get(&blob, section::CAL_DATE, err) {
         p.expect_len(CAL_DATE_BYTES)?;
         let date = CalDate { year: u16_at(p.bytes, 0).unwrap_or(0), month: p.byte(2), day: p.byte(3) };
         if !date.is_valid() {
-            return Err(BlobError::OutOfRange { field: Field::CalDate, offset: p.base });
+            return Err(p.fail(BlobError::OutOfRange { field: Field::CalDate, offset: p.base }));
         }
         meta.date = Some(date);
     }
 
-    let vibration = parse_vibration(&blob)?;
-    let dynamics = parse_dynamics(&blob)?;
+    let vibration = parse_vibration(&blob, err)?;
+    let dynamics = parse_dynamics(&blob, err)?;
 
     let params =
         CalibrationParams { constants: Constants { k_v_per_g: k, u0_v }, t0_c, model, method, temp_range_c: (lo, hi) };
-    params.validate()?;
+    params.validate().map_err(|e| reject(err, e.into()))?;
     // The vibration values' checks above imply `VibrationParams::validate`'s (a host test
     // holds them so); it does not run again.
     Ok(ParsedCalibration { params, vibration, dynamics, meta, blob })
@@ -1331,12 +1366,12 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
 /// its offset.
 #[inline(never)]
 #[cfg_attr(unstable_target, optimize(size))]
-fn parse_dynamics(blob: &Blob<'_>) -> Result<Option<ThermalDynamics<f64>>, BlobError> {
-    let Some(p) = Payload::get(blob, section::THERMAL_DYNAMICS) else { return Ok(None) };
+fn parse_dynamics(blob: &Blob<'_>, err: &Cell<BlobError>) -> Checked<Option<ThermalDynamics<f64>>> {
+    let Some(p) = Payload::get(blob, section::THERMAL_DYNAMICS, err) else { return Ok(None) };
     p.expect_len(DYNAMICS_BYTES)?;
     let code = p.byte(0);
     if code != DYNAMICS_LAYOUT {
-        return Err(BlobError::BadCode { field: Field::DynamicsLayout, offset: p.base, code });
+        return Err(p.fail(BlobError::BadCode { field: Field::DynamicsLayout, offset: p.base, code }));
     }
     p.reserved_zero(1..DYNAMICS_HEADER_BYTES)?;
     let mut a = [0.0; 8];
@@ -1356,10 +1391,10 @@ fn parse_dynamics(blob: &Blob<'_>) -> Result<Option<ThermalDynamics<f64>>, BlobE
 /// nothing without the coefficients.
 #[inline(never)]
 #[cfg_attr(unstable_target, optimize(size))]
-fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError> {
-    let Some(p) = Payload::get(blob, section::VIBRATION) else {
-        return match Payload::get(blob, section::FLIGHT_PHASES) {
-            Some(_) => Err(BlobError::MissingSection(section::VIBRATION)),
+fn parse_vibration(blob: &Blob<'_>, err: &Cell<BlobError>) -> Checked<Option<VibrationParams>> {
+    let Some(p) = Payload::get(blob, section::VIBRATION, err) else {
+        return match Payload::get(blob, section::FLIGHT_PHASES, err) {
+            Some(_) => Err(reject(err, BlobError::MissingSection(section::VIBRATION))),
             None => Ok(None),
         };
     };
@@ -1367,7 +1402,7 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
     let variant = match p.byte(0) {
         VARIANT_PAPER => Variant::Paper,
         VARIANT_EXACT => Variant::Exact,
-        code => return Err(BlobError::BadCode { field: Field::VibVariant, offset: p.base, code }),
+        code => return Err(p.fail(BlobError::BadCode { field: Field::VibVariant, offset: p.base, code })),
     };
     p.reserved_zero(1..VIBRATION_HEADER_BYTES)?;
     let mut cf = [ConversionFunction::<f64>::default(); 3];
@@ -1381,14 +1416,14 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
         *c = ConversionFunction::from_array(&a);
     }
     let mut out = VibrationParams::new(cf, variant);
-    let Some(p) = Payload::get(blob, section::FLIGHT_PHASES) else { return Ok(Some(out)) };
+    let Some(p) = Payload::get(blob, section::FLIGHT_PHASES, err) else { return Ok(Some(out)) };
     if p.bytes.len() < PROFILES_HEADER_BYTES {
-        return Err(p.length_error());
+        return Err(p.fail(p.length_error()));
     }
     let count = p.byte(0);
     let n = count as usize;
     if !(1..=MAX_PROFILES).contains(&n) {
-        return Err(BlobError::ProfileCount { count, offset: p.base });
+        return Err(p.fail(BlobError::ProfileCount { count, offset: p.base }));
     }
     p.reserved_zero(1..PROFILES_HEADER_BYTES)?;
     p.expect_len(PROFILES_HEADER_BYTES + PROFILE_BYTES * n)?;
@@ -1425,7 +1460,11 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
                 Vibration::Random { sigma_g, band_hz: (lo, hi) }
             }
             code => {
-                return Err(BlobError::BadCode { field: Field::ProfileKind { profile }, offset: p.base + at, code });
+                return Err(p.fail(BlobError::BadCode {
+                    field: Field::ProfileKind { profile },
+                    offset: p.base + at,
+                    code,
+                }));
             }
         };
     }
