@@ -1143,11 +1143,6 @@ fn cross_limit(x: f64) -> f64 {
     if b >> 52 > 1 && b >> 52 < 0x7ff { f64::from_bits(b - (1 << 52)) } else { 0.0 }
 }
 
-/// |K_ii| within the scale-factor limits.
-fn scale_ok(k_ii: f64) -> bool {
-    le(limits::SCALE_FACTOR_MIN_V_PER_G, k_ii.abs()) && le(k_ii.abs(), limits::SCALE_FACTOR_MAX_V_PER_G)
-}
-
 /// Which coefficient set [`read_coef_set`] reads: a polynomial term (power − 1) or a knot.
 #[derive(Clone, Copy)]
 enum CoefSet {
@@ -1229,7 +1224,14 @@ fn parse_sections<'a>(blob: Blob<'a>, err: &Cell<BlobError>) -> Checked<ParsedCa
     let t0_c = p.value_in(0, Field::T0, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
     let mut k = [[0.0; 3]; 3];
     for i in 0..3 {
-        k[i][i] = p.value(8 + 8 * (4 * i), Field::K { row: i as u8, col: i as u8 }, scale_ok)?;
+        // |K_ii| within the scale-factor limits: at most the largest by the range check, at
+        // least the smallest by the test after it (the same error either way).
+        let (at, field, max) =
+            (8 + 8 * (4 * i), Field::K { row: i as u8, col: i as u8 }, limits::SCALE_FACTOR_MAX_V_PER_G);
+        k[i][i] = p.value_in(at, field, -max, max)?;
+        if !le(limits::SCALE_FACTOR_MIN_V_PER_G, k[i][i].abs()) {
+            return Err(p.fail(BlobError::OutOfRange { field, offset: p.base + at }));
+        }
     }
     for i in 0..3 {
         for j in 0..3 {
@@ -1454,9 +1456,11 @@ fn parse_vibration(blob: &Blob<'_>, err: &Cell<BlobError>) -> Checked<Option<Vib
                     *s = p.value_in(v + 8 * j, Field::ProfileSigma { profile, axis: j as u8 }, 0.0, MAX_LEVEL_G)?;
                 }
                 let lo = p.value_in(v + 24, Field::ProfileBand { profile, end: 0 }, 0.0, limits::FREQ_MAX_HZ)?;
-                let hi = p.value(v + 32, Field::ProfileBand { profile, end: 1 }, |x| {
-                    le(0.0, x) && le(x, limits::FREQ_MAX_HZ) && lt(lo, x)
-                })?;
+                let field = Field::ProfileBand { profile, end: 1 };
+                let hi = p.value_in(v + 32, field, 0.0, limits::FREQ_MAX_HZ)?;
+                if !lt(lo, hi) {
+                    return Err(p.fail(BlobError::OutOfRange { field, offset: p.base + v + 32 }));
+                }
                 Vibration::Random { sigma_g, band_hz: (lo, hi) }
             }
             code => {

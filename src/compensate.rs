@@ -422,8 +422,8 @@ impl<F: Float> Calibration<F> {
         let constants = p.constants;
         let (lo, hi) = p.temp_range_c;
         let (n, n_diag_lo) = inverse_hi_lo(&constants.k_v_per_g).ok_or(CalibrationError::SingularK)?;
-        let k: Mat3<F> = linalg::cast_mat(&constants.k_v_per_g);
         let constants_f: Constants<F> = constants.cast();
+        let k = &constants_f.k_v_per_g;
         let mut lin0 = n;
         for (i, row) in lin0.iter_mut().enumerate() {
             if let (Some(x), Some(&lo)) = (row.get_mut(i), n_diag_lo.get(i)) {
