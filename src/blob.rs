@@ -1083,24 +1083,27 @@ impl<'a, 'e> Payload<'a, 'e> {
         }
     }
 
-    /// The f64 at `at` if within `[lo, hi]`, else [`BlobError::OutOfRange`] naming `field`.
-    /// One out-of-line copy for every plain range check.
+    /// The f64 at `at` into `out` if within `[lo, hi]`, else [`BlobError::OutOfRange`] naming
+    /// `field`. One out-of-line copy for every plain range check; the value is stored by it,
+    /// so that a check costs its caller a call and a test.
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn value_in(&self, at: usize, field: Field, lo: f64, hi: f64) -> Checked<f64> {
-        self.value(at, field, |x| le(lo, x) && le(x, hi))
+    fn value_in(&self, out: &mut f64, at: usize, field: Field, lo: f64, hi: f64) -> Checked<()> {
+        *out = self.value(at, field, |x| le(lo, x) && le(x, hi))?;
+        Ok(())
     }
 
-    /// The f64 x at `at` if `|a·x|·scale ≤ max`, else [`BlobError::OutOfRange`] naming
-    /// `field` (the temperature model's plausibility checks, one out-of-line copy). Evaluated
+    /// The f64 x at `at` into `out` if `|a·x|·scale ≤ max`, else [`BlobError::OutOfRange`]
+    /// naming `field` (the temperature model's plausibility checks, one out-of-line copy). Evaluated
     /// in `f32`, the precision the firmware computes in (it has no `f64` arithmetic), on host
     /// and target alike: a value within about 10⁻⁶ of its limit, relative, may fall on either
     /// side of it.
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn value_scaled(&self, at: usize, field: Field, a: f64, scale: f32, max: f32) -> Checked<f64> {
+    fn value_scaled(&self, out: &mut f64, at: usize, field: Field, a: f64, scale: f32, max: f32) -> Checked<()> {
         let a = a as f32;
-        self.value(at, field, |x| !((a * x as f32).abs() * scale > max))
+        *out = self.value(at, field, |x| !((a * x as f32).abs() * scale > max))?;
+        Ok(())
     }
 
     #[cfg_attr(unstable_target, optimize(size))]
@@ -1195,7 +1198,7 @@ fn read_coef_set(
                 (field, k_ij, limits::CROSS_RATIO_MAX as f32 * (k_ii as f32).abs())
             }
         };
-        *slot = p.value_scaled(off, field, a, scale, max)?;
+        p.value_scaled(slot, off, field, a, scale, max)?;
     }
     Ok(CoefDelta::from_array(&a))
 }
@@ -1221,14 +1224,15 @@ fn parse_sections<'a>(blob: Blob<'a>, err: &Cell<BlobError>) -> Checked<ParsedCa
     // Constants at T0.
     let p = Payload::require(&blob, section::CONSTANTS, err)?;
     p.expect_len(CONSTANTS_BYTES)?;
-    let t0_c = p.value_in(0, Field::T0, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
+    let mut t0_c = 0.0;
+    p.value_in(&mut t0_c, 0, Field::T0, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
     let mut k = [[0.0; 3]; 3];
     for i in 0..3 {
         // |K_ii| within the scale-factor limits: at most the largest by the range check, at
         // least the smallest by the test after it (the same error either way).
         let (at, field, max) =
             (8 + 8 * (4 * i), Field::K { row: i as u8, col: i as u8 }, limits::SCALE_FACTOR_MAX_V_PER_G);
-        k[i][i] = p.value_in(at, field, -max, max)?;
+        p.value_in(&mut k[i][i], at, field, -max, max)?;
         if !le(limits::SCALE_FACTOR_MIN_V_PER_G, k[i][i].abs()) {
             return Err(p.fail(BlobError::OutOfRange { field, offset: p.base + at }));
         }
@@ -1237,20 +1241,22 @@ fn parse_sections<'a>(blob: Blob<'a>, err: &Cell<BlobError>) -> Checked<ParsedCa
         for j in 0..3 {
             if i != j {
                 let c = cross_limit(k[i][i]);
-                k[i][j] = p.value_in(8 + 8 * (3 * i + j), Field::K { row: i as u8, col: j as u8 }, -c, c)?;
+                p.value_in(&mut k[i][j], 8 + 8 * (3 * i + j), Field::K { row: i as u8, col: j as u8 }, -c, c)?;
             }
         }
     }
     let mut u0_v = [0.0; 3];
     for (i, u) in u0_v.iter_mut().enumerate() {
-        *u = p.value_in(80 + 8 * i, Field::U0 { axis: i as u8 }, -limits::U0_MAX_V, limits::U0_MAX_V)?;
+        p.value_in(u, 80 + 8 * i, Field::U0 { axis: i as u8 }, -limits::U0_MAX_V, limits::U0_MAX_V)?;
     }
 
     // Temperature range.
     let p = Payload::require(&blob, section::TEMP_RANGE, err)?;
     p.expect_len(TEMP_RANGE_BYTES)?;
-    let lo = p.value_in(0, Field::TempRange { end: 0 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
-    let hi = p.value_in(8, Field::TempRange { end: 1 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
+    let mut lo = 0.0;
+    p.value_in(&mut lo, 0, Field::TempRange { end: 0 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
+    let mut hi = 0.0;
+    p.value_in(&mut hi, 8, Field::TempRange { end: 1 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
     if !(lt(lo, hi) && le(lo, t0_c) && le(t0_c, hi)) {
         return Err(p.fail(BlobError::BadRange { offset: p.base }));
     }
@@ -1291,7 +1297,8 @@ fn parse_sections<'a>(blob: Blob<'a>, err: &Cell<BlobError>) -> Checked<ParsedCa
             p.expect_len(MODEL_HEADER_BYTES + (8 + COEF_SET_BYTES) * n)?;
             let mut knots_c = [0.0; MAX_KNOTS];
             for (i, slot) in knots_c.iter_mut().enumerate().take(n) {
-                *slot = p.value_in(
+                p.value_in(
+                    slot,
                     MODEL_HEADER_BYTES + 8 * i,
                     Field::Knot { knot: i as u8 },
                     limits::TEMP_MIN_C,
@@ -1380,7 +1387,7 @@ fn parse_dynamics(blob: &Blob<'_>, err: &Cell<BlobError>) -> Checked<Option<Ther
     for n in 0..8 {
         // The bias play's gains (5, 6, 7) must be 0 without a play width (4, read before).
         let (lo, hi) = if n >= 5 && eq(a[4], 0.0) { (0.0, 0.0) } else { dynamics::limits(n as u8) };
-        a[n] = p.value_in(DYNAMICS_HEADER_BYTES + 8 * n, Field::Dynamics { param: n as u8 }, lo, hi)?;
+        p.value_in(&mut a[n], DYNAMICS_HEADER_BYTES + 8 * n, Field::Dynamics { param: n as u8 }, lo, hi)?;
     }
     let d = ThermalDynamics::from_array(&a);
     // These checks are [`ThermalDynamics::validate`]'s, field by field (the host tests check
@@ -1413,7 +1420,7 @@ fn parse_vibration(blob: &Blob<'_>, err: &Cell<BlobError>) -> Checked<Option<Vib
         for (n, x) in a.iter_mut().enumerate() {
             let lim = coefficient_limit(n as u8);
             let at = VIBRATION_HEADER_BYTES + CONVERSION_FUNCTION_BYTES * axis + 8 * n;
-            *x = p.value_in(at, Field::VibCoef { axis: axis as u8, coef: n as u8 }, -lim, lim)?;
+            p.value_in(x, at, Field::VibCoef { axis: axis as u8, coef: n as u8 }, -lim, lim)?;
         }
         *c = ConversionFunction::from_array(&a);
     }
@@ -1443,21 +1450,23 @@ fn parse_vibration(blob: &Blob<'_>, err: &Cell<BlobError>) -> Checked<Option<Vib
             PROFILE_SINE => {
                 let mut amp_g = [0.0; 3];
                 for (j, a) in amp_g.iter_mut().enumerate() {
-                    *a =
-                        p.value_in(v + 8 * j, Field::ProfileAmp { profile, axis: j as u8 }, -MAX_LEVEL_G, MAX_LEVEL_G)?;
+                    p.value_in(a, v + 8 * j, Field::ProfileAmp { profile, axis: j as u8 }, -MAX_LEVEL_G, MAX_LEVEL_G)?;
                 }
-                let freq_hz = p.value_in(v + 24, Field::ProfileFreq { profile }, 0.0, limits::FREQ_MAX_HZ)?;
+                let mut freq_hz = 0.0;
+                p.value_in(&mut freq_hz, v + 24, Field::ProfileFreq { profile }, 0.0, limits::FREQ_MAX_HZ)?;
                 p.reserved_zero(v + 32..v + 40)?;
                 Vibration::Harmonic { amp_g, freq_hz }
             }
             PROFILE_RANDOM => {
                 let mut sigma_g = [0.0; 3];
                 for (j, s) in sigma_g.iter_mut().enumerate() {
-                    *s = p.value_in(v + 8 * j, Field::ProfileSigma { profile, axis: j as u8 }, 0.0, MAX_LEVEL_G)?;
+                    p.value_in(s, v + 8 * j, Field::ProfileSigma { profile, axis: j as u8 }, 0.0, MAX_LEVEL_G)?;
                 }
-                let lo = p.value_in(v + 24, Field::ProfileBand { profile, end: 0 }, 0.0, limits::FREQ_MAX_HZ)?;
+                let mut lo = 0.0;
+                p.value_in(&mut lo, v + 24, Field::ProfileBand { profile, end: 0 }, 0.0, limits::FREQ_MAX_HZ)?;
                 let field = Field::ProfileBand { profile, end: 1 };
-                let hi = p.value_in(v + 32, field, 0.0, limits::FREQ_MAX_HZ)?;
+                let mut hi = 0.0;
+                p.value_in(&mut hi, v + 32, field, 0.0, limits::FREQ_MAX_HZ)?;
                 if !lt(lo, hi) {
                     return Err(p.fail(BlobError::OutOfRange { field, offset: p.base + v + 32 }));
                 }
