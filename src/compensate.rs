@@ -339,6 +339,11 @@ pub struct Calibration<F> {
     /// 1/K_ii at T0 ([`float::recip`] in `f64`, rounded).
     inv_diag: Vec3<F>,
     model: TempModel<F>,
+    /// The model of method 1's (and the linearised form's) terms: each set's ΔU0 kept, its
+    /// ΔK/K replaced by `X_c = N·(K ∘ c)`. X(T) = N·ΔK(T) is linear in the sets, so a new
+    /// reading evaluates it directly, without forming ΔK(T) and the product (N with its
+    /// diagonal's hi part, as in [`at_temperature`](Self::at_temperature)).
+    model_x: TempModel<F>,
     method: Method,
     temp_min_c: F,
     temp_max_c: F,
@@ -430,6 +435,9 @@ impl<F: Float> Calibration<F> {
                 *x = lo;
             }
         }
+        let model: TempModel<F> = p.model.cast();
+        let model_x =
+            model.map_sets(|c| CoefDelta { du0_v: c.du0_v, rel_k: linalg::mat_mul_fused(&n, &delta_k(k, c)) });
         Ok(Calibration {
             t0_c: F::from_f64(p.t0_c),
             constants: constants_f,
@@ -437,7 +445,8 @@ impl<F: Float> Calibration<F> {
             lin0,
             neg_offset0_g: neg_offset(&n, &lin0, &constants_f.u0_v, &[F::ZERO; 3]),
             inv_diag: [0, 1, 2].map(|i| float::recip(k[i][i])),
-            model: p.model.cast(),
+            model,
+            model_x,
             method: p.method,
             temp_min_c: F::from_f64(lo),
             temp_max_c: F::from_f64(hi),
@@ -459,6 +468,7 @@ impl<F: Float> Calibration<F> {
             neg_offset0_g: [F::ZERO; 3],
             inv_diag: [F::ONE; 3],
             model: TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] },
+            model_x: TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] },
             method: Method::Uncorrected,
             temp_min_c: F::from_f64(-1.0e30),
             temp_max_c: F::from_f64(1.0e30),
@@ -596,15 +606,17 @@ impl<F: Float> Calibration<F> {
         if self.method == Method::Uncorrected {
             return at;
         }
-        let d = self.model.delta(t, self.t0_c);
+        // Method 1 and the linearised form: ΔU0 and X = N·ΔK from their own model.
+        let uses_x = matches!(self.method, Method::CoefficientCorrection | Method::OutputCorrection(Form::Linearized));
+        let d = if uses_x { &self.model_x } else { &self.model }.delta(t, self.t0_c);
         let n = &self.n_g_per_v;
         let k = &self.constants.k_v_per_g;
         match self.method {
             Method::Uncorrected => {}
             Method::CoefficientCorrection => {
                 let u0 = linalg::vec_add(&self.constants.u0_v, &d.du0_v);
-                let x = linalg::mat_mul_fused(n, &delta_k(k, &d));
-                match identity_minus_inverse(&x, F::from_f64(linalg::MIN_HADAMARD_RATIO)) {
+                let x = &d.rel_k;
+                match identity_minus_inverse(x, F::from_f64(linalg::MIN_HADAMARD_RATIO)) {
                     Some(m) => at.lin = linalg::mat_mul_sub(&m, n, &at.lin),
                     None => at.status.insert(Status::SINGULAR_AT_TEMP),
                 }
@@ -613,10 +625,10 @@ impl<F: Float> Calibration<F> {
             Method::OutputCorrection(Form::Linearized) => {
                 // A = N + D with D = −X·N, X = N·ΔK; −c = −c₀ + b − D·U0 with b = −N·ΔU0 and
                 // D·U0 = X·c₀.
-                let x = linalg::mat_mul_fused(n, &delta_k(k, &d));
+                let x = &d.rel_k;
                 let nd = linalg::mat_vec_fused(n, &d.du0_v);
-                at.lin = linalg::mat_sub(&at.lin, &linalg::mat_mul_fused(&x, n));
-                let xc = linalg::mat_vec_fused(&x, &self.neg_offset0_g);
+                at.lin = linalg::mat_sub(&at.lin, &linalg::mat_mul_fused(x, n));
+                let xc = linalg::mat_vec_fused(x, &self.neg_offset0_g);
                 for i in 0..3 {
                     at.neg_offset_g[i] -= nd[i] + xc[i];
                 }
