@@ -7,7 +7,8 @@
 //! can be wrong is a typed [`BlobError`] naming the field (as the calibration file spells it,
 //! see [`Field`]) and the byte offset where that applies. A blob that parses is a calibration
 //! [`Calibration::new`] accepts (and, with the optional vibration sections, a configuration
-//! [`VibrationConfig::new`] accepts): [`parse`] runs their checks too. [`load_region`] gives
+//! [`VibrationConfig::new`] accepts): [`parse`] runs their checks too (the vibration ones
+//! value by value, with limits that imply them). [`load_region`] gives
 //! the firmware both configurations of the per-sample step from the CALIB region.
 //!
 //! # Layout (format version 1, all integers and floats little-endian)
@@ -28,14 +29,16 @@
 //! reported as such (bad magic, bad version, a length error or a CRC mismatch) before any of
 //! its contents is interpreted.
 
+use core::cell::Cell;
+
 use crate::compensate::{Calibration, CalibrationError, CalibrationParams, Form, Method};
 use crate::dynamics::{self, DynamicsError, FixedRate, ThermalDynamics};
 use crate::float::Float;
+use crate::float::cmp_f64::{eq, le, lt};
 use crate::model::Constants;
 use crate::temperature::{CoefDelta, MAX_KNOTS, MAX_POLY_ORDER, TempModel};
 use crate::vibration::{
-    ConversionFunction, MAX_LEVEL_G, MAX_PROFILES, Variant, Vibration, VibrationConfig, VibrationConfigError,
-    VibrationParams,
+    ConversionFunction, MAX_LEVEL_G, MAX_PROFILES, Variant, Vibration, VibrationConfig, VibrationParams,
 };
 
 /// The first four bytes of every blob.
@@ -634,9 +637,6 @@ pub enum BlobError {
         /// Offset of the count byte.
         offset: usize,
     },
-    /// A rejection by [`VibrationConfig::new`] (not reached for a blob whose values passed
-    /// the checks above; kept so that nothing unchecked is ever used).
-    Vibration(VibrationConfigError),
     /// A rejection by [`ThermalDynamics::validate`] (not reached for a blob whose values
     /// passed the checks above; kept so that nothing unchecked is ever used).
     Dynamics(DynamicsError),
@@ -724,18 +724,6 @@ impl core::fmt::Display for BlobError {
                     f,
                     "vibration.profile at byte 0x{offset:04x}: {count} profiles unsupported (1 to {MAX_PROFILES})"
                 )
-            }
-            // Written out here rather than through the error's own Display, which prints the
-            // level limit as a float: the firmware logs these messages, and float formatting
-            // would add its code to the image.
-            BlobError::Vibration(VibrationConfigError::NonFiniteCoefficients(i)) => {
-                write!(f, "vibration: conversion function of accelerometer {i} has a non-finite coefficient")
-            }
-            BlobError::Vibration(VibrationConfigError::TooManyProfiles) => {
-                write!(f, "vibration.profile: more than {MAX_PROFILES} profiles")
-            }
-            BlobError::Vibration(VibrationConfigError::BadProfile(i)) => {
-                write!(f, "vibration.profile[{i}]: not finite, negative, or above the 10 g level limit")
             }
             BlobError::Dynamics(e) => write!(f, "thermal_dynamics.{e}"),
             BlobError::BufferTooSmall { needed } => write!(f, "output buffer too small: {needed} bytes needed"),
@@ -974,7 +962,7 @@ pub struct ParsedCalibration<'a> {
     pub params: CalibrationParams,
     /// The vibration-error coefficients and flight-phase profiles (sections
     /// [`section::VIBRATION`] and [`section::FLIGHT_PHASES`]); `None` when the blob has no
-    /// vibration section. [`VibrationConfig::new`] has accepted these.
+    /// vibration section. They pass [`VibrationParams::validate`].
     pub vibration: Option<VibrationParams>,
     /// The thermal dynamics (section [`section::THERMAL_DYNAMICS`]); `None` when the blob has
     /// no such section (no dynamics). They pass [`ThermalDynamics::validate`].
@@ -994,13 +982,11 @@ impl ParsedCalibration<'_> {
 
     /// The vibration-error configuration in the working precision:
     /// [`VibrationConfig::none`] (no VE model, nothing subtracted) for a blob without a
-    /// vibration section. [`parse`] has already run the same checks, so this does not fail for
-    /// a parsed blob.
+    /// vibration section. [`parse`] has checked every value against limits that imply
+    /// [`VibrationParams::validate`]'s, so they are not validated again
+    /// ([`VibrationConfig::from_validated`]) and this does not fail.
     pub fn vibration_config<F: Float>(&self) -> Result<VibrationConfig<F>, BlobError> {
-        match &self.vibration {
-            None => Ok(VibrationConfig::none()),
-            Some(p) => VibrationConfig::new(p).map_err(BlobError::Vibration),
-        }
+        Ok(self.vibration.as_ref().map_or_else(VibrationConfig::none, VibrationConfig::from_validated))
     }
 
     /// Both configurations of the per-sample step ([`crate::Pipeline::new`]): the calibration
@@ -1030,31 +1016,55 @@ pub fn load_region<F: Float>(region: &[u8]) -> Result<(Calibration<F>, Vibration
     parse_region(region)?.configs()
 }
 
-/// A section's payload and where it starts in the blob.
+/// A rejected blob, inside the parser: the error itself is kept in the parse's error cell
+/// ([`reject`]), so that each `?` between the parser's steps passes this mark (nothing)
+/// instead of copying the error, in every one of its checks.
+#[derive(Clone, Copy, Debug)]
+struct Rejected;
+
+/// A step of the parser: its result, or [`Rejected`] with the error in the cell.
+type Checked<T> = Result<T, Rejected>;
+
+/// Keeps `e` as the parse's error. One out-of-line copy for every rejection.
+#[cold]
+#[inline(never)]
+#[cfg_attr(unstable_target, optimize(size))]
+fn reject(err: &Cell<BlobError>, e: BlobError) -> Rejected {
+    err.set(e);
+    Rejected
+}
+
+/// A section's payload, where it starts in the blob, and the parse's error cell.
 #[derive(Clone, Copy)]
-struct Payload<'a> {
+struct Payload<'a, 'e> {
     id: u16,
     bytes: &'a [u8],
     base: usize,
+    err: &'e Cell<BlobError>,
 }
 
-impl<'a> Payload<'a> {
+impl<'a, 'e> Payload<'a, 'e> {
     /// One out-of-line copy for every lookup (and [`require`](Self::require)'s).
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn get(blob: &Blob<'a>, id: u16) -> Option<Self> {
+    fn get(blob: &Blob<'a>, id: u16, err: &'e Cell<BlobError>) -> Option<Self> {
         let e = blob.entry(id)?;
-        Some(Payload { id, bytes: blob.bytes.get(e.start()..e.end())?, base: e.start() })
+        Some(Payload { id, bytes: blob.bytes.get(e.start()..e.end())?, base: e.start(), err })
     }
 
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn require(blob: &Blob<'a>, id: u16) -> Result<Self, BlobError> {
-        Payload::get(blob, id).ok_or(BlobError::MissingSection(id))
+    fn require(blob: &Blob<'a>, id: u16, err: &'e Cell<BlobError>) -> Checked<Self> {
+        Payload::get(blob, id, err).ok_or_else(|| reject(err, BlobError::MissingSection(id)))
     }
 
-    fn expect_len(&self, len: usize) -> Result<(), BlobError> {
-        if self.bytes.len() == len { Ok(()) } else { Err(self.length_error()) }
+    /// Rejects the blob with `e`.
+    fn fail(&self, e: BlobError) -> Rejected {
+        reject(self.err, e)
+    }
+
+    fn expect_len(&self, len: usize) -> Checked<()> {
+        if self.bytes.len() == len { Ok(()) } else { Err(self.fail(self.length_error())) }
     }
 
     fn length_error(&self) -> BlobError {
@@ -1066,48 +1076,55 @@ impl<'a> Payload<'a> {
     }
 
     /// The f64 at `at` if `ok` accepts it, else [`BlobError::OutOfRange`] naming `field`.
-    fn value(&self, at: usize, field: Field, ok: impl Fn(f64) -> bool) -> Result<f64, BlobError> {
+    fn value(&self, at: usize, field: Field, ok: impl Fn(f64) -> bool) -> Checked<f64> {
         match f64_at(self.bytes, at) {
             Some(x) if x.is_finite() && ok(x) => Ok(x),
-            _ => Err(BlobError::OutOfRange { field, offset: self.base + at }),
+            _ => Err(self.fail(BlobError::OutOfRange { field, offset: self.base + at })),
         }
     }
 
-    /// The f64 at `at` if within `[lo, hi]`, else [`BlobError::OutOfRange`] naming `field`.
-    /// One out-of-line copy for every plain range check.
+    /// The f64 at `at` into `out` if within `[lo, hi]`, else [`BlobError::OutOfRange`] naming
+    /// `field`. One out-of-line copy for every plain range check; the value is stored by it,
+    /// so that a check costs its caller a call and a test.
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn value_in(&self, at: usize, field: Field, lo: f64, hi: f64) -> Result<f64, BlobError> {
-        self.value(at, field, |x| lo <= x && x <= hi)
+    fn value_in(&self, out: &mut f64, at: usize, field: Field, lo: f64, hi: f64) -> Checked<()> {
+        *out = self.value(at, field, |x| le(lo, x) && le(x, hi))?;
+        Ok(())
     }
 
-    /// The f64 x at `at` if `|a·x|·scale ≤ max`, else [`BlobError::OutOfRange`] naming
-    /// `field` (the temperature model's plausibility checks, one out-of-line copy). Evaluated
+    /// The f64 x at `at` into `out` if `|a·x|·scale ≤ max`, else [`BlobError::OutOfRange`]
+    /// naming `field` (the temperature model's plausibility checks, one out-of-line copy). Evaluated
     /// in `f32`, the precision the firmware computes in (it has no `f64` arithmetic), on host
     /// and target alike: a value within about 10⁻⁶ of its limit, relative, may fall on either
     /// side of it.
     #[inline(never)]
     #[cfg_attr(unstable_target, optimize(size))]
-    fn value_scaled(&self, at: usize, field: Field, a: f64, scale: f32, max: f32) -> Result<f64, BlobError> {
+    fn value_scaled(&self, out: &mut f64, at: usize, field: Field, a: f64, scale: f32, max: f32) -> Checked<()> {
         let a = a as f32;
-        self.value(at, field, |x| !((a * x as f32).abs() * scale > max))
+        *out = self.value(at, field, |x| !((a * x as f32).abs() * scale > max))?;
+        Ok(())
     }
 
-    fn reserved_zero(&self, range: core::ops::Range<usize>) -> Result<(), BlobError> {
+    #[cfg_attr(unstable_target, optimize(size))]
+    fn reserved_zero(&self, range: core::ops::Range<usize>) -> Checked<()> {
         for at in range {
             if self.byte(at) != 0 {
-                return Err(BlobError::ReservedNotZero { offset: self.base + at });
+                return Err(self.fail(BlobError::ReservedNotZero { offset: self.base + at }));
             }
         }
         Ok(())
     }
 
-    fn text(&self, field: Field) -> Result<&'a str, BlobError> {
+    #[cfg_attr(unstable_target, optimize(size))]
+    fn text(&self, field: Field) -> Checked<&'a str> {
         let b = self.bytes;
-        if b.is_empty() || b.len() > MAX_TEXT_BYTES || !b.iter().all(|c| (0x20..=0x7e).contains(c)) {
-            return Err(BlobError::OutOfRange { field, offset: self.base });
-        }
-        ascii_str(b).ok_or(BlobError::OutOfRange { field, offset: self.base })
+        let text = if b.is_empty() || b.len() > MAX_TEXT_BYTES || !b.iter().all(|c| (0x20..=0x7e).contains(c)) {
+            None
+        } else {
+            ascii_str(b)
+        };
+        text.ok_or_else(|| self.fail(BlobError::OutOfRange { field, offset: self.base }))
     }
 }
 
@@ -1127,11 +1144,6 @@ fn cross_limit(x: f64) -> f64 {
     const { assert!(limits::CROSS_RATIO_MAX == 0.5) };
     let b = x.to_bits() & !(1 << 63);
     if b >> 52 > 1 && b >> 52 < 0x7ff { f64::from_bits(b - (1 << 52)) } else { 0.0 }
-}
-
-/// |K_ii| within the scale-factor limits.
-fn scale_ok(k_ii: f64) -> bool {
-    (limits::SCALE_FACTOR_MIN_V_PER_G..=limits::SCALE_FACTOR_MAX_V_PER_G).contains(&k_ii.abs())
 }
 
 /// Which coefficient set [`read_coef_set`] reads: a polynomial term (power − 1) or a knot.
@@ -1161,13 +1173,14 @@ impl CoefSet {
 
 /// A change of the constants (one knot, or one polynomial term at its largest |ΔT|, `scale`
 /// = ΔT_max^n) is plausible: see [`Field::limit`]. One copy for terms and knots (`set`).
+#[cfg_attr(unstable_target, optimize(size))]
 fn read_coef_set(
-    p: &Payload<'_>,
+    p: &Payload<'_, '_>,
     at: usize,
     k: &[[f64; 3]; 3],
     scale: f32,
     set: CoefSet,
-) -> Result<CoefDelta<f64>, BlobError> {
+) -> Checked<CoefDelta<f64>> {
     let mut a = [0.0; 12];
     for (n, slot) in a.iter_mut().enumerate() {
         let off = at + 8 * n;
@@ -1185,7 +1198,7 @@ fn read_coef_set(
                 (field, k_ij, limits::CROSS_RATIO_MAX as f32 * (k_ii as f32).abs())
             }
         };
-        *slot = p.value_scaled(off, field, a, scale, max)?;
+        p.value_scaled(slot, off, field, a, scale, max)?;
     }
     Ok(CoefDelta::from_array(&a))
 }
@@ -1193,48 +1206,65 @@ fn read_coef_set(
 /// Checks a blob completely and returns its calibration: the container ([`Blob::new`]), every
 /// section of format version 1, each value against its physical range ([`limits`]), and
 /// finally [`Calibration::new`]'s checks. `bytes` must be exactly the blob.
-#[inline(never)]
-#[cfg_attr(unstable_target, optimize(size))]
 pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
     let blob = Blob::new(bytes)?;
+    // Every rejection overwrites it.
+    let err = Cell::new(BlobError::BadMagic);
+    parse_sections(blob, &err).map_err(|Rejected| err.get())
+}
+
+/// [`parse`] after the container: the sections and the calibration's checks.
+#[inline(never)]
+#[cfg_attr(unstable_target, optimize(size))]
+fn parse_sections<'a>(blob: Blob<'a>, err: &Cell<BlobError>) -> Checked<ParsedCalibration<'a>> {
     for id in section::MANDATORY {
-        Payload::require(&blob, id)?;
+        Payload::require(&blob, id, err)?;
     }
 
     // Constants at T0.
-    let p = Payload::require(&blob, section::CONSTANTS)?;
+    let p = Payload::require(&blob, section::CONSTANTS, err)?;
     p.expect_len(CONSTANTS_BYTES)?;
-    let t0_c = p.value_in(0, Field::T0, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
+    let mut t0_c = 0.0;
+    p.value_in(&mut t0_c, 0, Field::T0, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
     let mut k = [[0.0; 3]; 3];
     for i in 0..3 {
-        k[i][i] = p.value(8 + 8 * (4 * i), Field::K { row: i as u8, col: i as u8 }, scale_ok)?;
+        // |K_ii| within the scale-factor limits: at most the largest by the range check, at
+        // least the smallest by the test after it (the same error either way).
+        let (at, field, max) =
+            (8 + 8 * (4 * i), Field::K { row: i as u8, col: i as u8 }, limits::SCALE_FACTOR_MAX_V_PER_G);
+        p.value_in(&mut k[i][i], at, field, -max, max)?;
+        if !le(limits::SCALE_FACTOR_MIN_V_PER_G, k[i][i].abs()) {
+            return Err(p.fail(BlobError::OutOfRange { field, offset: p.base + at }));
+        }
     }
     for i in 0..3 {
         for j in 0..3 {
             if i != j {
                 let c = cross_limit(k[i][i]);
-                k[i][j] = p.value_in(8 + 8 * (3 * i + j), Field::K { row: i as u8, col: j as u8 }, -c, c)?;
+                p.value_in(&mut k[i][j], 8 + 8 * (3 * i + j), Field::K { row: i as u8, col: j as u8 }, -c, c)?;
             }
         }
     }
     let mut u0_v = [0.0; 3];
     for (i, u) in u0_v.iter_mut().enumerate() {
-        *u = p.value_in(80 + 8 * i, Field::U0 { axis: i as u8 }, -limits::U0_MAX_V, limits::U0_MAX_V)?;
+        p.value_in(u, 80 + 8 * i, Field::U0 { axis: i as u8 }, -limits::U0_MAX_V, limits::U0_MAX_V)?;
     }
 
     // Temperature range.
-    let p = Payload::require(&blob, section::TEMP_RANGE)?;
+    let p = Payload::require(&blob, section::TEMP_RANGE, err)?;
     p.expect_len(TEMP_RANGE_BYTES)?;
-    let lo = p.value_in(0, Field::TempRange { end: 0 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
-    let hi = p.value_in(8, Field::TempRange { end: 1 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
-    if !(lo < hi && lo <= t0_c && t0_c <= hi) {
-        return Err(BlobError::BadRange { offset: p.base });
+    let mut lo = 0.0;
+    p.value_in(&mut lo, 0, Field::TempRange { end: 0 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
+    let mut hi = 0.0;
+    p.value_in(&mut hi, 8, Field::TempRange { end: 1 }, limits::TEMP_MIN_C, limits::TEMP_MAX_C)?;
+    if !(lt(lo, hi) && le(lo, t0_c) && le(t0_c, hi)) {
+        return Err(p.fail(BlobError::BadRange { offset: p.base }));
     }
 
     // Temperature model.
-    let p = Payload::require(&blob, section::TEMP_MODEL)?;
+    let p = Payload::require(&blob, section::TEMP_MODEL, err)?;
     if p.bytes.len() < MODEL_HEADER_BYTES {
-        return Err(p.length_error());
+        return Err(p.fail(p.length_error()));
     }
     let kind = p.byte(0);
     let count = p.byte(1);
@@ -1242,7 +1272,7 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
         KIND_POLY => {
             let order = count as usize;
             if !(1..=MAX_POLY_ORDER).contains(&order) {
-                return Err(BlobError::UnsupportedOrder { order: count, offset: p.base + 1 });
+                return Err(p.fail(BlobError::UnsupportedOrder { order: count, offset: p.base + 1 }));
             }
             p.reserved_zero(2..MODEL_HEADER_BYTES)?;
             p.expect_len(MODEL_HEADER_BYTES + COEF_SET_BYTES * order)?;
@@ -1261,13 +1291,14 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
         KIND_PWL => {
             let n = count as usize;
             if !(2..=MAX_KNOTS).contains(&n) {
-                return Err(BlobError::KnotCount { count, offset: p.base + 1 });
+                return Err(p.fail(BlobError::KnotCount { count, offset: p.base + 1 }));
             }
             p.reserved_zero(2..MODEL_HEADER_BYTES)?;
             p.expect_len(MODEL_HEADER_BYTES + (8 + COEF_SET_BYTES) * n)?;
             let mut knots_c = [0.0; MAX_KNOTS];
             for (i, slot) in knots_c.iter_mut().enumerate().take(n) {
-                *slot = p.value_in(
+                p.value_in(
+                    slot,
                     MODEL_HEADER_BYTES + 8 * i,
                     Field::Knot { knot: i as u8 },
                     limits::TEMP_MIN_C,
@@ -1276,12 +1307,12 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
             }
             for i in 1..n {
                 if let (Some(a), Some(b)) = (knots_c.get(i - 1), knots_c.get(i))
-                    && !(b > a)
+                    && !lt(*a, *b)
                 {
-                    return Err(BlobError::KnotsNotIncreasing {
+                    return Err(p.fail(BlobError::KnotsNotIncreasing {
                         knot: i as u8,
                         offset: p.base + MODEL_HEADER_BYTES + 8 * i,
-                    });
+                    }));
                 }
             }
             let mut at_knot = [CoefDelta::zero(); MAX_KNOTS];
@@ -1292,11 +1323,11 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
             }
             TempModel::Pwl { n_knots: count, knots_c, at_knot }
         }
-        code => return Err(BlobError::BadCode { field: Field::ModelKind, offset: p.base, code }),
+        code => return Err(p.fail(BlobError::BadCode { field: Field::ModelKind, offset: p.base, code })),
     };
 
     // Method.
-    let p = Payload::require(&blob, section::METHOD)?;
+    let p = Payload::require(&blob, section::METHOD, err)?;
     p.expect_len(METHOD_BYTES)?;
     let (m, form) = (p.byte(0), p.byte(1));
     let method = match (m, form) {
@@ -1305,37 +1336,36 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
         (2, 1) => Method::OutputCorrection(Form::Full),
         (2, 2) => Method::OutputCorrection(Form::Simplified),
         (2, 3) => Method::OutputCorrection(Form::Linearized),
-        (0..=2, code) => return Err(BlobError::BadCode { field: Field::Form, offset: p.base + 1, code }),
-        (code, _) => return Err(BlobError::BadCode { field: Field::Method, offset: p.base, code }),
+        (0..=2, code) => return Err(p.fail(BlobError::BadCode { field: Field::Form, offset: p.base + 1, code })),
+        (code, _) => return Err(p.fail(BlobError::BadCode { field: Field::Method, offset: p.base, code })),
     };
     p.reserved_zero(2..METHOD_BYTES)?;
 
     // Traceability.
     let mut meta = Meta::default();
-    if let Some(p) = Payload::get(&blob, section::SERIAL) {
+    if let Some(p) = Payload::get(&blob, section::SERIAL, err) {
         meta.serial = p.text(Field::Serial)?;
     }
-    if let Some(p) = Payload::get(&blob, section::TOOL_VERSION) {
+    if let Some(p) = Payload::get(&blob, section::TOOL_VERSION, err) {
         meta.tool_version = p.text(Field::ToolVersion)?;
     }
-    if let Some(p) = Payload::get(&blob, section::CAL_DATE) {
+    if let Some(p) = Payload::get(&blob, section::CAL_DATE, err) {
         p.expect_len(CAL_DATE_BYTES)?;
         let date = CalDate { year: u16_at(p.bytes, 0).unwrap_or(0), month: p.byte(2), day: p.byte(3) };
         if !date.is_valid() {
-            return Err(BlobError::OutOfRange { field: Field::CalDate, offset: p.base });
+            return Err(p.fail(BlobError::OutOfRange { field: Field::CalDate, offset: p.base }));
         }
         meta.date = Some(date);
     }
 
-    let vibration = parse_vibration(&blob)?;
-    let dynamics = parse_dynamics(&blob)?;
+    let vibration = parse_vibration(&blob, err)?;
+    let dynamics = parse_dynamics(&blob, err)?;
 
     let params =
         CalibrationParams { constants: Constants { k_v_per_g: k, u0_v }, t0_c, model, method, temp_range_c: (lo, hi) };
-    params.validate()?;
-    if let Some(v) = &vibration {
-        v.validate().map_err(BlobError::Vibration)?;
-    }
+    params.validate().map_err(|e| reject(err, e.into()))?;
+    // The vibration values' checks above imply `VibrationParams::validate`'s (a host test
+    // holds them so); it does not run again.
     Ok(ParsedCalibration { params, vibration, dynamics, meta, blob })
 }
 
@@ -1345,19 +1375,19 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedCalibration<'_>, BlobError> {
 /// its offset.
 #[inline(never)]
 #[cfg_attr(unstable_target, optimize(size))]
-fn parse_dynamics(blob: &Blob<'_>) -> Result<Option<ThermalDynamics<f64>>, BlobError> {
-    let Some(p) = Payload::get(blob, section::THERMAL_DYNAMICS) else { return Ok(None) };
+fn parse_dynamics(blob: &Blob<'_>, err: &Cell<BlobError>) -> Checked<Option<ThermalDynamics<f64>>> {
+    let Some(p) = Payload::get(blob, section::THERMAL_DYNAMICS, err) else { return Ok(None) };
     p.expect_len(DYNAMICS_BYTES)?;
     let code = p.byte(0);
     if code != DYNAMICS_LAYOUT {
-        return Err(BlobError::BadCode { field: Field::DynamicsLayout, offset: p.base, code });
+        return Err(p.fail(BlobError::BadCode { field: Field::DynamicsLayout, offset: p.base, code }));
     }
     p.reserved_zero(1..DYNAMICS_HEADER_BYTES)?;
     let mut a = [0.0; 8];
     for n in 0..8 {
         // The bias play's gains (5, 6, 7) must be 0 without a play width (4, read before).
-        let (lo, hi) = if n >= 5 && a[4] == 0.0 { (0.0, 0.0) } else { dynamics::limits(n as u8) };
-        a[n] = p.value_in(DYNAMICS_HEADER_BYTES + 8 * n, Field::Dynamics { param: n as u8 }, lo, hi)?;
+        let (lo, hi) = if n >= 5 && eq(a[4], 0.0) { (0.0, 0.0) } else { dynamics::limits(n as u8) };
+        p.value_in(&mut a[n], DYNAMICS_HEADER_BYTES + 8 * n, Field::Dynamics { param: n as u8 }, lo, hi)?;
     }
     let d = ThermalDynamics::from_array(&a);
     // These checks are [`ThermalDynamics::validate`]'s, field by field (the host tests check
@@ -1370,10 +1400,10 @@ fn parse_dynamics(blob: &Blob<'_>) -> Result<Option<ThermalDynamics<f64>>, BlobE
 /// nothing without the coefficients.
 #[inline(never)]
 #[cfg_attr(unstable_target, optimize(size))]
-fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError> {
-    let Some(p) = Payload::get(blob, section::VIBRATION) else {
-        return match Payload::get(blob, section::FLIGHT_PHASES) {
-            Some(_) => Err(BlobError::MissingSection(section::VIBRATION)),
+fn parse_vibration(blob: &Blob<'_>, err: &Cell<BlobError>) -> Checked<Option<VibrationParams>> {
+    let Some(p) = Payload::get(blob, section::VIBRATION, err) else {
+        return match Payload::get(blob, section::FLIGHT_PHASES, err) {
+            Some(_) => Err(reject(err, BlobError::MissingSection(section::VIBRATION))),
             None => Ok(None),
         };
     };
@@ -1381,7 +1411,7 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
     let variant = match p.byte(0) {
         VARIANT_PAPER => Variant::Paper,
         VARIANT_EXACT => Variant::Exact,
-        code => return Err(BlobError::BadCode { field: Field::VibVariant, offset: p.base, code }),
+        code => return Err(p.fail(BlobError::BadCode { field: Field::VibVariant, offset: p.base, code })),
     };
     p.reserved_zero(1..VIBRATION_HEADER_BYTES)?;
     let mut cf = [ConversionFunction::<f64>::default(); 3];
@@ -1390,19 +1420,19 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
         for (n, x) in a.iter_mut().enumerate() {
             let lim = coefficient_limit(n as u8);
             let at = VIBRATION_HEADER_BYTES + CONVERSION_FUNCTION_BYTES * axis + 8 * n;
-            *x = p.value_in(at, Field::VibCoef { axis: axis as u8, coef: n as u8 }, -lim, lim)?;
+            p.value_in(x, at, Field::VibCoef { axis: axis as u8, coef: n as u8 }, -lim, lim)?;
         }
         *c = ConversionFunction::from_array(&a);
     }
     let mut out = VibrationParams::new(cf, variant);
-    let Some(p) = Payload::get(blob, section::FLIGHT_PHASES) else { return Ok(Some(out)) };
+    let Some(p) = Payload::get(blob, section::FLIGHT_PHASES, err) else { return Ok(Some(out)) };
     if p.bytes.len() < PROFILES_HEADER_BYTES {
-        return Err(p.length_error());
+        return Err(p.fail(p.length_error()));
     }
     let count = p.byte(0);
     let n = count as usize;
     if !(1..=MAX_PROFILES).contains(&n) {
-        return Err(BlobError::ProfileCount { count, offset: p.base });
+        return Err(p.fail(BlobError::ProfileCount { count, offset: p.base }));
     }
     p.reserved_zero(1..PROFILES_HEADER_BYTES)?;
     p.expect_len(PROFILES_HEADER_BYTES + PROFILE_BYTES * n)?;
@@ -1410,7 +1440,6 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
         let at = PROFILES_HEADER_BYTES + PROFILE_BYTES * i;
         let profile = i as u8;
         let v = at + 8;
-        let freq_ok = |x: f64| (0.0..=limits::FREQ_MAX_HZ).contains(&x);
         let kind = p.byte(at);
         p.reserved_zero(at + 1..at + 8)?;
         *slot = match kind {
@@ -1421,24 +1450,34 @@ fn parse_vibration(blob: &Blob<'_>) -> Result<Option<VibrationParams>, BlobError
             PROFILE_SINE => {
                 let mut amp_g = [0.0; 3];
                 for (j, a) in amp_g.iter_mut().enumerate() {
-                    *a =
-                        p.value_in(v + 8 * j, Field::ProfileAmp { profile, axis: j as u8 }, -MAX_LEVEL_G, MAX_LEVEL_G)?;
+                    p.value_in(a, v + 8 * j, Field::ProfileAmp { profile, axis: j as u8 }, -MAX_LEVEL_G, MAX_LEVEL_G)?;
                 }
-                let freq_hz = p.value_in(v + 24, Field::ProfileFreq { profile }, 0.0, limits::FREQ_MAX_HZ)?;
+                let mut freq_hz = 0.0;
+                p.value_in(&mut freq_hz, v + 24, Field::ProfileFreq { profile }, 0.0, limits::FREQ_MAX_HZ)?;
                 p.reserved_zero(v + 32..v + 40)?;
                 Vibration::Harmonic { amp_g, freq_hz }
             }
             PROFILE_RANDOM => {
                 let mut sigma_g = [0.0; 3];
                 for (j, s) in sigma_g.iter_mut().enumerate() {
-                    *s = p.value_in(v + 8 * j, Field::ProfileSigma { profile, axis: j as u8 }, 0.0, MAX_LEVEL_G)?;
+                    p.value_in(s, v + 8 * j, Field::ProfileSigma { profile, axis: j as u8 }, 0.0, MAX_LEVEL_G)?;
                 }
-                let lo = p.value_in(v + 24, Field::ProfileBand { profile, end: 0 }, 0.0, limits::FREQ_MAX_HZ)?;
-                let hi = p.value(v + 32, Field::ProfileBand { profile, end: 1 }, |x| freq_ok(x) && x > lo)?;
+                let mut lo = 0.0;
+                p.value_in(&mut lo, v + 24, Field::ProfileBand { profile, end: 0 }, 0.0, limits::FREQ_MAX_HZ)?;
+                let field = Field::ProfileBand { profile, end: 1 };
+                let mut hi = 0.0;
+                p.value_in(&mut hi, v + 32, field, 0.0, limits::FREQ_MAX_HZ)?;
+                if !lt(lo, hi) {
+                    return Err(p.fail(BlobError::OutOfRange { field, offset: p.base + v + 32 }));
+                }
                 Vibration::Random { sigma_g, band_hz: (lo, hi) }
             }
             code => {
-                return Err(BlobError::BadCode { field: Field::ProfileKind { profile }, offset: p.base + at, code });
+                return Err(p.fail(BlobError::BadCode {
+                    field: Field::ProfileKind { profile },
+                    offset: p.base + at,
+                    code,
+                }));
             }
         };
     }

@@ -24,6 +24,7 @@
 //! - K(T) singular at the current temperature (method 1; load-time checks make this
 //!   practically unreachable): the T0 inverse is used, flagged [`Status::SINGULAR_AT_TEMP`].
 
+use crate::float::cmp_f64::{eq, le, lt};
 use crate::float::{self, Float};
 use crate::linalg::{self, Mat3, Vec3};
 use crate::model::Constants;
@@ -211,12 +212,12 @@ impl CalibrationParams {
             return Err(CalibrationError::SingularK);
         }
         let k = &constants.k_v_per_g;
-        if k[0][0] == 0.0 || k[1][1] == 0.0 || k[2][2] == 0.0 {
+        if eq(k[0][0], 0.0) || eq(k[1][1], 0.0) || eq(k[2][2], 0.0) {
             return Err(CalibrationError::ZeroScaleFactor);
         }
         p.model.check().map_err(CalibrationError::TempModel)?;
         let (lo, hi) = p.temp_range_c;
-        if !(lo.is_finite() && hi.is_finite() && p.t0_c.is_finite() && lo < hi && lo <= p.t0_c && p.t0_c <= hi) {
+        if !(lo.is_finite() && hi.is_finite() && p.t0_c.is_finite() && lt(lo, hi) && le(lo, p.t0_c) && le(p.t0_c, hi)) {
             return Err(CalibrationError::BadRange);
         }
         let (model, t0_c) = (p.model.cast::<f32>(), f32::from_f64(p.t0_c));
@@ -230,7 +231,7 @@ impl CalibrationParams {
         }
         if let TempModel::Pwl { n_knots, knots_c, .. } = &p.model {
             for &kn in knots_c.iter().take(*n_knots as usize) {
-                if kn > lo && kn < hi {
+                if lt(lo, kn) && lt(kn, hi) {
                     check_k_at(&c, &model, t0_c, f32::from_f64(kn))?;
                 }
             }
@@ -338,6 +339,11 @@ pub struct Calibration<F> {
     /// 1/K_ii at T0 ([`float::recip`] in `f64`, rounded).
     inv_diag: Vec3<F>,
     model: TempModel<F>,
+    /// The model of method 1's (and the linearised form's) terms: each set's ΔU0 kept, its
+    /// ΔK/K replaced by `X_c = N·(K ∘ c)`. X(T) = N·ΔK(T) is linear in the sets, so a new
+    /// reading evaluates it directly, without forming ΔK(T) and the product (N with its
+    /// diagonal's hi part, as in [`at_temperature`](Self::at_temperature)).
+    model_x: TempModel<F>,
     method: Method,
     temp_min_c: F,
     temp_max_c: F,
@@ -421,14 +427,17 @@ impl<F: Float> Calibration<F> {
         let constants = p.constants;
         let (lo, hi) = p.temp_range_c;
         let (n, n_diag_lo) = inverse_hi_lo(&constants.k_v_per_g).ok_or(CalibrationError::SingularK)?;
-        let k: Mat3<F> = linalg::cast_mat(&constants.k_v_per_g);
         let constants_f: Constants<F> = constants.cast();
+        let k = &constants_f.k_v_per_g;
         let mut lin0 = n;
         for (i, row) in lin0.iter_mut().enumerate() {
             if let (Some(x), Some(&lo)) = (row.get_mut(i), n_diag_lo.get(i)) {
                 *x = lo;
             }
         }
+        let model: TempModel<F> = p.model.cast();
+        let model_x =
+            model.map_sets(|c| CoefDelta { du0_v: c.du0_v, rel_k: linalg::mat_mul_fused(&n, &delta_k(k, c)) });
         Ok(Calibration {
             t0_c: F::from_f64(p.t0_c),
             constants: constants_f,
@@ -436,7 +445,8 @@ impl<F: Float> Calibration<F> {
             lin0,
             neg_offset0_g: neg_offset(&n, &lin0, &constants_f.u0_v, &[F::ZERO; 3]),
             inv_diag: [0, 1, 2].map(|i| float::recip(k[i][i])),
-            model: p.model.cast(),
+            model,
+            model_x,
             method: p.method,
             temp_min_c: F::from_f64(lo),
             temp_max_c: F::from_f64(hi),
@@ -458,6 +468,7 @@ impl<F: Float> Calibration<F> {
             neg_offset0_g: [F::ZERO; 3],
             inv_diag: [F::ONE; 3],
             model: TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] },
+            model_x: TempModel::Poly { order: 1, coef: [CoefDelta::zero(); 4] },
             method: Method::Uncorrected,
             temp_min_c: F::from_f64(-1.0e30),
             temp_max_c: F::from_f64(1.0e30),
@@ -595,15 +606,17 @@ impl<F: Float> Calibration<F> {
         if self.method == Method::Uncorrected {
             return at;
         }
-        let d = self.model.delta(t, self.t0_c);
+        // Method 1 and the linearised form: ΔU0 and X = N·ΔK from their own model.
+        let uses_x = matches!(self.method, Method::CoefficientCorrection | Method::OutputCorrection(Form::Linearized));
+        let d = if uses_x { &self.model_x } else { &self.model }.delta(t, self.t0_c);
         let n = &self.n_g_per_v;
         let k = &self.constants.k_v_per_g;
         match self.method {
             Method::Uncorrected => {}
             Method::CoefficientCorrection => {
                 let u0 = linalg::vec_add(&self.constants.u0_v, &d.du0_v);
-                let x = linalg::mat_mul_fused(n, &delta_k(k, &d));
-                match identity_minus_inverse(&x, F::from_f64(linalg::MIN_HADAMARD_RATIO)) {
+                let x = &d.rel_k;
+                match identity_minus_inverse(x, F::from_f64(linalg::MIN_HADAMARD_RATIO)) {
                     Some(m) => at.lin = linalg::mat_mul_sub(&m, n, &at.lin),
                     None => at.status.insert(Status::SINGULAR_AT_TEMP),
                 }
@@ -612,10 +625,10 @@ impl<F: Float> Calibration<F> {
             Method::OutputCorrection(Form::Linearized) => {
                 // A = N + D with D = −X·N, X = N·ΔK; −c = −c₀ + b − D·U0 with b = −N·ΔU0 and
                 // D·U0 = X·c₀.
-                let x = linalg::mat_mul_fused(n, &delta_k(k, &d));
+                let x = &d.rel_k;
                 let nd = linalg::mat_vec_fused(n, &d.du0_v);
-                at.lin = linalg::mat_sub(&at.lin, &linalg::mat_mul_fused(&x, n));
-                let xc = linalg::mat_vec_fused(&x, &self.neg_offset0_g);
+                at.lin = linalg::mat_sub(&at.lin, &linalg::mat_mul_fused(x, n));
+                let xc = linalg::mat_vec_fused(x, &self.neg_offset0_g);
                 for i in 0..3 {
                     at.neg_offset_g[i] -= nd[i] + xc[i];
                 }

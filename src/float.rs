@@ -221,6 +221,53 @@ pub fn recip<F: Float>(x: F) -> F {
     r1 + r1 * (F::ONE - x * r1)
 }
 
+/// `f64` comparisons by the bits, for the load-time checks: the target has no `f64`
+/// arithmetic, and the soft-float comparison routines would cost it flash for a few tests at
+/// boot. Each is the IEEE comparison (−0 equal to +0, false when either side is NaN), here
+/// and on the host alike.
+pub mod cmp_f64 {
+    use core::cmp::Ordering;
+
+    /// An integer in the order of the values: the magnitude's bits, negated for a negative
+    /// sign (−0 and +0 both 0; NaN orders beyond ±∞, which is why the tests below exclude it).
+    #[inline(always)]
+    fn key(x: f64) -> i64 {
+        let b = x.to_bits() as i64;
+        if b < 0 { -(b & i64::MAX) } else { b }
+    }
+
+    /// Not NaN.
+    #[inline(always)]
+    fn ordered(x: f64) -> bool {
+        x.to_bits() & !(1 << 63) <= 0x7ff0_0000_0000_0000
+    }
+
+    /// `a.partial_cmp(&b)`: one out-of-line copy for the tests below.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
+    fn order(a: f64, b: f64) -> Option<Ordering> {
+        if ordered(a) && ordered(b) { Some(key(a).cmp(&key(b))) } else { None }
+    }
+
+    /// `a < b`.
+    #[inline(always)]
+    pub fn lt(a: f64, b: f64) -> bool {
+        order(a, b) == Some(Ordering::Less)
+    }
+
+    /// `a <= b`.
+    #[inline(always)]
+    pub fn le(a: f64, b: f64) -> bool {
+        matches!(order(a, b), Some(Ordering::Less | Ordering::Equal))
+    }
+
+    /// `a == b`.
+    #[inline(always)]
+    pub fn eq(a: f64, b: f64) -> bool {
+        order(a, b) == Some(Ordering::Equal)
+    }
+}
+
 /// Knuth's TwoSum: `s + e = a + b` exactly, `s = fl(a + b)`.
 #[inline(always)]
 pub fn two_sum<F: Float>(a: F, b: F) -> (F, F) {

@@ -6,6 +6,7 @@
 //! model works with any method.
 
 use crate::float::Float;
+use crate::float::cmp_f64::lt;
 use crate::linalg::{Mat3, Vec3};
 
 /// Highest polynomial order supported, T(3).
@@ -118,9 +119,11 @@ impl<F: Float> TempModel<F> {
             TempModel::Poly { order, coef } => {
                 let n = (*order as usize).min(MAX_POLY_ORDER);
                 let dt = temp_c - t0_c;
-                // Horner: ΔT·(c1 + ΔT·(c2 + …)), each step one fused multiply-add.
-                let mut acc = [F::ZERO; 12];
-                for c in coef.iter().take(n).rev() {
+                // Horner: ΔT·(c1 + ΔT·(c2 + …)), each step one fused multiply-add, from the
+                // highest term's coefficients (a model has at least one term).
+                let mut sets = coef.iter().take(n).rev();
+                let mut acc = sets.next().map_or([F::ZERO; 12], CoefDelta::to_array);
+                for c in sets {
                     for (a, c) in acc.iter_mut().zip(c.to_array()) {
                         *a = a.mul_add(dt, c);
                     }
@@ -170,10 +173,26 @@ impl<F: Float> TempModel<F> {
         if !sets.iter().all(CoefDelta::is_finite) || !knots.iter().all(|k| k.is_finite()) {
             return Err(TempModelError::NonFinite);
         }
-        if knots.windows(2).any(|w| matches!(w, [a, b] if !(b > a))) {
+        // Compared by the bits (exact: `to_f64` widens), no soft-float `f64` comparison.
+        if knots.windows(2).any(|w| matches!(w, [a, b] if !lt(a.to_f64(), b.to_f64()))) {
             return Err(TempModelError::KnotsNotIncreasing);
         }
         Ok(())
+    }
+
+    /// The same model with each coefficient set (each term's, or each knot's) mapped by `f`:
+    /// for a quantity linear in the sets, its own model (the knots kept).
+    #[cfg_attr(unstable_target, optimize(size))]
+    pub fn map_sets(&self, f: impl Fn(&CoefDelta<F>) -> CoefDelta<F>) -> Self {
+        let mut out = *self;
+        let sets: &mut [CoefDelta<F>] = match &mut out {
+            TempModel::Poly { coef, .. } => coef,
+            TempModel::Pwl { at_knot, .. } => at_knot,
+        };
+        for c in sets {
+            *c = f(c);
+        }
+        out
     }
 
     /// Converts between float types.

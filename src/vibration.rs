@@ -633,15 +633,23 @@ pub struct VibrationConfig<F> {
 
 impl<F: Float> VibrationConfig<F> {
     /// Validates `p` ([`VibrationParams::validate`]) and casts it to the working precision.
-    #[inline(never)]
-    #[cfg_attr(unstable_target, optimize(size))]
     pub fn new(p: &VibrationParams) -> Result<Self, VibrationConfigError> {
         p.validate()?;
+        Ok(Self::from_validated(p))
+    }
+
+    /// `p` cast to the working precision, without [`VibrationParams::validate`]: for
+    /// parameters already checked value by value, as the blob parser does (its checks imply
+    /// `validate`'s; a property test in the host tests holds them so). The image that loads
+    /// a blob then needs no second, `f64` copy of the checks.
+    #[inline(never)]
+    #[cfg_attr(unstable_target, optimize(size))]
+    pub fn from_validated(p: &VibrationParams) -> Self {
         let mut profiles = [Vibration::None; MAX_PROFILES];
         for (src, dst) in p.profiles.iter().zip(profiles.iter_mut()).take(p.n_profiles as usize) {
             *dst = src.cast();
         }
-        Ok(VibrationConfig { cf: p.cf.map(|c| c.cast()), variant: p.variant, n_profiles: p.n_profiles, profiles })
+        VibrationConfig { cf: p.cf.map(|c| c.cast()), variant: p.variant, n_profiles: p.n_profiles, profiles }
     }
 
     /// No VE model: every coefficient zero, no profiles; predicts zero.

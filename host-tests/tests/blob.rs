@@ -1060,6 +1060,50 @@ proptest! {
     }
 }
 
+/// A value written over one of the vibration sections' numbers: often within the limits,
+/// sometimes just outside, negative, zero of either sign or not finite.
+fn arb_vib_value() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        4 => -10.0f64..=10.0,
+        1 => 0.0f64..=2e5,
+        1 => prop::sample::select(vec![0.0, -0.0, 10.0, -10.0, 10.000001, 1e5, 1.00000001e5, 1e-3, 1.1e-2]),
+        1 => prop::sample::select(vec![f64::NAN, f64::INFINITY, f64::NEG_INFINITY, f64::MIN_POSITIVE / 2.0]),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(512))]
+    /// The parser checks the vibration sections value by value and does not run
+    /// `VibrationParams::validate` again: whatever the sections hold, a blob it accepts
+    /// passes `validate`, and its configuration is `VibrationConfig::new`'s.
+    #[test]
+    fn vibration_parser_accepts_only_what_validate_accepts(
+        coefs in prop::collection::vec(prop::option::weighted(0.03, arb_vib_value()), 30),
+        values in prop::collection::vec(prop::option::weighted(0.4, arb_vib_value()), 5 * 8),
+    ) {
+        let mut b = typical_vib();
+        let at = payload_offset(&b, section::VIBRATION);
+        for (n, x) in coefs.iter().enumerate() {
+            if let Some(x) = x {
+                put_f64(&mut b, at + 8 + 8 * n, *x);
+            }
+        }
+        let at = payload_offset(&b, section::FLIGHT_PHASES);
+        for (n, x) in values.iter().enumerate() {
+            // Profile n / 5, its value n % 5 (after the kind's 8 bytes).
+            if let Some(x) = x {
+                put_f64(&mut b, at + 8 + 48 * (n / 5) + 8 + 8 * (n % 5), *x);
+            }
+        }
+        seal(&mut b);
+        if let Ok(parsed) = blob::parse(&b) {
+            let v = parsed.vibration.expect("vibration section");
+            prop_assert_eq!(v.validate(), Ok(()));
+            prop_assert_eq!(parsed.vibration_config::<f32>(), Ok(VibrationConfig::new(&v).unwrap()));
+        }
+    }
+}
+
 // ---- thermal dynamics (section 0x0007) -----------------------------------------------------
 
 /// A unit with every stage of the thermal dynamics on.

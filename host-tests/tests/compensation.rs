@@ -390,3 +390,36 @@ fn an_f64_split_into_two_f32_holds_it_to_2_pow_minus_47() {
     assert_eq!(<f32 as Float>::split_f64(0.0), (0.0, 0.0));
     assert_eq!(<f32 as Float>::split_f64(1e-25).1, 0.0);
 }
+
+#[test]
+fn f64_comparisons_by_the_bits_are_the_ieee_ones() {
+    // `float::cmp_f64` (the load-time checks of the target, without soft-float comparisons)
+    // against the language's own `<`, `<=`, `==` on every pair of special values, their
+    // neighbours and a spread of magnitudes of both signs.
+    use bins_comp::float::cmp_f64;
+    let mut xs = vec![
+        0.0,
+        -0.0,
+        f64::MIN_POSITIVE,
+        f64::from_bits(1),
+        f64::MAX,
+        f64::INFINITY,
+        f64::NAN,
+        -f64::NAN,
+        f64::from_bits(0x7ff0_0000_0000_0001),
+        f64::from_bits(0x7ff8_dead_beef_0000),
+    ];
+    let mut m = 1e-310f64;
+    while m < 1e300 {
+        xs.extend([m, m.next_up(), m.next_down()]);
+        m *= 7.3;
+    }
+    xs.extend(xs.clone().iter().map(|x| -x));
+    for &a in &xs {
+        for &b in &xs {
+            assert_eq!(cmp_f64::lt(a, b), a < b, "{a:e} < {b:e}");
+            assert_eq!(cmp_f64::le(a, b), a <= b, "{a:e} <= {b:e}");
+            assert_eq!(cmp_f64::eq(a, b), a == b, "{a:e} == {b:e}");
+        }
+    }
+}

@@ -156,7 +156,8 @@ impl Xtask {
     /// diagnosis's wall time on 30 000- and 260 000-row pairs against its budgets, and the CPU
     /// time and peak memory of `calibrate` and `verify` on a simulated day at 100 Hz against
     /// theirs. `--only N` runs step N alone, after step 1 (the toolchain) for the firmware's
-    /// steps 2 to 4.
+    /// steps 2 to 4 and step 2 (the images' build) for steps 3 and 4, so that they measure
+    /// the tree as it is.
     pub(crate) fn bench(&mut self, args: &[String]) -> bool {
         let only = match args {
             [] => None,
@@ -174,8 +175,11 @@ impl Xtask {
         };
         let started = Instant::now();
         let mut ok = true;
-        // The firmware's steps need the toolchain that step 1 finds or installs.
-        let wanted = |n: usize| only.is_none_or(|k| k == n || (n == 1 && (2..=4).contains(&k)));
+        // The firmware's steps need the toolchain that step 1 finds or installs, and steps 3
+        // and 4 the images that step 2 builds (the replay firmware is one of step 4's).
+        let wanted = |n: usize| {
+            only.is_none_or(|k| k == n || (n == 1 && (2..=4).contains(&k)) || (n == 2 && (3..=4).contains(&k)))
+        };
         for &(n, name, f) in BENCH_STEPS.iter().filter(|s| wanted(s.0)) {
             ok = self.step(n, name, f);
             if !ok {
