@@ -958,23 +958,17 @@ fn separability_of(ctx: &Context, fit: &AxisFit) -> Vec<(Mech, Vec<(Mech, f64)>)
                 add(other.mech, d);
             }
         }
-        // Or the rest of that lag's or play's shape: its state carried through the unpowered
-        // gaps. And any lag or play, selected or not, with a gain that varies with temperature
-        // (in one orientation an additive play is a play through the sensitivity whose gain
-        // follows the temperature).
+        // Or the rest of that lag's or play's shape: a gain varying with temperature, or its
+        // state carried through the unpowered gaps.
         for (j, other) in fit.terms.iter().enumerate() {
-            if j != k
-                && matches!(other.mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis)
-                && let Some(d) = refit.carried_across_sessions(other.mech)
+            if j == k || !matches!(other.mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis) {
+                continue;
+            }
+            for d in [refit.gain_with_temperature(other.mech), refit.carried_across_sessions(other.mech)]
+                .into_iter()
+                .flatten()
             {
                 add(other.mech, d);
-            }
-        }
-        for m in [Mech::ThermalLag, Mech::ThermalHysteresis, Mech::BiasHysteresis] {
-            if m != term.mech
-                && let Some(d) = refit.gain_with_temperature(m)
-            {
-                add(m, d);
             }
         }
         rivals.sort_by(|x, y| x.1.total_cmp(&y.1));
