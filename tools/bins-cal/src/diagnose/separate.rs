@@ -169,8 +169,7 @@ impl<'c, 'p> Refit<'c, 'p> {
         let mut best = f64::INFINITY;
         for rho in [0.3, 1.0, DIE_RISE_MAX_C] {
             for &tau in &taus {
-                let temp: Vec<f64> =
-                    ctx.p.temp_s.iter().zip(power).map(|(t, p)| t - rho * (-p / tau).exp_m1()).collect();
+                let temp = die_temperature(&ctx.p.temp_s, power, rho, tau);
                 for &th in &thetas {
                     let s = self.sse(&ctx.columns_at(rival, th, &temp));
                     best = best.min(s / self.scale);
@@ -204,15 +203,13 @@ impl Refit<'_, '_> {
             return None;
         }
         let rhos: &[f64] = match mech {
-            Mech::ThermalLag => &[1.0],
             Mech::ThermalHysteresis | Mech::BiasHysteresis => &[0.3, 1.0, DIE_RISE_MAX_C],
             _ => &[1.0],
         };
         let mut best: Option<f64> = None;
         for &rho in rhos {
             let columns = |tau: f64| -> Vec<Vec<f64>> {
-                let temp: Vec<f64> =
-                    ctx.p.temp_s.iter().zip(power).map(|(t, p)| t - rho * (-p / tau).exp_m1()).collect();
+                let temp = die_temperature(&ctx.p.temp_s, power, rho, tau);
                 let cols = ctx.columns_at(mech, theta.unwrap_or(0.0), &temp);
                 let mut d: Vec<f64> = contribution.iter().map(|v| -v).collect();
                 for (c, b) in cols.iter().zip(coef) {
@@ -324,6 +321,12 @@ impl Refit<'_, '_> {
         };
         self.deviance(&grid, &|th| ctx.offered(Mech::SelfHeating, th), &columns).map(|s| s.deviance)
     }
+}
+
+/// The die's temperature when it runs `rho` °C above the thermistor's `temp` once settled,
+/// rising as `1 − e^(−P/τ)` after each power-on (`power`: `power_s`).
+fn die_temperature(temp: &[f64], power: &[f64], rho: f64, tau: f64) -> Vec<f64> {
+    temp.iter().zip(power).map(|(t, p)| t - rho * (-p / tau).exp_m1()).collect()
 }
 
 /// The deviance the rival `rival` (one mechanism, θ searched on its grid where it has one)
