@@ -249,11 +249,11 @@ impl<F: Float> Pipeline<F> {
     }
 
     /// The same pipeline evaluating the temperature model at the exact effective temperature
-    /// on every sample (no rounding to [`TEMP_EFF_STEP_C`], the self-heating term advanced on
-    /// every sample, [`FixedRate::heating_every_sample`]): the reference the rounded one is tested against.
+    /// on every sample (no rounding to [`TEMP_EFF_STEP_C`], the stages run on every sample,
+    /// [`FixedRate::every_sample`]): the reference the rounded, held one is tested against.
     pub fn exact_effective_temperature(mut self) -> Self {
         self.round_c = F::ZERO;
-        self.dynamics = self.dynamics.map(|d| d.heating_every_sample());
+        self.dynamics = self.dynamics.map(|d| d.every_sample());
         self
     }
 
