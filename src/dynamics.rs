@@ -30,22 +30,23 @@
 //!
 //! Two ways to run it: [`ThermalDynamics::step`] with any period and the time since
 //! power-on (host tools; the gains and the self-heating term are computed in the call), and
-//! [`FixedRate`], the same stages with the constants of one fixed period precomputed
-//! ([`ThermalDynamics::at_rate`]) and the self-heating term advanced recursively every
-//! N = [`HEATING_EVERY`] samples, `s ← s + (ΔT_sh − s)·(1 − e^(−N·Δt/τ_sh))`, which after k
-//! updates is `ΔT_sh·(1 − e^(−k·N·Δt/τ_sh))` (the closed form at `t_on = k·N·Δt`, time counted
-//! from the first finite reading), held in between: within `|ΔT_sh|·(N − 1)·Δt/τ_sh` of the
-//! closed form at the sample's own time (7.5·10⁻⁵ °C for 1.5 °C, τ_sh = 300 s at 1 kHz), with
-//! no exponential per sample. The sampling interrupt uses [`FixedRate`];
-//! [`FixedRate::heating_every_sample`] advances the term on every sample (the tests' reference).
+//! [`FixedRate`] ([`ThermalDynamics::at_rate`]), the same stages run once every
+//! N = [`UPDATE_EVERY`] samples with the gains of N periods precomputed, their output held in
+//! between: the lag by `x ← x + (T_th − x)·(1 − e^(−N·Δt/τ))`, N per-sample steps exactly for
+//! a reading held over them (a TMP117 gives a new reading every 16 samples at 1 kHz), and the
+//! self-heating term by `s ← s + (ΔT_sh − s)·(1 − e^(−N·Δt/τ_sh))`, which after k updates is
+//! `ΔT_sh·(1 − e^(−k·N·Δt/τ_sh))` (the closed form at `t_on = k·N·Δt`, time counted from the
+//! first finite reading): within `|ΔT_sh|·(N − 1)·Δt/τ_sh` of the closed form at the sample's
+//! own time (7.5·10⁻⁵ °C for 1.5 °C, τ_sh = 300 s at 1 kHz), with no exponential and, on 15
+//! samples of 16, no arithmetic. The sampling interrupt uses [`FixedRate`];
+//! [`FixedRate::every_sample`] runs the stages on every sample (the tests' reference), and
+//! [`FixedRate::step`] bounds the difference.
 //!
-//! Precision: the lagged temperature is kept as a double-word (hi + lo, compensated
-//! summation). Its increment per sample is small (1.7·10⁻⁵ of the gap at Δt = 1 ms, τ = 60
-//! s) beside the `f32` spacing of the temperature (3.8·10⁻⁶ °C at 50 °C), so a plain `f32`
-//! sum would lose a few per cent of each increment. [`FixedRate`] adds each increment to the
-//! low part and carries the low part into the high part every N samples (Fast2Sum): the low
-//! part then holds at most N increments, so it is rounded to 2⁻²⁴ of them in `f32`. The
-//! self-heating term is a double-word too (the high part is used).
+//! Precision: the lagged temperature is kept as a double-word (hi + lo, Fast2Sum). Its
+//! increment per update is small (2.7·10⁻⁴ of the gap at N·Δt = 16 ms, τ = 60 s; 1.7·10⁻⁵
+//! per sample) beside the `f32` spacing of the temperature (3.8·10⁻⁶ °C at 50 °C), so a plain
+//! `f32` sum would lose part of each increment. The self-heating term is a double-word too
+//! (the high part is used).
 //!
 //! A reading that is not a temperature (NaN, ±∞, or beyond ±[`MAX_READING_C`]): the state is
 //! not touched (the next good reading continues from it), and the reading is passed through
@@ -154,8 +155,10 @@ pub struct DynamicsState<F> {
     /// The self-heating term of [`FixedRate`], high and low part [°C] (advanced every N steps
     /// from power-on).
     heating: (F, F),
-    /// Steps of [`FixedRate`] until the self-heating term is next advanced.
+    /// Steps of [`FixedRate`] until its next update.
     countdown: u32,
+    /// [`FixedRate`]'s output at its last update, held until the next.
+    held: Effective<F>,
     /// A finite reading has set the lag and the plays.
     initialised: bool,
 }
@@ -169,6 +172,7 @@ impl<F: Float> DynamicsState<F> {
             bias_play: F::ZERO,
             heating: (F::ZERO, F::ZERO),
             countdown: 0,
+            held: Effective { temp_eff_c: F::ZERO, bias_play: F::ZERO },
             initialised: false,
         }
     }
@@ -191,7 +195,7 @@ impl<F: Float> DynamicsState<F> {
 }
 
 /// The output of one step.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Effective<F> {
     /// The effective temperature T_eff [°C] at which the temperature model is evaluated
     /// (the reading itself, non-finite, when the reading is).
@@ -393,7 +397,8 @@ impl<F: Float> ThermalDynamics<F> {
         if !(dt_s.is_finite() && dt_s > F::ZERO) {
             return Err(DynamicsError::SamplePeriod);
         }
-        let lag = lag_gain(dt_s, self.lag_tau_s);
+        let n = F::from_f64(UPDATE_EVERY as f64) * dt_s;
+        let lag = lag_gain(n, self.lag_tau_s);
         Ok(FixedRate {
             k: Constants {
                 lag_gain: lag,
@@ -402,19 +407,20 @@ impl<F: Float> ThermalDynamics<F> {
                 inv_bias_half_width: inv_half(self.bias_play_width_c),
             },
             lag: (lag < F::ONE) as u32,
-            heating_gain: lag_gain(F::from_f64(HEATING_EVERY as f64) * dt_s, self.self_heating_tau_s),
-            every: HEATING_EVERY,
+            heating_gain: lag_gain(n, self.self_heating_tau_s),
+            every: UPDATE_EVERY,
             params: *self,
             dt_s,
         })
     }
 }
 
-/// How often [`FixedRate`] advances the self-heating term \[samples\]: it is held over
-/// N = 16 samples, where it moves by at most |ΔT_sh|·(1 − e^(−(N−1)·Δt/τ_sh)) ≤
-/// |ΔT_sh|·(N − 1)·Δt/τ_sh (7.5·10⁻⁵ °C for 1.5 °C, τ_sh = 300 s at 1 kHz; with τ_sh = 0 it is
-/// ΔT_sh from the second sample on, as without the hold).
-pub const HEATING_EVERY: u32 = 16;
+/// How often [`FixedRate`] runs the stages \[samples\]: once every N = 16 samples, with the
+/// gains of N periods, and the effective temperature and the bias-play fraction held in
+/// between (the TMP117 at its fastest conversion cycle gives a new reading every 15.5 ms, 16
+/// samples at 1 kHz). The held output is the per-sample stages' at the update's time for a
+/// reading held over the N periods before it (see [`FixedRate::step`] for the bound).
+pub const UPDATE_EVERY: u32 = 16;
 
 /// `x ← x + (target − x)·gain` on a double-word `x` = (hi, lo): the low part is carried
 /// into the increment and the sum's rounding error becomes the new low part, so an
@@ -486,18 +492,19 @@ impl<F: Float> Constants<F> {
     }
 }
 
-/// [`ThermalDynamics`] at one fixed sample period: the gains precomputed, the self-heating
-/// term advanced recursively every N steps from the first finite reading (module docs). A few additions, multiplies
-/// and compares per sample, no exponential.
+/// [`ThermalDynamics`] at one fixed sample period: the gains of N = [`UPDATE_EVERY`] periods
+/// precomputed, the stages run once every N samples and their output held in between (module
+/// docs). Per sample a countdown and a comparison; no exponential.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FixedRate<F> {
+    /// The lag's, the plays' and the bias play's constants, the lag's gain of N periods.
     k: Constants<F>,
-    /// The lag is on (its gain below 1): 1, else 0 (a word: one integer test per sample).
+    /// The lag is on (its gain below 1): 1, else 0 (a word: the `Option` around the stages
+    /// keeps its own tag).
     lag: u32,
     /// `1 − e^(−N·Δt/τ_sh)` (1 for τ_sh = 0).
     heating_gain: F,
-    /// N: the self-heating term is advanced every N samples ([`HEATING_EVERY`]; 1 without
-    /// the hold).
+    /// N: the stages run every N samples ([`UPDATE_EVERY`]; 1 for the per-sample reference).
     every: u32,
     params: ThermalDynamics<F>,
     dt_s: F,
@@ -519,16 +526,18 @@ impl<F: Float> FixedRate<F> {
         &self.params.bias_play_g
     }
 
-    /// N: the self-heating term is advanced every N samples and held in between
-    /// ([`HEATING_EVERY`]).
-    pub fn heating_every(&self) -> u32 {
+    /// N: the stages run every N samples and their output is held in between
+    /// ([`UPDATE_EVERY`]).
+    pub fn every(&self) -> u32 {
         self.every
     }
 
-    /// The same stages with the self-heating term advanced on every sample (N = 1): the
-    /// recursion without the hold, the reference the held one is tested against.
-    pub fn heating_every_sample(mut self) -> Self {
+    /// The same stages run on every sample (N = 1, the gains of one period): the reference
+    /// the held ones are tested against.
+    pub fn every_sample(mut self) -> Self {
         self.every = 1;
+        self.k.lag_gain = lag_gain(self.dt_s, self.params.lag_tau_s);
+        self.lag = (self.k.lag_gain < F::ONE) as u32;
         self.heating_gain = lag_gain(self.dt_s, self.params.self_heating_tau_s);
         self
     }
@@ -536,81 +545,53 @@ impl<F: Float> FixedRate<F> {
     /// One sample (period `dt_s`): the thermistor reading [°C] to the effective temperature
     /// and the bias-play fraction.
     ///
-    /// The self-heating term is advanced by N samples ([`heating_every`](Self::heating_every))
-    /// every N steps from the first finite reading and held in between: step n (counted from
-    /// that reading) uses the closed form at `k·N·Δt`, k·N the first multiple of N from n on,
-    /// within the bound of [`HEATING_EVERY`] of the one at `n·Δt`. The lag's increments are
-    /// summed in its low part, carried into the high part on the same steps: the low part holds
-    /// at most N increments and the carry's residue, so its rounding is 2⁻²⁴ of those in `f32`.
+    /// The stages run on the first finite reading and then every N samples
+    /// ([`every`](Self::every)): the lag by its gain over N periods, `1 − e^(−N·Δt/τ)`, which
+    /// is N per-sample steps exactly for a reading held over them; the plays on the lagged
+    /// temperature and on `T_eff`; the self-heating term at the update's time `k·N·Δt`,
+    /// advanced by N periods after it. The output is held until the next update. A reading
+    /// that is not a temperature is passed through on its own sample (the calibration's policy
+    /// applies) and leaves the state untouched; the countdown runs on, and an update that
+    /// falls on such a reading waits for the next good one.
     ///
-    /// Out of line: inlined into the step, it costs the path without dynamics registers and
-    /// instructions (about 15 per sample in the benchmark).
-    #[inline(never)]
+    /// Against the stages run on every sample ([`every_sample`](Self::every_sample)), the held
+    /// `T_eff` at sample n (last update at m ≤ n, n − m < N) differs by at most
+    /// `D_u + D_x + D_T + |ΔT_sh|·(N − 1)·Δt/τ_sh`: `D_u` the largest change of the reading
+    /// over N − 1 samples (the update uses the reading at m for the N periods before it; the
+    /// lag and the plays do not enlarge a difference of their input), `D_x` the per-sample
+    /// lagged temperature's largest change over N − 1 samples (the play sees it at the
+    /// updates only), `D_T` the per-sample `T_eff`'s (the hold). For the TMP117 read every 16
+    /// samples, a 5 °C/min chamber ramp and τ = 60 s, all of it stays below 3 m°C (host tests,
+    /// `dynamics.rs`). The per-sample cost is a countdown, a comparison and two loads; the
+    /// update is out of line.
+    #[inline]
     pub fn step(&self, st: &mut DynamicsState<F>, temp_c: F) -> Effective<F> {
         let u = temp_c;
         // Not a temperature (NaN, ±∞, beyond ±1000 °C): passed through, the state untouched.
         // One comparison, false for NaN too.
         let good = u.abs() <= F::from_f64(MAX_READING_C);
-        // The high part: within half its spacing of hi + lo.
-        let heating = st.heating.0;
-        if st.countdown == 0 {
-            // Every N steps, and on each step before the first finite reading (the clock starts
-            // with it).
-            if !st.initialised {
-                if !good {
-                    return Effective { temp_eff_c: u, bias_play: F::ZERO };
-                }
-                // The lag and both plays set to the first reading (the path below then leaves
-                // them so: x = u, e = u, p = T_eff, d = 0).
-                st.lag = (u, F::ZERO);
-                st.play = u;
-                st.bias_play = u + heating;
-                st.initialised = true;
+        if st.countdown != 0 {
+            st.countdown -= 1;
+            if good {
+                return st.held;
             }
-            // The lag's low part carried into its high part (exact but within one increment of
-            // 0 °C, see `follow`).
-            st.lag = float::fast_two_sum(st.lag.0, st.lag.1);
-            // s ← s + (ΔT_sh − s)·g_N: after k updates ΔT_sh·(1 − (1 − g_N)ᵏ) = ΔT_sh·(1 − e^(−kNΔt/τ_sh)).
-            follow(&mut st.heating, self.params.self_heating_c, self.heating_gain);
-            st.countdown = self.every;
+        } else if good {
+            return self.update(st, u);
         }
-        st.countdown -= 1;
-        if !good {
-            return Effective { temp_eff_c: u, bias_play: F::ZERO };
-        }
-        let k = &self.k;
-        let x = if self.lag == 0 {
-            // Without the lag x is the reading (its low part stays 0 from the first reading).
-            st.lag.0 = u;
-            u
-        } else {
-            let (hi, lo) = st.lag;
-            let lo = lo + ((u - hi) - lo) * k.lag_gain;
-            st.lag.1 = lo;
-            hi + lo
-        };
-        let h = k.half_width_c;
-        let e = push(&mut st.play, x - h, x + h);
-        let t_eff = e + heating;
-        let hb = k.bias_half_width_c;
-        let p = push(&mut st.bias_play, t_eff - hb, t_eff + hb);
-        Effective { temp_eff_c: t_eff, bias_play: (p - t_eff) * k.inv_bias_half_width }
+        Effective { temp_eff_c: u, bias_play: F::ZERO }
     }
-}
 
-/// A play's output `y` pushed into `[lo, hi]` (`lo ≤ hi`): the clamp, by branches that store
-/// only when it moves (one comparison less than a clamp by selects when pushed from below,
-/// none more otherwise).
-#[inline(always)]
-fn push<F: Float>(y: &mut F, lo: F, hi: F) -> F {
-    let v = *y;
-    if v < lo {
-        *y = lo;
-        lo
-    } else if v > hi {
-        *y = hi;
-        hi
-    } else {
-        v
+    /// The stages over the N periods up to a good reading `u` (the first one sets them), the
+    /// self-heating term at this time, then advanced by N periods; the output held.
+    #[inline(never)]
+    fn update(&self, st: &mut DynamicsState<F>, u: F) -> Effective<F> {
+        // The term at this update's time k·N·Δt (k updates since the first reading).
+        let heating = st.heating.0;
+        let e = self.k.advance(st, u, heating, self.lag != 0);
+        // s ← s + (ΔT_sh − s)·g_N: after k updates ΔT_sh·(1 − (1 − g_N)ᵏ) = ΔT_sh·(1 − e^(−kNΔt/τ_sh)).
+        follow(&mut st.heating, self.params.self_heating_c, self.heating_gain);
+        st.held = e;
+        st.countdown = self.every.saturating_sub(1);
+        e
     }
 }

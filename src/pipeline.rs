@@ -19,14 +19,19 @@
 //!   back to the acceleration by the gain of each conversion function at the block mean
 //!   ([`output_gains`](VibrationConfig::output_gains); the AL-15 at 6 g magnifies the
 //!   vibration by 2.5 %, which would overstate the VE by 5 %); the exact moment form is used
-//!   and `a_p` is solved from the block mean the same way. The VE depends on the block alone,
-//!   so it is computed once per block, spread over four steps so that no step carries all of
-//!   it (the moments on the step after the one that completes the block, which adds the last
-//!   samples to the block's sums; one accelerometer's VE on each of the next three), and
-//!   subtracted from every sample from then until the next block's is ready. The window is
-//!   fed only while `Online` is selected and emptied by any other source, so after switching
-//!   to `Online` the first estimate comes four steps after the first complete block (flagged
-//!   not ready until then).
+//!   and `a_p` is solved from the block mean the same way. One block of `W` samples in
+//!   [`ONLINE_BLOCK_EVERY`] = 4 enters the window: after a completed block the next `3W`
+//!   samples are left out, so the window's sums and the VE cost a quarter of what every block
+//!   would, and an estimate is refreshed every `4W` samples (256 ms with the firmware's 64
+//!   samples at 1 kHz; at most `5W + 4` samples old, against `2W + 4` from every block;
+//!   flight-phase vibration changes over seconds). Each estimate is one block's, as it was.
+//!   The VE depends on the block alone, so it is computed once per estimated block, spread
+//!   over four steps so that no step carries all of it (the moments on the step after the
+//!   one that completes the block, which adds the last samples to the block's sums; one
+//!   accelerometer's VE on each of the next three), and subtracted from every sample from
+//!   then until the next estimate is ready. The window is fed only while `Online` is selected
+//!   and emptied by any other source, so after switching to `Online` the first estimate comes
+//!   four steps after the first complete block (flagged not ready until then).
 //!
 //! # Policies
 //!
@@ -129,6 +134,11 @@ const fn eq(a: &[u8], b: &[u8]) -> bool {
 /// stays within one step (see [`Pipeline::with_dynamics`]).
 pub const TEMP_EFF_STEP_C: f64 = 1.0 / 256.0;
 
+/// The online VE is estimated from one block of `W` samples in this many: after a completed
+/// block the next `(ONLINE_BLOCK_EVERY − 1)·W` samples are left out of the window (module
+/// docs, "Where the vibration comes from").
+pub const ONLINE_BLOCK_EVERY: usize = 4;
+
 /// The configuration of the per-sample step: calibration, VE model and thermal dynamics.
 /// Immutable after boot.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -160,6 +170,9 @@ pub struct PipelineState<F, const W: usize> {
     ve_work: u8,
     /// That block's VE in progress.
     next_ve: NextVe<F>,
+    /// Samples the online source leaves out of the window before its next block (set to
+    /// `(ONLINE_BLOCK_EVERY − 1)·W` by a completed block).
+    skip: u32,
     /// The online source has fed the window or set a VE since the last reset.
     online_used: bool,
     /// Temperature terms of the last reading.
@@ -183,6 +196,7 @@ impl<F: Float, const W: usize> PipelineState<F, W> {
             online_status: Status::VIBRATION_ESTIMATE_NOT_READY,
             ve_work: 0,
             next_ve: NextVe::ZERO,
+            skip: 0,
             online_used: false,
             temps: TempCache::new(),
             dynamics: DynamicsState::new(),
@@ -198,6 +212,7 @@ impl<F: Float, const W: usize> PipelineState<F, W> {
         self.online_ve_g = [F::ZERO; 3];
         self.online_status = Status::VIBRATION_ESTIMATE_NOT_READY;
         self.ve_work = 0;
+        self.skip = 0;
         self.online_used = false;
     }
 }
@@ -249,11 +264,11 @@ impl<F: Float> Pipeline<F> {
     }
 
     /// The same pipeline evaluating the temperature model at the exact effective temperature
-    /// on every sample (no rounding to [`TEMP_EFF_STEP_C`], the self-heating term advanced on
-    /// every sample, [`FixedRate::heating_every_sample`]): the reference the rounded one is tested against.
+    /// on every sample (no rounding to [`TEMP_EFF_STEP_C`], the stages run on every sample,
+    /// [`FixedRate::every_sample`]): the reference the rounded, held one is tested against.
     pub fn exact_effective_temperature(mut self) -> Self {
         self.round_c = F::ZERO;
-        self.dynamics = self.dynamics.map(|d| d.heating_every_sample());
+        self.dynamics = self.dynamics.map(|d| d.every_sample());
         self
     }
 
@@ -411,9 +426,14 @@ impl<F: Float> Pipeline<F> {
                     self.online_ve_work(state);
                 }
                 state.online_used = true;
-                // The sample is finite (`usable`).
-                if state.window.push_finite(&s.accel_g) == Pushed::BlockDone {
+                // One block in ONLINE_BLOCK_EVERY enters the window: the samples after a
+                // completed block are left out until the next block's first. The sample is
+                // finite (`usable`).
+                if state.skip != 0 {
+                    state.skip -= 1;
+                } else if state.window.push_finite(&s.accel_g) == Pushed::BlockDone {
                     state.ve_work = 1;
+                    state.skip = ((ONLINE_BLOCK_EVERY - 1) * W) as u32;
                 }
                 s.status.insert(state.online_status);
                 state.online_ve_g

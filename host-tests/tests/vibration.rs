@@ -1085,6 +1085,61 @@ fn pipeline_online_removes_the_ve_from_fast_samples() {
 }
 
 #[test]
+fn pipeline_online_estimates_from_one_block_in_four() {
+    // The same unit and vibration as above, its amplitude different in every block of W
+    // samples (1, 1.25, 1.5, … times `amp`): the VE subtracted at each sample is that of
+    // block 4j (the last of the blocks 0, 4, 8, … that completed four steps before), from the
+    // time-domain definition (`td_harmonic`), and never that of a block in between.
+    use bins_comp::pipeline::ONLINE_BLOCK_EVERY;
+    const W: usize = 2000;
+    let every = ONLINE_BLOCK_EVERY;
+    assert_eq!(every, 4);
+    let c = al15_csv().0;
+    let nl = |a: &[f64; 3], i: usize| {
+        au_unit(&c, a, i) - c[0] - ia_oa_pa(a, i).0 - c[6] * ia_oa_pa(a, i).1 - c[7] * ia_oa_pa(a, i).2
+    };
+    let p64 = pipeline::<f64>(Variant::Exact);
+    let a_p = [6.0, -0.2, 1.0];
+    let amp = [1.0, 0.75, -1.5];
+    let scale = |block: usize| 1.0 + 0.25 * block as f64;
+    let (fs, f, t) = (2000.0, 50.0, 25.0);
+    let blocks = 3 * every + 1;
+    // Each block's VE by the definition; on the two axes with a large VE, consecutive blocks'
+    // differ by far more than the tolerance, so the test tells them apart.
+    let ve_of: Vec<[f64; 3]> =
+        (0..blocks).map(|b| [0, 1, 2].map(|i| td_harmonic(&c, &a_p, &amp.map(|x| x * scale(b)), i))).collect();
+    for w in ve_of.windows(2) {
+        for i in [0, 2] {
+            assert!((w[1][i] - w[0][i]).abs() > 0.05 * w[0][i].abs(), "axis {i}: {w:?}");
+        }
+    }
+    let mut st = PipelineState::<f64, W>::new();
+    let ready = W + 3;
+    let (mut checked, mut worst) = (0usize, 0.0f64);
+    for k in 0..blocks * W {
+        let m = scale(k / W);
+        let s = (std::f64::consts::TAU * f * k as f64 / fs).sin();
+        let a: [f64; 3] = [0, 1, 2].map(|i| a_p[i] + m * amp[i] * s);
+        let out = [0, 1, 2].map(|i| a[i] + nl(&a, i) - nl(&a_p, i));
+        let (o, ve) = p64.step_with_ve(&mut st, signals(&out, t), t, VibrationSource::Online);
+        if k < ready {
+            assert_eq!(o.status, Status::VIBRATION_ESTIMATE_NOT_READY, "sample {k}");
+            continue;
+        }
+        assert_eq!(o.status, Status::OK, "sample {k}");
+        let block = (k - ready) / (every * W) * every;
+        for i in 0..3 {
+            let want = ve_of[block][i];
+            let e = (ve[i] - want).abs();
+            worst = worst.max(e / want.abs());
+            assert!(e < (0.005 * want.abs()).max(1e-7), "sample {k}, axis {i}: VE {} vs block {block}'s {want}", ve[i]);
+        }
+        checked += 1;
+    }
+    println!("online VE from one block in {every}: {checked} samples, worst relative error {worst:.2e}");
+}
+
+#[test]
 fn pipeline_status_policies() {
     let p = pipeline::<f32>(Variant::Exact);
     let mut st = PipelineState::<f32, 8>::new();

@@ -4,8 +4,10 @@
 //! (a tumbling window: no ring buffer, one accumulation per sample, no allocation).
 //!
 //! A block's moments are available from the sample that completes it until the next block
-//! completes, so an estimate is at most `2W` samples old (128 ms with the firmware's 64
-//! samples at 1 kHz); flight-phase vibration changes over seconds. A sliding window would
+//! completes, so an estimate is at most `2W` samples of the window old (the pipeline feeds
+//! it one block in four, [`ONLINE_BLOCK_EVERY`](crate::pipeline::ONLINE_BLOCK_EVERY): at most
+//! `5W` samples, 320 ms with the firmware's 64 at 1 kHz); flight-phase vibration changes over
+//! seconds. A sliding window would
 //! give a new estimate on every sample but costs three accumulations per sample (add the
 //! new sample, remove the oldest, and a drift-free second set) and `W` stored samples.
 //!
