@@ -96,3 +96,83 @@ fn nothing_to_separate_gives_no_proposal() {
     let dir = tempfile::tempdir().unwrap();
     assert!(propose::propose(&d, &twin(dir.path()), None, &|_, _| {}).unwrap().is_none());
 }
+
+/// Writes the case's SIM and REAL recordings and the twin (SIM's scenario) into `dir`;
+/// `real_has`: REAL with the warm-up and the lag, else a second SIM.
+fn files(dir: &Path, real_has: bool) -> [std::path::PathBuf; 3] {
+    let (s, r, t) = (dir.join("sim.csv"), dir.join("real.csv"), dir.join("twin.toml"));
+    std::fs::write(&t, scenario(false)).unwrap();
+    for (path, text, seed) in [(&s, scenario(false), "2"), (&r, scenario(real_has), "1")] {
+        let src = dir.join("src.toml");
+        std::fs::write(&src, text).unwrap();
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_bins-cal"))
+            .args(["simulate"])
+            .arg(&src)
+            .arg("-o")
+            .arg(path)
+            .args(["--seed", seed])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    }
+    [s, r, t]
+}
+
+fn diagnose_propose(dir: &Path, [s, r, t]: &[std::path::PathBuf; 3]) -> (String, serde_json::Value) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_bins-cal"))
+        .args(["diagnose", "--sim"])
+        .arg(s)
+        .arg("--real")
+        .arg(r)
+        .arg("--report")
+        .arg(dir.join("out.json"))
+        .arg("--propose")
+        .arg(dir.join("next.toml"))
+        .arg("--twin")
+        .arg(t)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    let v = serde_json::from_str(&std::fs::read_to_string(dir.join("out.json")).unwrap()).unwrap();
+    (stdout, v)
+}
+
+#[test]
+fn command_writes_the_best_as_a_scenario_the_simulator_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = files(dir.path(), true);
+    let (stdout, v) = diagnose_propose(dir.path(), &f);
+    assert!(stdout.contains("candidate 1: ") && stdout.contains("candidate 3: "), "{stdout}");
+    let next = dir.path().join("next.toml");
+    let best = &v["proposal"]["candidates"][0];
+    assert_eq!(v["proposal"]["file"].as_str(), Some(next.to_str().unwrap()));
+    assert!(best["name"].as_str().unwrap().contains("power"), "{best}");
+    assert!(dir.path().join("next.png").exists());
+    // The scenario runs, for as long as the proposal says, with a second power-on in it.
+    let csv = dir.path().join("next.csv");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_bins-cal"))
+        .arg("simulate")
+        .arg(&next)
+        .arg("-o")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let sim = ScenarioFile::read(&next).unwrap().build(&next).unwrap();
+    let hours = best["duration_h"].as_f64().unwrap();
+    assert!((sim.duration_s() / 3600.0 - hours).abs() < 1e-6, "{} h vs {hours} h", sim.duration_s() / 3600.0);
+    let rows = rows(&std::fs::read_to_string(&next).unwrap(), 1);
+    let restarts = rows.windows(2).filter(|w| w[1].power_s.unwrap() < w[0].power_s.unwrap()).count();
+    assert!(restarts >= 1, "a power cycle in the proposed test");
+}
+
+#[test]
+fn command_with_nothing_to_separate_writes_no_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = files(dir.path(), false);
+    let (stdout, v) = diagnose_propose(dir.path(), &f);
+    assert!(stdout.contains("nothing to separate"), "{stdout}");
+    assert!(!dir.path().join("next.toml").exists() && !dir.path().join("next.png").exists());
+    assert!(v["proposal"]["candidates"].as_array().unwrap().is_empty());
+}

@@ -368,18 +368,19 @@ pub struct Evidence {
     /// The candidate.
     pub candidate: Candidate,
     /// Per pair (as in [`pairs`]): the deviance the rival cannot absorb on the candidate (NaN
-    /// where the rival has no column on it).
+    /// where the rival has no column on it: it cannot mimic the term there, and counts as
+    /// separated).
     pub deviance: Vec<f64>,
     /// Whether every pair reaches what it needs.
     pub separates_all: bool,
-    /// The worst pair's deviance over what it needs.
+    /// The worst pair's deviance over what it needs (of the pairs whose rival has a column).
     pub worst_ratio: f64,
     /// `worst_ratio` per hour of test.
     pub worst_ratio_per_h: f64,
 }
 
 /// Rows of a candidate's design (its thermal path at the twin's physics, noise off).
-const DESIGN_ROWS: f64 = 8000.0;
+const DESIGN_ROWS: f64 = 4000.0;
 
 /// The design of candidate `c`: the twin's physics run on its program at a sample period of
 /// about its length over [`DESIGN_ROWS`] (no noise), prepared as the diagnosis prepares a pair;
@@ -505,6 +506,8 @@ pub fn rank(
         progress(i, n);
         let cp = design(twin, &c, dens)?;
         let deviance = evidence_on(d, &cp, pairs);
+        // A rival with no column on the test (a cross-axis term in one orientation) cannot
+        // mimic anything there: the test alone would never name it.
         let ratios: Vec<f64> =
             deviance.iter().zip(pairs).filter(|(v, _)| v.is_finite()).map(|(v, p)| v / p.needed).collect();
         if ratios.is_empty() {
@@ -513,7 +516,7 @@ pub fn rank(
         let worst = ratios.iter().copied().fold(f64::INFINITY, f64::min);
         let hours = c.duration_s() / 3600.0;
         out.push(Evidence {
-            separates_all: worst >= 1.0 && ratios.len() == pairs.len(),
+            separates_all: worst >= 1.0,
             worst_ratio: worst,
             worst_ratio_per_h: worst / hours,
             deviance,
@@ -552,4 +555,196 @@ pub fn propose(
     let cands = candidates(&limits, start, hold_s(d, &pairs));
     let ranked = rank(d, twin, &pairs, cands, progress)?;
     Ok(Some(Proposal { pairs, limits, ranked }))
+}
+
+/// The report's `proposal`: the limits, the pairs, every candidate with its length and its
+/// evidence per pair, best first, and the file written (`None`: nothing to separate).
+pub fn to_json(prop: Option<&Proposal>, file: Option<&Path>) -> serde_json::Value {
+    use serde_json::json;
+    let Some(p) = prop else {
+        return json!({ "pairs": [], "candidates": [], "note": "nothing to separate: no test proposed" });
+    };
+    let num = |v: f64| if v.is_finite() { json!(v) } else { serde_json::Value::Null };
+    let pairs: Vec<_> = p
+        .pairs
+        .iter()
+        .map(|q| {
+            json!({
+                "axis": prep::AXES[q.axis], "modelled": q.a.id(), "rival": q.b.id(),
+                "on_recording": num(q.recording), "needed": q.needed,
+            })
+        })
+        .collect();
+    let cands: Vec<_> = p
+        .ranked
+        .iter()
+        .map(|e| {
+            json!({
+                "name": e.candidate.name, "what": e.candidate.what,
+                "duration_h": e.candidate.duration_s() / 3600.0,
+                "separates_all": e.separates_all, "worst_ratio": num(e.worst_ratio),
+                "worst_ratio_per_h": num(e.worst_ratio_per_h),
+                "deviance": e.deviance.iter().map(|v| num(*v)).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    json!({
+        "limits": {
+            "chamber_min_C": p.limits.temp_min_c, "chamber_max_C": p.limits.temp_max_c,
+            "max_rate_C_per_min": p.limits.max_rate_c_per_min, "max_test_h": p.limits.max_duration_s / 3600.0,
+        },
+        "pairs": pairs,
+        "candidates": cands,
+        "file": file.map(|f| f.display().to_string()),
+    })
+}
+
+/// Least squares of `y` on `cols` (and a constant): the fitted values (`None` when singular).
+fn ls_fit(y: &[f64], cols: &[Vec<f64>]) -> Option<Vec<f64>> {
+    let n = y.len();
+    let mut x: Vec<Vec<f64>> = vec![vec![1.0; n]];
+    x.extend(cols.iter().cloned());
+    let k = x.len();
+    let mut a = vec![vec![0.0; k + 1]; k];
+    for i in 0..k {
+        for j in 0..k {
+            a[i][j] = x[i].iter().zip(&x[j]).map(|(u, v)| u * v).sum();
+        }
+        a[i][k] = x[i].iter().zip(y).map(|(u, v)| u * v).sum();
+    }
+    let scale = (0..k).map(|i| a[i][i]).fold(0.0f64, f64::max);
+    for c in 0..k {
+        let piv = (c..k).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
+        a.swap(c, piv);
+        if !(a[c][c].abs() > 1e-12 * scale) {
+            return None;
+        }
+        for r in 0..k {
+            if r != c {
+                let f = a[r][c] / a[c][c];
+                let row_c = a[c].clone();
+                for (v, w) in a[r].iter_mut().zip(&row_c) {
+                    *v -= f * w;
+                }
+            }
+        }
+    }
+    let b: Vec<f64> = (0..k).map(|i| a[i][k] / a[i][i]).collect();
+    Some((0..n).map(|r| (0..k).map(|j| b[j] * x[j][r]).sum()).collect())
+}
+
+/// The plot of the best candidate: its temperature (`temp_C`, smoothed) and `power_s` against
+/// time, and below them, for its worst pair, what the modelled term predicts on that test (as
+/// fitted on the recording) beside the rival refitted to it (least squares, the rival's θ
+/// where the separability found it best; absent where the rival is not one of the library's
+/// mechanisms), in mg. PNG bytes, written by the caller with its other outputs.
+pub fn plot(d: &Diagnosis, twin: &Twin, prop: &Proposal, path: &Path) -> Result<Vec<u8>, DiagnoseError> {
+    use super::plot::{drawing_error, render_png};
+    use plotters::prelude::*;
+    use plotters::style::{FontStyle, register_font};
+    let _ = register_font("sans-serif", FontStyle::Normal, super::plot::FONT);
+    let best = prop.ranked.first().ok_or_else(|| DiagnoseError(format!("{}: no candidate", path.display())))?;
+    let cp = design(twin, &best.candidate, white_density(&d.prepared))?;
+    let k = (0..prop.pairs.len())
+        .filter(|&k| best.deviance[k].is_finite())
+        .min_by(|&i, &j| {
+            (best.deviance[i] / prop.pairs[i].needed).total_cmp(&(best.deviance[j] / prop.pairs[j].needed))
+        })
+        .unwrap_or(0);
+    let pair = prop.pairs[k];
+    let mut ctx = Context::new(&cp, pair.axis);
+    ctx.s = d.sensitivity[pair.axis].clone();
+    ctx.s_now = (0..cp.t.len()).map(|r| ctx.s.eval(cp.temp_s[r], &cp.f[r])).collect();
+    let fit = &d.axes[pair.axis];
+    let term = fit.terms.iter().find(|t| t.mech == pair.a);
+    let eta: Vec<f64> = match term {
+        Some(t) => super::separate::predict(
+            &ctx,
+            &[super::separate::Fitted { mech: t.mech, theta: t.theta, coef: t.coef.clone() }],
+        ),
+        None => vec![0.0; cp.t.len()],
+    };
+    let rival: Option<Vec<f64>> = {
+        let refit = super::separate::Refit::new(&ctx, fit.q, fit.deviance_scale, &eta, &ctx.nuisance);
+        refit.mechanism(pair.b).and_then(|s| {
+            let mut cols = ctx.columns(pair.b, s.rival_theta.unwrap_or(0.0));
+            cols.extend(ctx.nuisance.iter().cloned());
+            ls_fit(&eta, &cols)
+        })
+    };
+    let hours: Vec<f64> = cp.t.iter().map(|t| t / 3600.0).collect();
+    let power_h: Vec<f64> = cp.power.clone().unwrap_or_default().iter().map(|p| p / 3600.0).collect();
+    let rng = |v: &mut dyn Iterator<Item = f64>| {
+        let (a, b) =
+            v.filter(|x| x.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+        if b > a { (a - 0.05 * (b - a), b + 0.05 * (b - a)) } else { (a - 1.0, a + 1.0) }
+    };
+    let x1 = hours.last().copied().unwrap_or(1.0).max(1e-3);
+    let mg = |v: &[f64]| -> Vec<f64> {
+        let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
+        v.iter().map(|x| (x - m) * 1e3).collect()
+    };
+    let (ea, eb) = (mg(&eta), rival.as_deref().map(mg));
+    let c = &best.candidate;
+    render_png(path, (1000, 900), |root| {
+        let panels = root.split_evenly((3, 1));
+        type Panel<'a> = (&'a str, String, Vec<(f64, f64)>);
+        let series: [Panel; 2] = [
+            (
+                "temp_C [°C]",
+                format!("{}: {:.1} h — {}", c.name, c.duration_s() / 3600.0, c.what),
+                hours.iter().copied().zip(cp.temp_s.iter().copied()).collect(),
+            ),
+            ("power_s [h]", "time since power-on".into(), hours.iter().copied().zip(power_h.iter().copied()).collect()),
+        ];
+        for (area, (ylab, title, pts)) in panels.iter().zip(series) {
+            let (y0, y1) = rng(&mut pts.iter().map(|p| p.1));
+            let mut ch = ChartBuilder::on(area)
+                .caption(title, ("sans-serif", 15))
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0.0..x1, y0..y1)
+                .map_err(drawing_error)?;
+            ch.configure_mesh().x_desc("time [h]").y_desc(ylab).draw().map_err(drawing_error)?;
+            ch.draw_series(LineSeries::new(pts, RGBColor(31, 119, 180).stroke_width(2))).map_err(drawing_error)?;
+        }
+        let (y0, y1) = rng(&mut ea.iter().chain(eb.iter().flatten()).copied());
+        let mut ch = ChartBuilder::on(&panels[2])
+            .caption(
+                format!(
+                    "accelerometer {}: {} as fitted vs {} refitted (expected deviance {:.1}, a name needs {:.1})",
+                    prep::AXES[pair.axis],
+                    pair.a.id(),
+                    pair.b.id(),
+                    best.deviance[k],
+                    pair.needed
+                ),
+                ("sans-serif", 15),
+            )
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..x1, y0..y1)
+            .map_err(drawing_error)?;
+        ch.configure_mesh().x_desc("time [h]").y_desc("predicted [mg]").draw().map_err(drawing_error)?;
+        let ca = RGBColor(214, 39, 40);
+        ch.draw_series(LineSeries::new(hours.iter().copied().zip(ea.iter().copied()), ca.stroke_width(2)))
+            .map_err(drawing_error)?
+            .label(pair.a.id())
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], ca.stroke_width(2)));
+        if let Some(eb) = &eb {
+            let cb = RGBColor(44, 160, 44);
+            ch.draw_series(LineSeries::new(hours.iter().copied().zip(eb.iter().copied()), cb.stroke_width(2)))
+                .map_err(drawing_error)?
+                .label(format!("{} refitted", pair.b.id()))
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], cb.stroke_width(2)));
+        }
+        ch.configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(drawing_error)
+    })
 }
