@@ -208,7 +208,7 @@ pub fn hold_s(d: &Diagnosis, pairs: &[Pair]) -> f64 {
 /// ramps at two rates followed by a power cycle.
 pub fn candidates(lim: &Limits, start_c: f64, hold_s: f64) -> Vec<Candidate> {
     let (lo, hi) = (lim.temp_min_c, lim.temp_max_c);
-    let start = start_c.clamp(lo, hi);
+    let start = ((start_c * 10.0).round() / 10.0).clamp(lo, hi);
     let far = if (start - lo).abs() >= (hi - start).abs() { lo } else { hi };
     let mid = 0.5 * (start + far);
     let r = lim.max_rate_c_per_min;
