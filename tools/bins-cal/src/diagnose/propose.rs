@@ -8,11 +8,11 @@
 //!
 //! A candidate is a list of scenario steps (soaks at a rate of their own, power cycles, tilter
 //! runs), kept within the chamber's [`Limits`]. Its design is its thermal path simulated with
-//! the twin's thermal table (`bins-cal simulate` on the candidate, noise off), at a coarse
+//! the twin's tables (`bins-cal simulate` on the candidate), at a coarse
 //! sample period with the recording's white-noise density carried over, so the whitened metric
 //! is the recording's own. On that design `A`'s prediction with the coefficients fitted on this
 //! recording (SIM's sensitivity as the recording's) is refitted by every rival
-//! ([`super::fit::separability_of`], the diagnosis's own list of rivals) under the recording's
+//! (`fit::separability_of`, the diagnosis's own list of rivals) under the recording's
 //! noise model (its random walk `q` and deviance unit): what `B` cannot absorb is the expected
 //! likelihood-ratio statistic of `A` against `B` were that test run. A candidate that lifts
 //! every pair to [`super::separate::separation_needed`] ranks before one that does not; among
@@ -379,12 +379,13 @@ pub struct Evidence {
     pub worst_ratio_per_h: f64,
 }
 
-/// Rows of a candidate's design (its thermal path at the twin's physics, noise off).
+/// Rows of a candidate's design (its thermal path at the twin's physics).
 const DESIGN_ROWS: f64 = 4000.0;
 
-/// The design of candidate `c`: the twin's physics run on its program at a sample period of
-/// about its length over [`DESIGN_ROWS`] (no noise), prepared as the diagnosis prepares a pair;
-/// the white noise per row set from the recording's density (`white_density`, g²·s per axis).
+/// The design of candidate `c`: the twin's physics (its noise too, so no column is constant)
+/// run on its program at a sample period of about its length over `DESIGN_ROWS` (4 000) rows,
+/// as SIM and as REAL, prepared as the diagnosis prepares a pair; the white noise per row set
+/// from the recording's density (`white_density`, g²·s per axis).
 pub fn design(twin: &Twin, c: &Candidate, white_density: [f64; 3]) -> Result<Prepared, DiagnoseError> {
     let rate = (DESIGN_ROWS / c.duration_s()).min(twin.rate_hz());
     let text = twin.scenario(c, rate, true);
