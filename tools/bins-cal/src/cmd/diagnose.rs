@@ -3,7 +3,7 @@
 //! method is in `docs/diagnosis.md`.
 
 use anyhow::{Context, anyhow};
-use bins_cal::diagnose::{DiagnoseError, Options, diagnose_against_calibration, diagnose_files, plot};
+use bins_cal::diagnose::{DiagnoseError, Options, diagnose_against_calibration, diagnose_files, plot, propose};
 use bins_cal::fsio;
 use std::path::PathBuf;
 
@@ -41,13 +41,40 @@ pub struct Args {
     /// row where blocks would change what the search sees (the report's note says which)
     #[arg(long, value_name = "SECONDS")]
     block_s: Option<f64>,
+    /// Where the recording cannot decide between explanations, propose the test that will:
+    /// print the three best candidates with their length and expected evidence for every pair,
+    /// and write the best as a scenario `bins-cal simulate` runs (with its plot beside it,
+    /// NEXT.png). Nothing to separate: it says so and writes neither. Needs --twin.
+    #[arg(long, value_name = "NEXT.toml", requires = "twin")]
+    propose: Option<PathBuf>,
+    /// The scenario of SIM (its unit, thermal and noise tables): the candidates' thermal path is
+    /// simulated with it, and the proposed scenario keeps its tables.
+    #[arg(long, value_name = "SCENARIO.toml", requires = "propose")]
+    twin: Option<PathBuf>,
+    /// The chamber's lowest set point for a proposal [°C] (default: the recording's lowest temp_C).
+    #[arg(long, value_name = "C", allow_negative_numbers = true, value_parser = bins_cal::numarg::temp_c, requires = "propose")]
+    chamber_min: Option<f64>,
+    /// The chamber's highest set point for a proposal [°C] (default: the recording's highest temp_C).
+    #[arg(long, value_name = "C", allow_negative_numbers = true, value_parser = bins_cal::numarg::temp_c, requires = "propose")]
+    chamber_max: Option<f64>,
+    /// The largest ramp rate for a proposal [°C/min] (default: the recording's fastest over a minute).
+    #[arg(long, value_name = "C_PER_MIN", value_parser = bins_cal::numarg::positive, requires = "propose")]
+    max_rate: Option<f64>,
+    /// The longest test to propose \[h\] (default: twice the recording's length, at least 4 h).
+    #[arg(long, value_name = "HOURS", value_parser = bins_cal::numarg::positive, requires = "propose")]
+    max_test_h: Option<f64>,
 }
 
 /// Runs `bins-cal diagnose`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let inputs: Vec<&PathBuf> =
         [args.sim.as_ref(), args.calib.as_ref(), Some(&args.real)].into_iter().flatten().collect();
-    fsio::refuse_overwriting_inputs(inputs.iter(), [Some(&args.report), args.model.as_ref()].into_iter().flatten())?;
+    let inputs: Vec<&PathBuf> = inputs.into_iter().chain(args.twin.as_ref()).collect();
+    let next_png = args.propose.as_ref().map(|p| p.with_extension("png"));
+    let named_outputs =
+        || [Some(&args.report), args.model.as_ref(), args.propose.as_ref(), next_png.as_ref()].into_iter().flatten();
+    fsio::refuse_overwriting_inputs(inputs.iter(), named_outputs())?;
+    let twin = args.twin.as_deref().map(propose::Twin::read).transpose().map_err(|e| anyhow!("{e}"))?;
     let t0 = std::time::Instant::now();
     let opt = Options { random_walk_mg_per_sqrt_h: args.random_walk, progress: true, block_s: args.block_s };
     let d = match (&args.sim, &args.calib) {
@@ -56,8 +83,51 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (None, None) => Err(DiagnoseError("give --sim SIM.csv or --calib CAL.toml".into())),
     }
     .map_err(|e| anyhow!("{e}"))?;
+    let diagnosis_s = t0.elapsed().as_secs_f64();
     let r = &d.report;
-    let json = serde_json::to_string_pretty(r).context("report")?;
+    let mut proposal = None;
+    let mut proposed: Option<(String, Vec<u8>)> = None;
+    if let Some(twin) = &twin {
+        let t1 = std::time::Instant::now();
+        let mut lim = propose::Limits::from_recording(&d.prepared);
+        lim.temp_min_c = args.chamber_min.unwrap_or(lim.temp_min_c);
+        lim.temp_max_c = args.chamber_max.unwrap_or(lim.temp_max_c);
+        lim.max_rate_c_per_min = args.max_rate.unwrap_or(lim.max_rate_c_per_min);
+        lim.max_duration_s = args.max_test_h.map_or(lim.max_duration_s, |h| h * 3600.0);
+        if !(lim.temp_max_c > lim.temp_min_c) {
+            return Err(anyhow!(
+                "--chamber-min {} --chamber-max {}: the range must not be empty",
+                lim.temp_min_c,
+                lim.temp_max_c
+            ));
+        }
+        let bar = indicatif::ProgressBar::new(0);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("proposing {bar:30} {pos}/{len} candidates, {elapsed}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        let p = propose::propose(&d, twin, Some(lim), &|i, n| {
+            bar.set_length(n as u64);
+            bar.set_position(i as u64);
+        })
+        .map_err(|e| anyhow!("{e}"))?;
+        bar.finish_and_clear();
+        if let (Some(p), Some(png_path)) = (&p, &next_png)
+            && let Some(best) = p.ranked.first()
+        {
+            let rate = twin.table.get("recording").and_then(|t| t.get("rate_Hz")).and_then(toml::Value::as_float);
+            let text = twin.scenario(&best.candidate, rate.unwrap_or(1.0), true);
+            let png = propose::plot(&d, twin, p, png_path).map_err(|e| anyhow!("{e}"))?;
+            proposed = Some((text, png));
+        }
+        proposal = Some((p, t1.elapsed().as_secs_f64()));
+    }
+    let mut value = serde_json::to_value(r).context("report")?;
+    if let (Some((p, _)), serde_json::Value::Object(m)) = (&proposal, &mut value) {
+        let file = proposed.as_ref().and(args.propose.as_deref());
+        m.insert("proposal".into(), propose::to_json(p.as_ref(), file));
+    }
+    let json = serde_json::to_string_pretty(&value).context("report")?;
     let model = match &args.model {
         Some(m) => {
             let text = toml::to_string(&r.model).with_context(|| format!("{}", m.display()))?;
@@ -73,13 +143,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     // Every output named, the plots' included, is checked against the inputs again, then all
     // are written or none.
-    fsio::refuse_overwriting_inputs(
-        inputs,
-        [Some(&args.report), args.model.as_ref()].into_iter().flatten().chain(plots.iter().map(|p| &p.0)),
-    )?;
+    fsio::refuse_overwriting_inputs(inputs, named_outputs().chain(plots.iter().map(|p| &p.0)))?;
     let mut outputs: Vec<(&std::path::Path, &[u8])> = vec![(&args.report, json.as_bytes())];
     if let (Some(m), Some(text)) = (&args.model, &model) {
         outputs.push((m, text.as_bytes()));
+    }
+    if let (Some(next), Some(png_path), Some((text, png))) = (&args.propose, &next_png, &proposed) {
+        outputs.push((next, text.as_bytes()));
+        outputs.push((png_path, png.as_slice()));
     }
     outputs.extend(plots.iter().map(|(p, png)| (p.as_path(), png.as_slice())));
     // A plot directory this run creates goes again with the outputs when they do not appear
@@ -90,7 +161,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         d.keep();
     }
     let plots: Vec<PathBuf> = plots.into_iter().map(|p| p.0).collect();
-    println!("diagnosed {} rows ({} used) in {:.1} s", r.rows, r.rows_used, t0.elapsed().as_secs_f64());
+    println!("diagnosed {} rows ({} used) in {diagnosis_s:.1} s", r.rows, r.rows_used);
     for n in &r.notes {
         println!("note: {n}");
     }
@@ -211,9 +282,75 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
+    if let Some((p, secs)) = &proposal {
+        print_proposal(p.as_ref(), args.propose.as_deref(), next_png.as_deref(), proposed.is_some(), *secs);
+    }
     println!("report: {}", args.report.display());
     for p in plots {
         println!("plot: {}", p.display());
     }
     Ok(())
+}
+
+/// Prints what `--propose` found: the pairs, the three best candidates with their length and
+/// the expected evidence for every pair, and the files written.
+fn print_proposal(
+    p: Option<&propose::Proposal>,
+    next: Option<&std::path::Path>,
+    png: Option<&std::path::Path>,
+    written: bool,
+    secs: f64,
+) {
+    let Some(p) = p else {
+        println!("proposal: nothing to separate (no ambiguous group): no test proposed, no file written");
+        return;
+    };
+    let l = &p.limits;
+    println!(
+        "proposal ({secs:.1} s): {} pairs this recording could not separate; chamber {:.1} … {:.1} °C, ramps up to {} °C/min, tests up to {:.1} h",
+        p.pairs.len(),
+        l.temp_min_c,
+        l.temp_max_c,
+        l.max_rate_c_per_min,
+        l.max_duration_s / 3600.0
+    );
+    let name = |q: &propose::Pair| format!("{} {} / {}", bins_cal::diagnose::prep::AXES[q.axis], q.a.id(), q.b.id());
+    for q in &p.pairs {
+        println!(
+            "    {}: expected deviance on this recording {:.1} (a name needs {:.1})",
+            name(q),
+            q.recording,
+            q.needed
+        );
+    }
+    if p.ranked.is_empty() {
+        println!("proposal: no candidate fits the chamber's limits: no file written");
+        return;
+    }
+    for (i, e) in p.ranked.iter().take(3).enumerate() {
+        let c = &e.candidate;
+        println!(
+            "candidate {}: {} ({:.1} h{}; worst pair at {:.2}× what it needs, {:.2}× per hour): {}",
+            i + 1,
+            c.name,
+            c.duration_s() / 3600.0,
+            if e.separates_all { ", separates every pair" } else { "" },
+            e.worst_ratio,
+            e.worst_ratio_per_h,
+            c.what
+        );
+        let list: Vec<String> = p
+            .pairs
+            .iter()
+            .zip(&e.deviance)
+            .map(|(q, v)| match v.is_finite() {
+                true => format!("{} {v:.1}", name(q)),
+                false => format!("{} (the rival has no column on this test)", name(q)),
+            })
+            .collect();
+        println!("    expected deviance: {}", list.join(", "));
+    }
+    if let (true, Some(n), Some(g)) = (written, next, png) {
+        println!("proposed test: {} (bins-cal simulate runs it; plot {})", n.display(), g.display());
+    }
 }

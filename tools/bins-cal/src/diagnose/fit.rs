@@ -871,7 +871,7 @@ pub fn naming_threshold(alpha: f64, df: usize) -> f64 {
 /// orientation is a bias tempco), the drift in time, and a second time constant of each other
 /// term with one (the term may be only the rest of that one's shape: a second-order lag fitted
 /// by first-order terms leaves a remainder that a play or a turn-on term takes).
-fn separability_of(ctx: &Context, fit: &AxisFit) -> Vec<(Mech, Vec<(Mech, f64)>)> {
+pub(crate) fn separability_of(ctx: &Context, fit: &AxisFit) -> Vec<(Mech, Vec<(Mech, f64)>)> {
     use super::separate::{Fitted, Refit, predict};
     let mut out = Vec::new();
     for (k, term) in fit.terms.iter().enumerate() {

@@ -26,6 +26,7 @@ pub mod mech;
 pub mod noise;
 pub mod plot;
 pub mod prep;
+pub mod propose;
 pub mod report;
 pub mod separate;
 pub mod stats;

@@ -17,7 +17,7 @@ use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// The font (DejaVu Sans; licence in `assets/DejaVuSans.LICENSE`).
-static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+pub(crate) static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
 fn err(path: &Path, e: impl std::fmt::Display) -> DiagnoseError {
     DiagnoseError(format!("{}: {e}", path.display()))

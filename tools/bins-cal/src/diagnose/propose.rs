@@ -1,0 +1,751 @@
+//! The test to run next when the recording cannot decide: candidate chamber programs built
+//! from blocks, each one's expected evidence for every pair of explanations the diagnosis could
+//! not separate, and their ranking (`docs/diagnosis.md`, "When the data cannot decide").
+//!
+//! The pairs are the diagnosis's ambiguous groups ([`super::fit::AxisFit::ambiguous`]): a term
+//! `A` it modelled and a rival `B` that explains this recording about as well, or that this
+//! recording's design would not let data drawn from `A` tell apart ([`super::separate`]).
+//!
+//! A candidate is a list of scenario steps (soaks at a rate of their own, power cycles, tilter
+//! runs), kept within the chamber's [`Limits`]. Its design is its thermal path simulated with
+//! the twin's tables (`bins-cal simulate` on the candidate), at a coarse
+//! sample period with the recording's white-noise density carried over, so the whitened metric
+//! is the recording's own. On that design `A`'s prediction with the coefficients fitted on this
+//! recording (SIM's sensitivity as the recording's) is refitted by every rival
+//! (`fit::separability_of`, the diagnosis's own list of rivals) under the recording's
+//! noise model (its random walk `q` and deviance unit): what `B` cannot absorb is the expected
+//! likelihood-ratio statistic of `A` against `B` were that test run. A candidate that lifts
+//! every pair to [`super::separate::separation_needed`] ranks before one that does not; among
+//! those alike, the worst pair's evidence (over what it needs) per hour of test decides.
+
+use super::fit::{ALPHA, AxisFit, Term, naming_threshold, separability_of};
+use super::mech::{Context, Mech};
+use super::prep::{self, Prepared};
+use super::{DiagnoseError, Diagnosis};
+use crate::recording::Row;
+use std::path::Path;
+
+/// The chamber's limits a candidate keeps within.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Limits {
+    /// Lowest chamber set point [°C].
+    pub temp_min_c: f64,
+    /// Highest chamber set point [°C].
+    pub temp_max_c: f64,
+    /// Largest ramp rate [°C/min].
+    pub max_rate_c_per_min: f64,
+    /// Longest test \[s\].
+    pub max_duration_s: f64,
+}
+
+impl Limits {
+    /// The recording's own: the range of its `temp_C`, the largest rate its smoothed
+    /// temperature moved at over a minute (at least 0.1 °C/min); a test up to twice its length
+    /// (at least 4 h).
+    pub fn from_recording(p: &Prepared) -> Limits {
+        let (lo, hi) = p.temp.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let mut rate: f64 = 0.1;
+        let mut j = 0;
+        for k in 0..p.t.len() {
+            while j < k && p.t[k] - p.t[j] > 60.0 {
+                j += 1;
+            }
+            let dt = p.t[k] - p.t[j];
+            if dt >= 30.0 {
+                rate = rate.max((p.temp_s[k] - p.temp_s[j]).abs() / dt * 60.0);
+            }
+        }
+        let span = p.t.last().copied().unwrap_or(0.0) - p.t.first().copied().unwrap_or(0.0);
+        Limits {
+            temp_min_c: (lo * 10.0).round() / 10.0,
+            temp_max_c: (hi * 10.0).round() / 10.0,
+            max_rate_c_per_min: (rate * 10.0).round().max(1.0) / 10.0,
+            max_duration_s: (2.0 * span).max(4.0 * 3600.0),
+        }
+    }
+}
+
+/// A pair of explanations the diagnosis could not separate on one accelerometer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pair {
+    /// Accelerometer index.
+    pub axis: usize,
+    /// The term modelled.
+    pub a: Mech,
+    /// The rival.
+    pub b: Mech,
+    /// The deviance `b` cannot absorb of what `a` predicts on this recording (NaN where the
+    /// separability did not list it).
+    pub recording: f64,
+    /// What a name needs ([`super::separate::separation_needed`]).
+    pub needed: f64,
+}
+
+/// The pairs of the diagnosis's ambiguous groups, per accelerometer.
+pub fn pairs(d: &Diagnosis) -> Vec<Pair> {
+    let mut out = Vec::new();
+    for fit in &d.axes {
+        for (a, alts) in &fit.ambiguous {
+            for &(b, _) in alts {
+                let recording = fit
+                    .separability
+                    .iter()
+                    .find(|(m, _)| m == a)
+                    .and_then(|(_, r)| r.iter().find(|x| x.0 == b))
+                    .map_or(f64::NAN, |x| x.1);
+                out.push(Pair { axis: fit.axis, a: *a, b, recording, needed: needed(fit, *a) });
+            }
+        }
+    }
+    out
+}
+
+/// The separation the term `m` of `fit` needs from a rival (as the report's groups use it).
+fn needed(fit: &AxisFit, m: Mech) -> f64 {
+    let alpha = ALPHA / (Mech::ALL.len() * 3) as f64;
+    let df = fit.terms.iter().find(|t| t.mech == m).map_or(1, |t| t.coef.len() + usize::from(t.theta.is_some()));
+    super::separate::separation_needed(naming_threshold(alpha, df), df)
+}
+
+/// One step of a candidate's chamber program (a `[[step]]` of the scenario).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Step {
+    /// Move the chamber to `chamber_c` at `rate_c_per_min`, the step lasting `dwell_s` from
+    /// its start (the move included).
+    Soak {
+        /// Set point [°C].
+        chamber_c: f64,
+        /// Rate [°C/min].
+        rate_c_per_min: f64,
+        /// Length \[s\].
+        dwell_s: f64,
+    },
+    /// The unit off for `off_s` while the chamber moves to `chamber_c`, then on.
+    Power {
+        /// Time off \[s\].
+        off_s: f64,
+        /// Set point [°C].
+        chamber_c: f64,
+        /// Rate [°C/min].
+        rate_c_per_min: f64,
+    },
+    /// Tilter positions TP1…TP6, 20 s each, 5 s turns.
+    Tilter,
+}
+
+/// Length of a tilter run ([`Step::Tilter`]) \[s\].
+const TILTER_S: f64 = 6.0 * 20.0 + 5.0 * 5.0;
+
+impl Step {
+    fn duration_s(&self) -> f64 {
+        match *self {
+            Step::Soak { dwell_s, .. } => dwell_s,
+            Step::Power { off_s, .. } => off_s,
+            Step::Tilter => TILTER_S,
+        }
+    }
+
+    fn toml(&self) -> String {
+        match *self {
+            Step::Soak { chamber_c, rate_c_per_min, dwell_s } => format!(
+                "[[step]]\nkind = \"soak\"\nchamber_C = {chamber_c:?}\nrate_C_per_min = {rate_c_per_min:?}\ndwell_s = {dwell_s:?}\n"
+            ),
+            Step::Power { off_s, chamber_c, rate_c_per_min } => format!(
+                "[[step]]\nkind = \"power\"\noff_s = {off_s:?}\nchamber_C = {chamber_c:?}\nrate_C_per_min = {rate_c_per_min:?}\n"
+            ),
+            Step::Tilter => "[[step]]\nkind = \"tilter\"\ndwell_s = 20.0\nmove_s = 5.0\n".into(),
+        }
+    }
+}
+
+/// A candidate test.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Candidate {
+    /// Short name.
+    pub name: String,
+    /// What it is, in words.
+    pub what: String,
+    /// The chamber (and the unit, in equilibrium, powered on) at the start [°C].
+    pub start_c: f64,
+    /// The program.
+    pub steps: Vec<Step>,
+}
+
+impl Candidate {
+    /// Length \[s\].
+    pub fn duration_s(&self) -> f64 {
+        self.steps.iter().map(Step::duration_s).sum()
+    }
+
+    /// Whether a power cycle is in it.
+    pub fn has_power_cycle(&self) -> bool {
+        self.steps.iter().any(|s| matches!(s, Step::Power { .. }))
+    }
+
+    /// The `[[step]]` tables.
+    pub fn steps_toml(&self) -> String {
+        self.steps.iter().map(|s| s.toml()).collect::<Vec<_>>().join("\n")
+    }
+}
+
+/// The hold after a move: five of the longest time constant among the terms of the pairs
+/// (turn-on, lag, drift), 600 s where none has one, within 15 min … 2 h.
+pub fn hold_s(d: &Diagnosis, pairs: &[Pair]) -> f64 {
+    let tau = pairs
+        .iter()
+        .filter_map(|p| d.axes[p.axis].terms.iter().find(|t| t.mech == p.a))
+        .filter(|t| matches!(t.mech, Mech::Warmup | Mech::SelfHeating | Mech::ThermalLag | Mech::Drift))
+        .filter_map(|t| t.theta)
+        .fold(f64::NAN, f64::max);
+    (5.0 * if tau.is_finite() { tau } else { 600.0 }).clamp(900.0, 7200.0)
+}
+
+/// The candidates for chamber `lim`, starting at `start_c` (clamped to the limits), holds of
+/// `hold_s` after each move (shortened, not below a third of it, to keep within the longest
+/// test; a candidate that still does not fit is left out): a power cycle at one temperature, a
+/// power cycle at two, ramps at two rates with holds at their ends, a reversal followed by
+/// holds reached by cooling and by heating, a staircase with a tilter run at each hold, and
+/// ramps at two rates followed by a power cycle.
+pub fn candidates(lim: &Limits, start_c: f64, hold_s: f64) -> Vec<Candidate> {
+    let (lo, hi) = (lim.temp_min_c, lim.temp_max_c);
+    let start = ((start_c * 10.0).round() / 10.0).clamp(lo, hi);
+    let far = if (start - lo).abs() >= (hi - start).abs() { lo } else { hi };
+    let mid = 0.5 * (start + far);
+    let r = lim.max_rate_c_per_min;
+    let r2 = 0.5 * r;
+    let ramp = |a: f64, b: f64, rate: f64| (b - a).abs() / rate * 60.0;
+    let soak = |chamber_c: f64, rate_c_per_min: f64, dwell_s: f64| Step::Soak { chamber_c, rate_c_per_min, dwell_s };
+    let off_s = 1800.0;
+    type Build = Box<dyn Fn(f64) -> Vec<Step>>;
+    let plans: Vec<(&str, String, Build)> = vec![
+        (
+            "power-cycle",
+            format!("power on at {start:.0} °C, off {:.0} min with the chamber holding, on again there", off_s / 60.0),
+            Box::new(move |h| {
+                vec![soak(start, r, h), Step::Power { off_s, chamber_c: start, rate_c_per_min: r }, soak(start, r, h)]
+            }),
+        ),
+        (
+            "power-cycle-two-temperatures",
+            format!(
+                "power on at {start:.0} °C, off while the chamber goes to {far:.0} °C at {r} °C/min, on there; back at {r2} °C/min"
+            ),
+            Box::new(move |h| {
+                vec![
+                    soak(start, r, h),
+                    Step::Power { off_s: ramp(start, far, r) + 600.0, chamber_c: far, rate_c_per_min: r },
+                    soak(far, r, h),
+                    soak(start, r2, ramp(far, start, r2) + h),
+                ]
+            }),
+        ),
+        (
+            "two-rates",
+            format!("ramp {start:.0} → {far:.0} °C at {r} °C/min and back at {r2} °C/min, holding at each end"),
+            Box::new(move |h| {
+                vec![
+                    soak(start, r, h),
+                    soak(far, r, ramp(start, far, r) + h),
+                    soak(start, r2, ramp(far, start, r2) + h),
+                ]
+            }),
+        ),
+        (
+            "reversal-holds",
+            format!(
+                "ramp to {far:.0} °C, reverse at once to {mid:.0} °C and hold; to {far:.0} °C and back to {mid:.0} °C, holding (at {r} °C/min)"
+            ),
+            Box::new(move |h| {
+                vec![
+                    soak(start, r, h),
+                    soak(far, r, ramp(start, far, r)),
+                    soak(mid, r, ramp(far, mid, r) + h),
+                    soak(far, r, ramp(mid, far, r) + h),
+                    soak(mid, r, ramp(far, mid, r) + h),
+                ]
+            }),
+        ),
+        (
+            "staircase-tilter",
+            format!("holds at {start:.0}, {mid:.0}, {far:.0}, {mid:.0} and {start:.0} °C with a tilter run at each"),
+            Box::new(move |h| {
+                let mut v = Vec::new();
+                let mut prev = start;
+                for tc in [start, mid, far, mid, start] {
+                    v.push(soak(tc, r, ramp(prev, tc, r) + h));
+                    v.push(Step::Tilter);
+                    prev = tc;
+                }
+                v
+            }),
+        ),
+        (
+            "two-rates-power-cycle",
+            format!(
+                "ramp {start:.0} → {far:.0} °C at {r} °C/min and back at {r2} °C/min, holding at each end; then a power cycle at {start:.0} °C"
+            ),
+            Box::new(move |h| {
+                vec![
+                    soak(start, r, h),
+                    soak(far, r, ramp(start, far, r) + h),
+                    soak(start, r2, ramp(far, start, r2) + h),
+                    Step::Power { off_s, chamber_c: start, rate_c_per_min: r },
+                    soak(start, r, h),
+                ]
+            }),
+        ),
+    ];
+    let dur = |steps: &[Step]| steps.iter().map(Step::duration_s).sum::<f64>();
+    let mut out = Vec::new();
+    for (name, what, build) in plans {
+        let (d0, d1) = (dur(&build(0.0)), dur(&build(1.0)));
+        let mut h = hold_s;
+        if d0 + (d1 - d0) * h > lim.max_duration_s {
+            h = ((lim.max_duration_s - d0) / (d1 - d0)).floor();
+        }
+        if !(h >= hold_s / 3.0) {
+            continue;
+        }
+        out.push(Candidate { name: name.to_string(), what, start_c: start, steps: build(h) });
+    }
+    out
+}
+
+/// The twin scenario: its tables with the `[[step]]`s and `[recording]` replaced.
+pub struct Twin {
+    /// The scenario's text as parsed (TOML).
+    pub table: toml::Table,
+    /// Its file (for errors).
+    pub path: std::path::PathBuf,
+}
+
+impl Twin {
+    /// Reads a scenario file (checked as `bins-cal simulate` checks it).
+    pub fn read(path: &Path) -> Result<Twin, DiagnoseError> {
+        let text = crate::fsio::read_text(path).map_err(|e| DiagnoseError(e.to_string()))?;
+        crate::sim::scenario::ScenarioFile::parse(&text, path).map_err(|e| DiagnoseError(e.to_string()))?;
+        let table: toml::Table = text.parse().map_err(|e| DiagnoseError(format!("{}: {e}", path.display())))?;
+        Ok(Twin { table, path: path.to_path_buf() })
+    }
+
+    /// The twin's logger rate \[Hz\] (1 where it has none).
+    fn rate_hz(&self) -> f64 {
+        self.table.get("recording").and_then(|r| r.get("rate_Hz")).and_then(toml::Value::as_float).unwrap_or(1.0)
+    }
+
+    /// The scenario of `c` with the twin's unit, thermal and (`with_noise`) noise tables, at
+    /// `rate_hz`.
+    pub fn scenario(&self, c: &Candidate, rate_hz: f64, with_noise: bool) -> String {
+        let mut t = self.table.clone();
+        t.remove("step");
+        t.remove("description");
+        if !with_noise {
+            t.remove("noise");
+        }
+        let mut rec = toml::Table::new();
+        rec.insert("rate_Hz".into(), toml::Value::Float(rate_hz));
+        rec.insert("power_on_s".into(), toml::Value::Float(0.0));
+        t.insert("recording".into(), toml::Value::Table(rec));
+        let thermal = t.entry("thermal").or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        if let Some(th) = thermal.as_table_mut() {
+            th.insert("start_C".into(), toml::Value::Float(c.start_c));
+        }
+        let head = format!(
+            "# Proposed by bins-cal diagnose --propose: {} ({:.1} h). Unit, thermal and noise tables from {}.\n#\n#   bins-cal simulate THIS.toml -o next.csv --seed 1\ndescription = {:?}\n",
+            c.name,
+            c.duration_s() / 3600.0,
+            self.path.display(),
+            format!("{}: {}", c.name, c.what)
+        );
+        let body = toml::to_string(&t).unwrap_or_default();
+        format!("{head}{body}\n{}", c.steps_toml())
+    }
+}
+
+/// A candidate's expected evidence.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Evidence {
+    /// The candidate.
+    pub candidate: Candidate,
+    /// Per pair (as in [`pairs`]): the deviance the rival cannot absorb on the candidate (NaN
+    /// where the rival has no column on it: it cannot mimic the term there, and counts as
+    /// separated).
+    pub deviance: Vec<f64>,
+    /// Whether every pair reaches what it needs.
+    pub separates_all: bool,
+    /// The worst pair's deviance over what it needs (of the pairs whose rival has a column).
+    pub worst_ratio: f64,
+    /// `worst_ratio` per hour of test.
+    pub worst_ratio_per_h: f64,
+}
+
+/// Rows of a candidate's design (its thermal path at the twin's physics).
+const DESIGN_ROWS: f64 = 4000.0;
+
+/// The design of candidate `c`: the twin's physics (its noise too, so no column is constant)
+/// run on its program at a sample period of about its length over `DESIGN_ROWS` (4 000) rows,
+/// as SIM and as REAL, prepared as the diagnosis prepares a pair; the white noise per row set
+/// from the recording's density (`white_density`, g²·s per axis).
+pub fn design(twin: &Twin, c: &Candidate, white_density: [f64; 3]) -> Result<Prepared, DiagnoseError> {
+    let rate = (DESIGN_ROWS / c.duration_s()).min(twin.rate_hz());
+    let text = twin.scenario(c, rate, true);
+    let name = Path::new("proposed test");
+    let sc = crate::sim::scenario::ScenarioFile::parse(&text, name).map_err(|e| DiagnoseError(e.to_string()))?;
+    let sim = sc.build(name).map_err(|e| DiagnoseError(e.to_string()))?;
+    let mut rowgen = sim.rows(1);
+    let mut rows = Vec::new();
+    let mut row = Row::default();
+    while rowgen.next_row(&mut row) {
+        rows.push(row.clone());
+    }
+    let mut p = prep::prepare_blocks(&rows, &rows, name, name, Some(0.0))?;
+    for (axis, d) in white_density.iter().enumerate() {
+        p.r_white[axis] = vec![d * rate; p.t.len()];
+    }
+    Ok(p)
+}
+
+/// The recording's white-noise density per axis (g²·s: the per-row white variance times the
+/// row spacing, median over the rows; the same for rows and for blocks of them).
+pub fn white_density(p: &Prepared) -> [f64; 3] {
+    let mut out = [0.0; 3];
+    for (axis, o) in out.iter_mut().enumerate() {
+        let mut v: Vec<f64> = (1..p.t.len()).map(|k| p.r_white[axis][k] * (p.t[k] - p.t[k - 1])).collect();
+        v.retain(|x| x.is_finite() && *x > 0.0);
+        v.sort_by(f64::total_cmp);
+        *o = v.get(v.len() / 2).copied().unwrap_or(0.0);
+    }
+    out
+}
+
+/// Per pair, the deviance its rival cannot absorb on the design `cp` of what its term, as
+/// fitted on the recording, predicts there (NaN where the rival has no column on it).
+pub fn evidence_on(d: &Diagnosis, cp: &Prepared, pairs: &[Pair]) -> Vec<f64> {
+    let mut out = vec![f64::NAN; pairs.len()];
+    for axis in 0..3 {
+        if !pairs.iter().any(|p| p.axis == axis) {
+            continue;
+        }
+        let fit = &d.axes[axis];
+        let mut ctx = Context::new(cp, axis);
+        ctx.s = d.sensitivity[axis].clone();
+        ctx.s_now = (0..cp.t.len()).map(|k| ctx.s.eval(cp.temp_s[k], &cp.f[k])).collect();
+        // A term with no column on the design predicts nothing there (a lag at a constant
+        // temperature): left out, its pairs get 0.
+        let terms: Vec<Term> = fit
+            .terms
+            .iter()
+            .filter_map(|t| {
+                let columns = ctx.columns(t.mech, t.theta.unwrap_or(0.0));
+                if columns.iter().all(|c| c.iter().all(|v| v.abs() < 1e-15)) {
+                    return None;
+                }
+                let mut contribution = vec![0.0; cp.t.len()];
+                for (c, b) in columns.iter().zip(&t.coef) {
+                    for (x, v) in contribution.iter_mut().zip(c) {
+                        *x += b * v;
+                    }
+                }
+                Some(Term {
+                    mech: t.mech,
+                    theta: t.theta,
+                    theta_ci: None,
+                    coef: t.coef.clone(),
+                    se: Vec::new(),
+                    lr_drop: f64::NAN,
+                    p_drop: f64::NAN,
+                    contribution,
+                    columns,
+                })
+            })
+            .collect();
+        let on_design = AxisFit {
+            axis,
+            q: fit.q,
+            inflation: fit.inflation,
+            terms,
+            ambiguous: Vec::new(),
+            separability: Vec::new(),
+            deviance_scale: fit.deviance_scale,
+            trace: Vec::new(),
+            drift: Vec::new(),
+            drift_rms: 0.0,
+            prediction: Vec::new(),
+            rms: (0.0, 0.0),
+            heldout_rms: (0.0, 0.0),
+            heldout_resid: (Vec::new(), Vec::new()),
+            heldout_gain: Vec::new(),
+        };
+        let sep = separability_of(&ctx, &on_design);
+        for (k, p) in pairs.iter().enumerate().filter(|(_, p)| p.axis == axis) {
+            if !on_design.terms.iter().any(|t| t.mech == p.a) {
+                out[k] = 0.0;
+            } else if let Some(v) =
+                sep.iter().find(|(m, _)| *m == p.a).and_then(|(_, r)| r.iter().find(|x| x.0 == p.b)).map(|x| x.1)
+            {
+                out[k] = v;
+            }
+        }
+    }
+    out
+}
+
+/// Every candidate's expected evidence, best first (those that lift every pair to what it
+/// needs first, then by the worst pair's evidence over what it needs, per hour). Candidates
+/// whose rivals have no column at all are left out.
+pub fn rank(
+    d: &Diagnosis,
+    twin: &Twin,
+    pairs: &[Pair],
+    cands: Vec<Candidate>,
+    progress: &dyn Fn(usize, usize),
+) -> Result<Vec<Evidence>, DiagnoseError> {
+    let dens = white_density(&d.prepared);
+    let mut out = Vec::new();
+    let n = cands.len();
+    for (i, c) in cands.into_iter().enumerate() {
+        progress(i, n);
+        let cp = design(twin, &c, dens)?;
+        let deviance = evidence_on(d, &cp, pairs);
+        // A rival with no column on the test (a cross-axis term in one orientation) cannot
+        // mimic anything there: the test alone would never name it.
+        let ratios: Vec<f64> =
+            deviance.iter().zip(pairs).filter(|(v, _)| v.is_finite()).map(|(v, p)| v / p.needed).collect();
+        if ratios.is_empty() {
+            continue;
+        }
+        let worst = ratios.iter().copied().fold(f64::INFINITY, f64::min);
+        let hours = c.duration_s() / 3600.0;
+        out.push(Evidence {
+            separates_all: worst >= 1.0,
+            worst_ratio: worst,
+            worst_ratio_per_h: worst / hours,
+            deviance,
+            candidate: c,
+        });
+    }
+    progress(n, n);
+    out.sort_by(|a, b| b.separates_all.cmp(&a.separates_all).then(b.worst_ratio_per_h.total_cmp(&a.worst_ratio_per_h)));
+    Ok(out)
+}
+
+/// What `--propose` found.
+pub struct Proposal {
+    /// The pairs.
+    pub pairs: Vec<Pair>,
+    /// The limits used.
+    pub limits: Limits,
+    /// The candidates, best first.
+    pub ranked: Vec<Evidence>,
+}
+
+/// The proposal for diagnosis `d` with the twin `twin` within `limits` (`None`: the
+/// recording's, [`Limits::from_recording`]); `None` when nothing is left to separate.
+pub fn propose(
+    d: &Diagnosis,
+    twin: &Twin,
+    limits: Option<Limits>,
+    progress: &dyn Fn(usize, usize),
+) -> Result<Option<Proposal>, DiagnoseError> {
+    let pairs = pairs(d);
+    if pairs.is_empty() {
+        return Ok(None);
+    }
+    let limits = limits.unwrap_or_else(|| Limits::from_recording(&d.prepared));
+    let start = d.prepared.temp_s.first().copied().unwrap_or(20.0);
+    let cands = candidates(&limits, start, hold_s(d, &pairs));
+    let ranked = rank(d, twin, &pairs, cands, progress)?;
+    Ok(Some(Proposal { pairs, limits, ranked }))
+}
+
+/// The report's `proposal`: the limits, the pairs, every candidate with its length and its
+/// evidence per pair, best first, and the file written (`None`: nothing to separate).
+pub fn to_json(prop: Option<&Proposal>, file: Option<&Path>) -> serde_json::Value {
+    use serde_json::json;
+    let Some(p) = prop else {
+        return json!({ "pairs": [], "candidates": [], "note": "nothing to separate: no test proposed" });
+    };
+    let num = |v: f64| if v.is_finite() { json!(v) } else { serde_json::Value::Null };
+    let pairs: Vec<_> = p
+        .pairs
+        .iter()
+        .map(|q| {
+            json!({
+                "axis": prep::AXES[q.axis], "modelled": q.a.id(), "rival": q.b.id(),
+                "on_recording": num(q.recording), "needed": q.needed,
+            })
+        })
+        .collect();
+    let cands: Vec<_> = p
+        .ranked
+        .iter()
+        .map(|e| {
+            json!({
+                "name": e.candidate.name, "what": e.candidate.what,
+                "duration_h": e.candidate.duration_s() / 3600.0,
+                "separates_all": e.separates_all, "worst_ratio": num(e.worst_ratio),
+                "worst_ratio_per_h": num(e.worst_ratio_per_h),
+                "deviance": e.deviance.iter().map(|v| num(*v)).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    json!({
+        "limits": {
+            "chamber_min_C": p.limits.temp_min_c, "chamber_max_C": p.limits.temp_max_c,
+            "max_rate_C_per_min": p.limits.max_rate_c_per_min, "max_test_h": p.limits.max_duration_s / 3600.0,
+        },
+        "pairs": pairs,
+        "candidates": cands,
+        "file": file.map(|f| f.display().to_string()),
+    })
+}
+
+/// Least squares of `y` on `cols` (and a constant): the fitted values (`None` when singular).
+fn ls_fit(y: &[f64], cols: &[Vec<f64>]) -> Option<Vec<f64>> {
+    let n = y.len();
+    let mut x: Vec<Vec<f64>> = vec![vec![1.0; n]];
+    x.extend(cols.iter().cloned());
+    let k = x.len();
+    let mut a = vec![vec![0.0; k + 1]; k];
+    for i in 0..k {
+        for j in 0..k {
+            a[i][j] = x[i].iter().zip(&x[j]).map(|(u, v)| u * v).sum();
+        }
+        a[i][k] = x[i].iter().zip(y).map(|(u, v)| u * v).sum();
+    }
+    let scale = (0..k).map(|i| a[i][i]).fold(0.0f64, f64::max);
+    for c in 0..k {
+        let piv = (c..k).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
+        a.swap(c, piv);
+        if !(a[c][c].abs() > 1e-12 * scale) {
+            return None;
+        }
+        for r in 0..k {
+            if r != c {
+                let f = a[r][c] / a[c][c];
+                let row_c = a[c].clone();
+                for (v, w) in a[r].iter_mut().zip(&row_c) {
+                    *v -= f * w;
+                }
+            }
+        }
+    }
+    let b: Vec<f64> = (0..k).map(|i| a[i][k] / a[i][i]).collect();
+    Some((0..n).map(|r| (0..k).map(|j| b[j] * x[j][r]).sum()).collect())
+}
+
+/// The plot of the best candidate: its temperature (`temp_C`, smoothed) and `power_s` against
+/// time, and below them, for its worst pair, what the modelled term predicts on that test (as
+/// fitted on the recording) beside the rival refitted to it (least squares, the rival's θ
+/// where the separability found it best; absent where the rival is not one of the library's
+/// mechanisms), in mg. PNG bytes, written by the caller with its other outputs.
+pub fn plot(d: &Diagnosis, twin: &Twin, prop: &Proposal, path: &Path) -> Result<Vec<u8>, DiagnoseError> {
+    use super::plot::{drawing_error, render_png};
+    use plotters::prelude::*;
+    use plotters::style::{FontStyle, register_font};
+    let _ = register_font("sans-serif", FontStyle::Normal, super::plot::FONT);
+    let best = prop.ranked.first().ok_or_else(|| DiagnoseError(format!("{}: no candidate", path.display())))?;
+    let cp = design(twin, &best.candidate, white_density(&d.prepared))?;
+    let k = (0..prop.pairs.len())
+        .filter(|&k| best.deviance[k].is_finite())
+        .min_by(|&i, &j| {
+            (best.deviance[i] / prop.pairs[i].needed).total_cmp(&(best.deviance[j] / prop.pairs[j].needed))
+        })
+        .unwrap_or(0);
+    let pair = prop.pairs[k];
+    let mut ctx = Context::new(&cp, pair.axis);
+    ctx.s = d.sensitivity[pair.axis].clone();
+    ctx.s_now = (0..cp.t.len()).map(|r| ctx.s.eval(cp.temp_s[r], &cp.f[r])).collect();
+    let fit = &d.axes[pair.axis];
+    let term = fit.terms.iter().find(|t| t.mech == pair.a);
+    let eta: Vec<f64> = match term {
+        Some(t) => super::separate::predict(
+            &ctx,
+            &[super::separate::Fitted { mech: t.mech, theta: t.theta, coef: t.coef.clone() }],
+        ),
+        None => vec![0.0; cp.t.len()],
+    };
+    let rival: Option<Vec<f64>> = {
+        let refit = super::separate::Refit::new(&ctx, fit.q, fit.deviance_scale, &eta, &ctx.nuisance);
+        refit.mechanism(pair.b).and_then(|s| {
+            let mut cols = ctx.columns(pair.b, s.rival_theta.unwrap_or(0.0));
+            cols.extend(ctx.nuisance.iter().cloned());
+            ls_fit(&eta, &cols)
+        })
+    };
+    let hours: Vec<f64> = cp.t.iter().map(|t| t / 3600.0).collect();
+    let power_h: Vec<f64> = cp.power.clone().unwrap_or_default().iter().map(|p| p / 3600.0).collect();
+    let rng = |v: &mut dyn Iterator<Item = f64>| {
+        let (a, b) =
+            v.filter(|x| x.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+        if b > a { (a - 0.05 * (b - a), b + 0.05 * (b - a)) } else { (a - 1.0, a + 1.0) }
+    };
+    let x1 = hours.last().copied().unwrap_or(1.0).max(1e-3);
+    let mg = |v: &[f64]| -> Vec<f64> {
+        let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
+        v.iter().map(|x| (x - m) * 1e3).collect()
+    };
+    let (ea, eb) = (mg(&eta), rival.as_deref().map(mg));
+    let c = &best.candidate;
+    render_png(path, (1000, 900), |root| {
+        let panels = root.split_evenly((3, 1));
+        type Panel<'a> = (&'a str, String, Vec<(f64, f64)>);
+        let series: [Panel; 2] = [
+            (
+                "temp_C [°C]",
+                format!("{}: {:.1} h — {}", c.name, c.duration_s() / 3600.0, c.what),
+                hours.iter().copied().zip(cp.temp_s.iter().copied()).collect(),
+            ),
+            ("power_s [h]", "time since power-on".into(), hours.iter().copied().zip(power_h.iter().copied()).collect()),
+        ];
+        for (area, (ylab, title, pts)) in panels.iter().zip(series) {
+            let (y0, y1) = rng(&mut pts.iter().map(|p| p.1));
+            let mut ch = ChartBuilder::on(area)
+                .caption(title, ("sans-serif", 15))
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0.0..x1, y0..y1)
+                .map_err(drawing_error)?;
+            ch.configure_mesh().x_desc("time [h]").y_desc(ylab).draw().map_err(drawing_error)?;
+            ch.draw_series(LineSeries::new(pts, RGBColor(31, 119, 180).stroke_width(2))).map_err(drawing_error)?;
+        }
+        let (y0, y1) = rng(&mut ea.iter().chain(eb.iter().flatten()).copied());
+        let mut ch = ChartBuilder::on(&panels[2])
+            .caption(
+                format!(
+                    "accelerometer {}: {} as fitted vs {} refitted (expected deviance {:.1}, a name needs {:.1})",
+                    prep::AXES[pair.axis],
+                    pair.a.id(),
+                    pair.b.id(),
+                    best.deviance[k],
+                    pair.needed
+                ),
+                ("sans-serif", 15),
+            )
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..x1, y0..y1)
+            .map_err(drawing_error)?;
+        ch.configure_mesh().x_desc("time [h]").y_desc("predicted [mg]").draw().map_err(drawing_error)?;
+        let ca = RGBColor(214, 39, 40);
+        ch.draw_series(LineSeries::new(hours.iter().copied().zip(ea.iter().copied()), ca.stroke_width(2)))
+            .map_err(drawing_error)?
+            .label(pair.a.id())
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], ca.stroke_width(2)));
+        if let Some(eb) = &eb {
+            let cb = RGBColor(44, 160, 44);
+            ch.draw_series(LineSeries::new(hours.iter().copied().zip(eb.iter().copied()), cb.stroke_width(2)))
+                .map_err(drawing_error)?
+                .label(format!("{} refitted", pair.b.id()))
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], cb.stroke_width(2)));
+        }
+        ch.configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(drawing_error)
+    })
+}
