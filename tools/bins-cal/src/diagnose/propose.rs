@@ -638,7 +638,8 @@ fn ls_fit(y: &[f64], cols: &[Vec<f64>]) -> Option<Vec<f64>> {
 /// time, and below them, for its worst pair, what the modelled term predicts on that test (as
 /// fitted on the recording) beside the rival refitted to it (least squares, the rival's θ
 /// where the separability found it best; absent where the rival is not one of the library's
-/// mechanisms), in mg. PNG bytes, written by the caller with its other outputs.
+/// mechanisms), in mg; each curve broken at the unpowered gaps (one line per session). PNG
+/// bytes, written by the caller with its other outputs.
 pub fn plot(d: &Diagnosis, twin: &Twin, prop: &Proposal, path: &Path) -> Result<Vec<u8>, DiagnoseError> {
     use super::plot::{drawing_error, render_png};
     use plotters::prelude::*;
@@ -687,19 +688,24 @@ pub fn plot(d: &Diagnosis, twin: &Twin, prop: &Proposal, path: &Path) -> Result<
     };
     let (ea, eb) = (mg(&eta), rival.as_deref().map(mg));
     let c = &best.candidate;
+    let sessions = cp.sessions();
+    // One line per session: nothing is drawn across an unpowered gap.
+    let by_session = |v: &[f64]| -> Vec<Vec<(f64, f64)>> {
+        sessions.iter().map(|r| r.clone().map(|i| (hours[i], v[i])).collect()).collect()
+    };
     render_png(path, (1000, 900), |root| {
         let panels = root.split_evenly((3, 1));
-        type Panel<'a> = (&'a str, String, Vec<(f64, f64)>);
+        type Panel<'a> = (&'a str, String, Vec<Vec<(f64, f64)>>);
         let series: [Panel; 2] = [
             (
                 "temp_C [°C]",
                 format!("{}: {:.1} h — {}", c.name, c.duration_s() / 3600.0, c.what),
-                hours.iter().copied().zip(cp.temp_s.iter().copied()).collect(),
+                by_session(&cp.temp_s),
             ),
-            ("power_s [h]", "time since power-on".into(), hours.iter().copied().zip(power_h.iter().copied()).collect()),
+            ("power_s [h]", "time since power-on".into(), by_session(&power_h)),
         ];
-        for (area, (ylab, title, pts)) in panels.iter().zip(series) {
-            let (y0, y1) = rng(&mut pts.iter().map(|p| p.1));
+        for (area, (ylab, title, segments)) in panels.iter().zip(series) {
+            let (y0, y1) = rng(&mut segments.iter().flatten().map(|p| p.1));
             let mut ch = ChartBuilder::on(area)
                 .caption(title, ("sans-serif", 15))
                 .margin(8)
@@ -708,7 +714,9 @@ pub fn plot(d: &Diagnosis, twin: &Twin, prop: &Proposal, path: &Path) -> Result<
                 .build_cartesian_2d(0.0..x1, y0..y1)
                 .map_err(drawing_error)?;
             ch.configure_mesh().x_desc("time [h]").y_desc(ylab).draw().map_err(drawing_error)?;
-            ch.draw_series(LineSeries::new(pts, RGBColor(31, 119, 180).stroke_width(2))).map_err(drawing_error)?;
+            for pts in segments {
+                ch.draw_series(LineSeries::new(pts, RGBColor(31, 119, 180).stroke_width(2))).map_err(drawing_error)?;
+            }
         }
         let (y0, y1) = rng(&mut ea.iter().chain(eb.iter().flatten()).copied());
         let mut ch = ChartBuilder::on(&panels[2])
@@ -730,16 +738,24 @@ pub fn plot(d: &Diagnosis, twin: &Twin, prop: &Proposal, path: &Path) -> Result<
             .map_err(drawing_error)?;
         ch.configure_mesh().x_desc("time [h]").y_desc("predicted [mg]").draw().map_err(drawing_error)?;
         let ca = RGBColor(214, 39, 40);
-        ch.draw_series(LineSeries::new(hours.iter().copied().zip(ea.iter().copied()), ca.stroke_width(2)))
-            .map_err(drawing_error)?
-            .label(pair.a.id())
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], ca.stroke_width(2)));
+        for (s, pts) in by_session(&ea).into_iter().enumerate() {
+            let drawn = ch.draw_series(LineSeries::new(pts, ca.stroke_width(2))).map_err(drawing_error)?;
+            if s == 0 {
+                drawn
+                    .label(pair.a.id())
+                    .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], ca.stroke_width(2)));
+            }
+        }
         if let Some(eb) = &eb {
             let cb = RGBColor(44, 160, 44);
-            ch.draw_series(LineSeries::new(hours.iter().copied().zip(eb.iter().copied()), cb.stroke_width(2)))
-                .map_err(drawing_error)?
-                .label(format!("{} refitted", pair.b.id()))
-                .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], cb.stroke_width(2)));
+            for (s, pts) in by_session(eb).into_iter().enumerate() {
+                let drawn = ch.draw_series(LineSeries::new(pts, cb.stroke_width(2))).map_err(drawing_error)?;
+                if s == 0 {
+                    drawn
+                        .label(format!("{} refitted", pair.b.id()))
+                        .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], cb.stroke_width(2)));
+                }
+            }
         }
         ch.configure_series_labels()
             .position(SeriesLabelPosition::UpperRight)
