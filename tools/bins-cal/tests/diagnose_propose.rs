@@ -40,14 +40,7 @@ dwell_s = 5400.0
 }
 
 fn rows(text: &str, seed: u64) -> Vec<Row> {
-    let sim = ScenarioFile::parse(text, Path::new("s.toml")).unwrap().build(Path::new("s.toml")).unwrap();
-    let mut g = sim.rows(seed);
-    let mut out = Vec::new();
-    let mut r = Row::default();
-    while g.next_row(&mut r) {
-        out.push(r.clone());
-    }
-    out
+    ScenarioFile::parse(text, Path::new("s.toml")).unwrap().build(Path::new("s.toml")).unwrap().all_rows(seed)
 }
 
 fn twin(dir: &Path) -> propose::Twin {

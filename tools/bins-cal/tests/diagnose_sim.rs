@@ -31,14 +31,7 @@ fn scenario(die_tau_s: f64, noise: bool) -> String {
 }
 
 fn rows(text: &str, seed: u64) -> Vec<Row> {
-    let sim = ScenarioFile::parse(text, Path::new("test.toml")).unwrap().build(Path::new("test.toml")).unwrap();
-    let mut g = sim.rows(seed);
-    let mut out = Vec::new();
-    let mut row = Row::default();
-    while g.next_row(&mut row) {
-        out.push(row.clone());
-    }
-    out
+    ScenarioFile::parse(text, Path::new("test.toml")).unwrap().build(Path::new("test.toml")).unwrap().all_rows(seed)
 }
 
 #[test]

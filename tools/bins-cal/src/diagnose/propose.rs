@@ -22,7 +22,6 @@ use super::fit::{ALPHA, AxisFit, Term, naming_threshold, separability_of};
 use super::mech::{Context, Mech};
 use super::prep::{self, Prepared};
 use super::{DiagnoseError, Diagnosis};
-use crate::recording::Row;
 use std::path::Path;
 
 /// The chamber's limits a candidate keeps within.
@@ -392,12 +391,7 @@ pub fn design(twin: &Twin, c: &Candidate, white_density: [f64; 3]) -> Result<Pre
     let name = Path::new("proposed test");
     let sc = crate::sim::scenario::ScenarioFile::parse(&text, name).map_err(|e| DiagnoseError(e.to_string()))?;
     let sim = sc.build(name).map_err(|e| DiagnoseError(e.to_string()))?;
-    let mut rowgen = sim.rows(1);
-    let mut rows = Vec::new();
-    let mut row = Row::default();
-    while rowgen.next_row(&mut row) {
-        rows.push(row.clone());
-    }
+    let rows = sim.all_rows(1);
     let mut p = prep::prepare_blocks(&rows, &rows, name, name, Some(0.0))?;
     for (axis, d) in white_density.iter().enumerate() {
         p.r_white[axis] = vec![d * rate; p.t.len()];

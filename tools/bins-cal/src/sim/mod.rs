@@ -108,6 +108,18 @@ impl Simulation {
         RowGen::new(self, seed)
     }
 
+    /// Every row of the run for `seed`, in memory: for a short design (a proposed test at a
+    /// coarse period, a test's case); a long run streams through [`rows`](Self::rows).
+    pub fn all_rows(&self, seed: u64) -> Vec<Row> {
+        let mut rows = self.rows(seed);
+        let mut out = Vec::new();
+        let mut row = Row::default();
+        while rows.next_row(&mut row) {
+            out.push(row.clone());
+        }
+        out
+    }
+
     /// Writes [`follow`](Self::follow)'s rows for the recording `real` to `output`
     /// (atomically), with the columns of REAL that have a value in some row (columns the format
     /// does not define are dropped). Two passes over REAL, each with a progress bar: the first
