@@ -109,7 +109,7 @@ pub enum TempModel<F> {
 
 impl<F: Float> TempModel<F> {
     /// The change of the constants at `temp_c` (T0 = `t0_c`). Bounded time: at most
-    /// [`MAX_POLY_ORDER`] Horner steps or a [`MAX_KNOTS`]-step interval search.
+    /// [`MAX_POLY_ORDER`] power-form steps or a [`MAX_KNOTS`]-step interval search.
     ///
     /// The caller ensures a valid model (see [`TempModel::check`]); an out-of-range order or
     /// knot count is clamped so that this function cannot index out of bounds.
@@ -119,16 +119,18 @@ impl<F: Float> TempModel<F> {
             TempModel::Poly { order, coef } => {
                 let n = (*order as usize).min(MAX_POLY_ORDER);
                 let dt = temp_c - t0_c;
-                // Horner: ΔT·(c1 + ΔT·(c2 + …)), each step one fused multiply-add, from the
-                // highest term's coefficients (a model has at least one term).
-                let mut sets = coef.iter().take(n).rev();
-                let mut acc = sets.next().map_or([F::ZERO; 12], CoefDelta::to_array);
-                for c in sets {
+                // Power form: c1·ΔT + c2·ΔT² + …, each term one fused multiply-add into the
+                // sum it joins, so the twelve sums stay where they are from one set to the next
+                // (Horner's rule moves each partial result once per set on the target).
+                let mut acc = [F::ZERO; 12];
+                let mut power = dt;
+                for c in coef.iter().take(n) {
                     for (a, c) in acc.iter_mut().zip(c.to_array()) {
-                        *a = a.mul_add(dt, c);
+                        *a = c.mul_add(power, *a);
                     }
+                    power *= dt;
                 }
-                CoefDelta::from_array(&acc.map(|a| a * dt))
+                CoefDelta::from_array(&acc)
             }
             TempModel::Pwl { n_knots, knots_c, at_knot } => {
                 let n = (*n_knots as usize).clamp(2, MAX_KNOTS);
