@@ -92,7 +92,7 @@ pub fn calibration<F: Float>(model: TempModel<f64>, method: Method) -> Result<Ca
 }
 
 /// [`quadratic_truth`] made order 3 by a small cubic term (each cubic coefficient 10⁻³ of
-/// the quadratic one, per °C), so the Horner evaluation of an order-3 model has its full
+/// the quadratic one, per °C), so the evaluation of an order-3 model has its full
 /// length: the benchmarks' "order-3 polynomial" case.
 pub fn order3_model() -> Result<TempModel<f64>, ident::FitError> {
     match quadratic_truth()? {
