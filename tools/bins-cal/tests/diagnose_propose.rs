@@ -112,19 +112,17 @@ fn files(dir: &Path, real_has: bool) -> [std::path::PathBuf; 3] {
 }
 
 fn diagnose_propose(dir: &Path, [s, r, t]: &[std::path::PathBuf; 3]) -> (String, serde_json::Value) {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_bins-cal"))
-        .args(["diagnose", "--sim"])
-        .arg(s)
-        .arg("--real")
-        .arg(r)
-        .arg("--report")
-        .arg(dir.join("out.json"))
-        .arg("--propose")
-        .arg(dir.join("next.toml"))
-        .arg("--twin")
-        .arg(t)
-        .output()
-        .unwrap();
+    diagnose_propose_with(dir, s, r, Some(t))
+}
+
+fn diagnose_propose_with(dir: &Path, s: &Path, r: &Path, twin: Option<&Path>) -> (String, serde_json::Value) {
+    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_bins-cal"));
+    cmd.args(["diagnose", "--sim"]).arg(s).arg("--real").arg(r).arg("--report").arg(dir.join("out.json"));
+    cmd.arg("--propose").arg(dir.join("next.toml"));
+    if let Some(t) = twin {
+        cmd.arg("--twin").arg(t);
+    }
+    let out = cmd.output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout).to_string();
     assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
     let v = serde_json::from_str(&std::fs::read_to_string(dir.join("out.json")).unwrap()).unwrap();
@@ -168,4 +166,85 @@ fn command_with_nothing_to_separate_writes_no_file() {
     assert!(stdout.contains("nothing to separate"), "{stdout}");
     assert!(!dir.path().join("next.toml").exists() && !dir.path().join("next.png").exists());
     assert!(v["proposal"]["candidates"].as_array().unwrap().is_empty());
+}
+
+/// A unit whose thermal path is known: case 600 s behind the chamber, die 120 s behind the
+/// case and 1.5 °C above it when powered, the thermistor 0.3 of the way to the die; ramps at
+/// 1 and 0.5 °C/min, holds, and a power cycle with the chamber moving while off; 1 Hz.
+fn known_thermal_path() -> String {
+    r#"
+[recording]
+rate_Hz = 1.0
+[unit]
+preset = "paper"
+[thermal]
+start_C = 20.0
+rate_C_per_min = 1.0
+case_tau_s = 600.0
+die_tau_s = 120.0
+self_heating_C = 1.5
+thermistor_at = 0.3
+[noise]
+temp_noise_C = 0.005
+temp_resolution_C = 0.01
+[[step]]
+kind = "soak"
+chamber_C = -10.0
+dwell_s = 5400.0
+[[step]]
+kind = "power"
+off_s = 1800.0
+chamber_C = 10.0
+[[step]]
+kind = "soak"
+chamber_C = 40.0
+rate_C_per_min = 0.5
+dwell_s = 7200.0
+"#
+    .to_string()
+}
+
+#[test]
+fn the_thermal_path_is_identified_from_the_recording() {
+    let rows = rows(&known_thermal_path(), 3);
+    let p = bins_cal::diagnose::prep::prepare(&rows, &rows, Path::new("s"), Path::new("r")).unwrap();
+    let th = propose::identify_thermal(&p).expect("a path with chamber_C");
+    // On ramps the thermistor lags the chamber by the case's τ plus its share of the die's:
+    // that sum, the rise it sees at a power-on and the path itself are what the data fix.
+    let lag = th.case_tau_s + th.thermistor_at * th.die_tau_s;
+    assert!((lag / 636.0 - 1.0).abs() < 0.1, "thermistor's lag {lag:.0} s (600 + 0.3·120 = 636): {th:?}");
+    let seen = th.self_heating_c * th.thermistor_at;
+    assert!((seen / 0.45 - 1.0).abs() < 0.2, "rise the thermistor sees {seen:.3} °C (0.3·1.5 = 0.45): {th:?}");
+    assert!(th.rms_c < 0.02, "rms {:.4} °C: {th:?}", th.rms_c);
+    // And here, with a power cycle and two rates, the split too (grids of ×1.35 and ×1.5).
+    assert!((th.case_tau_s / 600.0 - 1.0).abs() < 0.2, "case τ: {th:?}");
+    assert!((th.die_tau_s / 120.0).ln().abs() < 1.6_f64.ln(), "die τ: {th:?}");
+    assert!((0.2..=0.45).contains(&th.thermistor_at), "thermistor's share: {th:?}");
+    // Without chamber_C nothing drives the case that the recording shows.
+    let bare: Vec<Row> = rows
+        .iter()
+        .cloned()
+        .map(|mut r| {
+            r.chamber_c = None;
+            r
+        })
+        .collect();
+    let p = bins_cal::diagnose::prep::prepare(&bare, &bare, Path::new("s"), Path::new("r")).unwrap();
+    assert!(propose::identify_thermal(&p).is_none());
+}
+
+#[test]
+fn command_without_twin_identifies_the_thermal_path_and_still_cycles_the_power() {
+    let dir = tempfile::tempdir().unwrap();
+    let [s, r, _] = files(dir.path(), true);
+    let (stdout, v) = diagnose_propose_with(dir.path(), &s, &r, None);
+    assert!(stdout.contains("thermal path identified from the recording"), "{stdout}");
+    let note = v["proposal"]["thermal_path"].as_str().unwrap();
+    assert!(note.contains("case τ"), "{note}");
+    let best = &v["proposal"]["candidates"][0];
+    assert!(best["name"].as_str().unwrap().contains("power"), "{best}");
+    let next = dir.path().join("next.toml");
+    let sim = ScenarioFile::read(&next).unwrap().build(&next).unwrap();
+    let hours = best["duration_h"].as_f64().unwrap();
+    assert!((sim.duration_s() / 3600.0 - hours).abs() < 1e-6, "{} h vs {hours} h", sim.duration_s() / 3600.0);
 }

@@ -44,11 +44,13 @@ pub struct Args {
     /// Where the recording cannot decide between explanations, propose the test that will:
     /// print the three best candidates with their length and expected evidence for every pair,
     /// and write the best as a scenario `bins-cal simulate` runs (with its plot beside it,
-    /// NEXT.png). Nothing to separate: it says so and writes neither. Needs --twin.
-    #[arg(long, value_name = "NEXT.toml", requires = "twin")]
+    /// NEXT.png). Nothing to separate: it says so and writes neither. Without --twin, the
+    /// candidates' thermal path is identified from the recording (chamber_C, power_s).
+    #[arg(long, value_name = "NEXT.toml")]
     propose: Option<PathBuf>,
     /// The scenario of SIM (its unit, thermal and noise tables): the candidates' thermal path is
-    /// simulated with it, and the proposed scenario keeps its tables.
+    /// simulated with it, and the proposed scenario keeps its tables (default: the paper's unit
+    /// with the thermal path identified from REAL's temp_C, chamber_C and power_s).
     #[arg(long, value_name = "SCENARIO.toml", requires = "propose")]
     twin: Option<PathBuf>,
     /// The chamber's lowest set point for a proposal [°C] (default: the recording's lowest temp_C).
@@ -87,7 +89,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let r = &d.report;
     let mut proposal = None;
     let mut proposed: Option<(String, Vec<u8>)> = None;
-    if let Some(twin) = &twin {
+    if args.propose.is_some() {
         let t1 = std::time::Instant::now();
         let mut lim = propose::Limits::from_recording(&d.prepared);
         lim.temp_min_c = args.chamber_min.unwrap_or(lim.temp_min_c);
@@ -101,6 +103,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 lim.temp_max_c
             ));
         }
+        let identified;
+        let (twin, twin_note) = match &twin {
+            Some(t) => (t, format!("unit, thermal and noise tables from {}", t.source)),
+            None => {
+                identified = propose::Twin::identified(&d.prepared, &lim).map_err(|e| anyhow!("{e}"))?;
+                (&identified.0, identified.1.clone())
+            }
+        };
         let bar = indicatif::ProgressBar::new(0);
         bar.set_style(
             indicatif::ProgressStyle::with_template("proposing {bar:30} {pos}/{len} candidates, {elapsed}")
@@ -120,12 +130,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let png = propose::plot(&d, twin, p, png_path).map_err(|e| anyhow!("{e}"))?;
             proposed = Some((text, png));
         }
-        proposal = Some((p, t1.elapsed().as_secs_f64()));
+        proposal = Some((p, t1.elapsed().as_secs_f64(), twin_note));
     }
     let mut value = serde_json::to_value(r).context("report")?;
-    if let (Some((p, _)), serde_json::Value::Object(m)) = (&proposal, &mut value) {
+    if let (Some((p, _, note)), serde_json::Value::Object(m)) = (&proposal, &mut value) {
         let file = proposed.as_ref().and(args.propose.as_deref());
-        m.insert("proposal".into(), propose::to_json(p.as_ref(), file));
+        let mut j = propose::to_json(p.as_ref(), file);
+        if let serde_json::Value::Object(o) = &mut j {
+            o.insert("thermal_path".into(), serde_json::Value::String(note.clone()));
+        }
+        m.insert("proposal".into(), j);
     }
     let json = serde_json::to_string_pretty(&value).context("report")?;
     let model = match &args.model {
@@ -282,8 +296,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
-    if let Some((p, secs)) = &proposal {
+    if let Some((p, secs, note)) = &proposal {
         print_proposal(p.as_ref(), args.propose.as_deref(), next_png.as_deref(), proposed.is_some(), *secs);
+        if p.is_some() {
+            println!("    candidates simulated with: {note}");
+        }
     }
     println!("report: {}", args.report.display());
     for p in plots {

@@ -35,6 +35,9 @@ pub struct Prepared {
     pub pos_names: Vec<String>,
     /// `power_s` \[s\] when every used row has it.
     pub power: Option<Vec<f64>>,
+    /// REAL's `chamber_C` [°C] when every used row has it (the proposal's thermal path is
+    /// identified from it, [`super::propose::Twin::identify`]).
+    pub chamber: Option<Vec<f64>>,
     /// Constant-reference segment of each row.
     pub seg: Vec<usize>,
     /// Residual REAL − SIM per accelerometer \[g\].
@@ -236,6 +239,9 @@ pub struct Builder {
     power: Vec<f64>,
     power_all: bool,
     power_any: bool,
+    /// REAL's `chamber_C` (NaN where a row has none), and whether every row has it.
+    chamber: Vec<f64>,
+    chamber_all: bool,
     /// REAL − SIM signals [V] (the residual once divided by the scale factors).
     du: [Vec<f64>; 3],
     /// SIM's signals [V] (SIM's departure from its linear fit once that is known).
@@ -350,6 +356,7 @@ struct Kept {
     temp: f64,
     sim_temp: f64,
     power: f64,
+    chamber: f64,
     f: [f64; 3],
     vib: Vibration<f64>,
     vib_class: usize,
@@ -413,6 +420,7 @@ struct Pending {
     temp: f64,
     sim_temp: f64,
     power: f64,
+    chamber: f64,
     f: [f64; 3],
     vib: Vibration<f64>,
     vib_class: usize,
@@ -559,6 +567,8 @@ impl Builder {
             power: Vec::new(),
             power_all: true,
             power_any: false,
+            chamber: Vec::new(),
+            chamber_all: true,
             du: Default::default(),
             sim_u: Default::default(),
             first_u: [0.0; 3],
@@ -701,6 +711,7 @@ impl Builder {
             }
         });
         self.power_all &= r.power_s.is_some();
+        self.chamber_all &= r.chamber_c.is_some();
         self.power_any |= r.power_s.is_some();
         let du = [0, 1, 2].map(|i| r.u_v[i] - s.u_v[i]);
         let k = Kept {
@@ -709,6 +720,7 @@ impl Builder {
             temp: r.temp_c,
             sim_temp: s.temp_c,
             power: r.power_s.unwrap_or(0.0),
+            chamber: r.chamber_c.unwrap_or(f64::NAN),
             f,
             vib,
             vib_class,
@@ -723,7 +735,7 @@ impl Builder {
 
     /// Keeps one usable row: as it is, or into the block being filled.
     fn keep(&mut self, k: Kept) {
-        let Kept { line, t, temp, sim_temp, power, f, vib, vib_class, pos, du, sim_u, session } = k;
+        let Kept { line, t, temp, sim_temp, power, chamber, f, vib, vib_class, pos, du, sim_u, session } = k;
         let Some(block_s) = self.block_s else {
             self.session_start.push(session);
             for i in 0..3 {
@@ -731,6 +743,7 @@ impl Builder {
                 self.sim_u[i].push(sim_u[i]);
             }
             self.power.push(power);
+            self.chamber.push(chamber);
             self.line.push(line);
             self.t.push(t);
             self.temp.push(temp);
@@ -788,6 +801,7 @@ impl Builder {
             temp: 0.0,
             sim_temp: 0.0,
             power: 0.0,
+            chamber: 0.0,
             f,
             vib,
             vib_class,
@@ -803,6 +817,7 @@ impl Builder {
         b.temp += temp;
         b.sim_temp += sim_temp;
         b.power += power;
+        b.chamber += chamber;
         for i in 0..3 {
             b.du[i] += du[i];
             b.du2[i] += du[i] * du[i];
@@ -841,6 +856,7 @@ impl Builder {
         let temp = std::mem::take(&mut self.temp);
         let sim_temp = std::mem::take(&mut self.sim_temp);
         let power = std::mem::take(&mut self.power);
+        let chamber = std::mem::take(&mut self.chamber);
         let f = std::mem::take(&mut self.f);
         let vib = std::mem::take(&mut self.vib);
         let vib_class = std::mem::take(&mut self.vib_class);
@@ -855,6 +871,7 @@ impl Builder {
                 temp: temp[k],
                 sim_temp: sim_temp[k],
                 power: power[k],
+                chamber: chamber[k],
                 f: f[k],
                 vib: vib[k],
                 vib_class: vib_class[k],
@@ -900,6 +917,7 @@ impl Builder {
             out.temp.push(mean(&self.temp));
             out.sim_temp.push(mean(&self.sim_temp));
             out.power.push(mean(&self.power));
+            out.chamber.push(mean(&self.chamber));
             out.f.push(self.f[j]);
             out.vib.push(self.vib[j]);
             out.vib_class.push(self.vib_class[j]);
@@ -921,6 +939,7 @@ impl Builder {
         self.temp = out.temp;
         self.sim_temp = out.sim_temp;
         self.power = out.power;
+        self.chamber = out.chamber;
         self.f = out.f;
         self.vib = out.vib;
         self.vib_class = out.vib_class;
@@ -941,6 +960,7 @@ impl Builder {
         self.temp.push(b.temp / n);
         self.sim_temp.push(b.sim_temp / n);
         self.power.push(b.power / n);
+        self.chamber.push(b.chamber / n);
         self.f.push(b.f);
         self.vib.push(b.vib);
         self.vib_class.push(b.vib_class);
@@ -1003,6 +1023,8 @@ impl Builder {
             power,
             power_all,
             power_any,
+            chamber,
+            chamber_all,
             du,
             sim_u,
             first_u,
@@ -1269,6 +1291,7 @@ impl Builder {
             pos,
             pos_names,
             power,
+            chamber: if chamber_all && !chamber.is_empty() { Some(chamber) } else { None },
             seg,
             r,
             sim_g,

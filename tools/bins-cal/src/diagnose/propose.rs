@@ -314,8 +314,154 @@ pub fn candidates(lim: &Limits, start_c: f64, hold_s: f64) -> Vec<Candidate> {
 pub struct Twin {
     /// The scenario's text as parsed (TOML).
     pub table: toml::Table,
-    /// Its file (for errors).
-    pub path: std::path::PathBuf,
+    /// Where its tables come from (a file, or the recording's identified thermal path).
+    pub source: String,
+}
+
+/// The unit's thermal path identified from a recording ([`identify_thermal`]): the case
+/// follows `chamber_C` with one time constant, the die follows the case with another and is
+/// heated by a step at each power-on (the simulator's `[thermal]` model, `docs/simulator.md`),
+/// and the thermistor reads the case plus a share of the die's departure from it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ThermalPath {
+    /// Chamber → case time constant \[s\].
+    pub case_tau_s: f64,
+    /// Case → die time constant, also the self-heating's \[s\].
+    pub die_tau_s: f64,
+    /// The die's rise over the case when powered [°C].
+    pub self_heating_c: f64,
+    /// The thermistor's share of the die's departure from the case (0 = case, 1 = die).
+    pub thermistor_at: f64,
+    /// RMS of `temp_C` about the fitted path [°C].
+    pub rms_c: f64,
+}
+
+/// The largest self-heating an identified twin is given [°C] (the simulator's bound on a
+/// width or rise).
+const MAX_RISE_C: f64 = bins_comp::dynamics::MAX_WIDTH_C;
+
+/// Grid of the time constants [`identify_thermal`] tries \[s\]: geometric, `n` values from
+/// `lo` to `hi`.
+fn tau_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    (0..n).map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64)).collect()
+}
+
+/// The response `e` of a first-order lag (time constant `tau_s`) to an input `x` linear between
+/// the rows, as its departure from the input: `e_k = a·e_{k−1} − ẋ·τ·(1 − a)`, `a = e^(−Δt/τ)`,
+/// exact for that input; at rest (`e = 0`) at the first row of each session (`starts`): what
+/// the input did in the unrecorded time before it is not known.
+fn lag_departure(t: &[f64], x: &[f64], tau_s: f64, starts: &[usize]) -> Vec<f64> {
+    let mut e = vec![0.0; t.len()];
+    for k in 1..t.len() {
+        let dt = t[k] - t[k - 1];
+        if !(dt > 0.0) || starts.binary_search(&k).is_ok() {
+            e[k] = if dt > 0.0 { 0.0 } else { e[k - 1] };
+            continue;
+        }
+        let a = (-dt / tau_s).exp();
+        let rate = (x[k] - x[k - 1]) / dt;
+        e[k] = a * e[k - 1] - rate * tau_s * (1.0 - a);
+    }
+    e
+}
+
+/// The die's heating over the case for a unit rise (time constant `tau_s`), from `power_s`:
+/// it charges while powered and decays while off (the off time is the time step less the
+/// `power_s` the row reports after a power-on); the first row has been on for its `power_s`.
+fn heating_unit(t: &[f64], power: &[f64], tau_s: f64) -> Vec<f64> {
+    let mut h = vec![0.0; t.len()];
+    for k in 0..t.len() {
+        h[k] = if k == 0 {
+            -(-power[0].max(0.0) / tau_s).exp_m1()
+        } else if power[k] >= power[k - 1] {
+            1.0 - (1.0 - h[k - 1]) * (-(t[k] - t[k - 1]).max(0.0) / tau_s).exp()
+        } else {
+            let on = power[k].max(0.0);
+            let off = (t[k] - t[k - 1] - on).max(0.0);
+            let left = h[k - 1] * (-off / tau_s).exp();
+            1.0 - (1.0 - left) * (-on / tau_s).exp()
+        };
+    }
+    h
+}
+
+/// The thermal path of recording `p` from its `temp_C`, `chamber_C` and `power_s`: `None`
+/// without `chamber_C` (nothing drives the case that the recording shows). The two time
+/// constants are searched on geometric grids (case 30 s–30 000 s, die 5 s–3 000 s, by a
+/// factor of about 1.35 and 1.5); at each pair `temp_C − case` is fitted by least squares as
+/// `b + s·h + a·g` plus, per session, the case's unknown departure from the chamber at its
+/// start decaying with the case's time constant (`e^(−(t − t_s)/τ_case)`; the die starts each
+/// session at the case, heated from its power-on): `case` the chamber through the case's lag
+/// ([`lag_departure`]), `h` the heating of a unit rise ([`heating_unit`]; left out without
+/// `power_s`, or where it does not change: a unit powered long before the record), `g` the
+/// die's lag behind the case. The thermistor's share is `a`
+/// (clamped to [0.05, 1]) and the rise `s/a`. The pair with the least squared residual is
+/// kept. On ramps the data fix the thermistor's total lag (`τ_case + a·τ_die`) better than its
+/// split.
+pub fn identify_thermal(p: &Prepared) -> Option<ThermalPath> {
+    let chamber = p.chamber.as_ref()?;
+    let t = &p.t;
+    let n = t.len();
+    if n < 8 {
+        return None;
+    }
+    let starts = &p.session_starts;
+    let session = p.session_of_rows();
+    let mut best: Option<(f64, ThermalPath)> = None;
+    for &tc in &tau_grid(30.0, 30_000.0, 24) {
+        let case_dep = lag_departure(t, chamber, tc, starts);
+        let case: Vec<f64> = chamber.iter().zip(&case_dep).map(|(c, e)| c + e).collect();
+        let y: Vec<f64> = p.temp.iter().zip(&case).map(|(a, b)| a - b).collect();
+        for &td in &tau_grid(5.0, 3000.0, 16) {
+            let g = lag_departure(t, &case, td, starts);
+            let h = p.power.as_ref().map(|pw| heating_unit(t, pw, td)).filter(|h| {
+                let (lo, hi) = h.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+                hi - lo > 0.01
+            });
+            let dense = if h.is_some() { 3 } else { 2 };
+            let q = dense + starts.len();
+            // Normal equations over the nonzero entries of each row: 1, g, (h), and its
+            // session's start column.
+            let mut ata = vec![0.0; q * q];
+            let mut aty = vec![0.0; q];
+            let mut sy2 = 0.0;
+            for k in 0..n {
+                let s = session[k];
+                let since = t[k] - t[starts[s]];
+                let mut e = [(0, 1.0), (1, g[k]), (0, 0.0), (0, 0.0)];
+                let mut m = 2;
+                if let Some(h) = &h {
+                    e[2] = (2, h[k]);
+                    m = 3;
+                }
+                e[m] = (dense + s, (-since / tc).exp());
+                let row = &e[..m + 1];
+                for &(i, vi) in row {
+                    aty[i] += vi * y[k];
+                    for &(j, vj) in row {
+                        ata[i * q + j] += vi * vj;
+                    }
+                }
+                sy2 += y[k] * y[k];
+            }
+            let Some((x, _)) = super::stats::chol_solve(&ata, &aty, q, 1e-12) else { continue };
+            let sse = (sy2 - x.iter().zip(&aty).map(|(a, b)| a * b).sum::<f64>()).max(0.0);
+            if best.as_ref().is_some_and(|(b, _)| *b <= sse) {
+                continue;
+            }
+            // A share below 5 % is taken as 5 % (the rise it implies stays finite).
+            let at = x[1].clamp(0.05, 1.0);
+            let path = ThermalPath {
+                case_tau_s: tc,
+                die_tau_s: td,
+                self_heating_c: if h.is_some() { x[2] / at } else { 0.0 },
+                thermistor_at: at,
+                rms_c: (sse / n as f64).sqrt(),
+            };
+            best = Some((sse, path));
+        }
+    }
+    best.map(|b| b.1)
 }
 
 impl Twin {
@@ -324,7 +470,49 @@ impl Twin {
         let text = crate::fsio::read_text(path).map_err(|e| DiagnoseError(e.to_string()))?;
         crate::sim::scenario::ScenarioFile::parse(&text, path).map_err(|e| DiagnoseError(e.to_string()))?;
         let table: toml::Table = text.parse().map_err(|e| DiagnoseError(format!("{}: {e}", path.display())))?;
-        Ok(Twin { table, path: path.to_path_buf() })
+        Ok(Twin { table, source: path.display().to_string() })
+    }
+
+    /// A twin made from recording `p` itself: the thermal path [`identify_thermal`] finds
+    /// (without `chamber_C`, the thermistor following the program: no case, die or
+    /// self-heating), the paper's unit (the proposal's columns use the recording's own fitted
+    /// sensitivity, not the unit's constants), the chamber's largest rate from `lim`, and the
+    /// recording's temperature resolution. The second value says what was identified.
+    pub fn identified(p: &Prepared, lim: &Limits) -> Result<(Twin, String), DiagnoseError> {
+        let path = identify_thermal(p);
+        let (th, what) = match path {
+            Some(th) => {
+                let what = format!(
+                    "thermal path identified from the recording's temp_C, chamber_C{}: case τ {:.0} s, die τ {:.0} s, self-heating {:.2} °C, thermistor at {:.2} of the die (rms {:.3} °C)",
+                    if p.power.is_some() { " and power_s" } else { "" },
+                    th.case_tau_s,
+                    th.die_tau_s,
+                    th.self_heating_c,
+                    th.thermistor_at,
+                    th.rms_c
+                );
+                (th, what)
+            }
+            None => (
+                ThermalPath { case_tau_s: 0.0, die_tau_s: 0.0, self_heating_c: 0.0, thermistor_at: 0.0, rms_c: f64::NAN },
+                "no chamber_C in the recording: the proposal's temperatures are the thermistor's, following the program (give --twin SCENARIO for the unit's thermal path)".to_string(),
+            ),
+        };
+        let resolution = p.temp_resolution_c.unwrap_or(0.01);
+        let rate_hz = if p.dt > 0.0 { (1.0 / p.dt).min(100.0) } else { 1.0 };
+        let text = format!(
+            "[recording]\nrate_Hz = {rate_hz:?}\n\n[unit]\npreset = \"paper\"\n\n[thermal]\nstart_C = 20.0\nrate_C_per_min = {:?}\ncase_tau_s = {:?}\ndie_tau_s = {:?}\nself_heating_C = {:?}\nthermistor_at = {:?}\n\n[noise]\nwhite_V = 1.0e-6\ntemp_noise_C = {:?}\ntemp_resolution_C = {resolution:?}\n\n[[step]]\nkind = \"soak\"\nchamber_C = 20.0\ndwell_s = 60.0\n",
+            lim.max_rate_c_per_min,
+            th.case_tau_s,
+            th.die_tau_s,
+            th.self_heating_c.clamp(-MAX_RISE_C, MAX_RISE_C),
+            th.thermistor_at,
+            0.5 * resolution,
+        );
+        let name = Path::new("identified twin");
+        crate::sim::scenario::ScenarioFile::parse(&text, name).map_err(|e| DiagnoseError(e.to_string()))?;
+        let table: toml::Table = text.parse().map_err(|e| DiagnoseError(format!("identified twin: {e}")))?;
+        Ok((Twin { table, source: "the recording (the paper's unit; thermal path identified)".into() }, what))
     }
 
     /// The twin's logger rate \[Hz\] (1 where it has none).
@@ -353,7 +541,7 @@ impl Twin {
             "# Proposed by bins-cal diagnose --propose: {} ({:.1} h). Unit, thermal and noise tables from {}.\n#\n#   bins-cal simulate THIS.toml -o next.csv --seed 1\ndescription = {:?}\n",
             c.name,
             c.duration_s() / 3600.0,
-            self.path.display(),
+            self.source,
             format!("{}: {}", c.name, c.what)
         );
         let body = toml::to_string(&t).unwrap_or_default();
