@@ -340,6 +340,9 @@ pub struct ThermalPath {
 /// width or rise).
 const MAX_RISE_C: f64 = bins_comp::dynamics::MAX_WIDTH_C;
 
+/// The most rows [`identify_thermal`] fits (every k-th of a longer recording).
+const IDENT_ROWS: usize = 20_000;
+
 /// Grid of the time constants [`identify_thermal`] tries \[s\]: geometric, `n` values from
 /// `lo` to `hi`.
 fn tau_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
@@ -397,24 +400,37 @@ fn heating_unit(t: &[f64], power: &[f64], tau_s: f64) -> Vec<f64> {
 /// die's lag behind the case. The thermistor's share is `a`
 /// (clamped to [0.05, 1]) and the rise `s/a`. The pair with the least squared residual is
 /// kept. On ramps the data fix the thermistor's total lag (`τ_case + a·τ_die`) better than its
-/// split.
+/// split. A longer recording is fitted on every k-th row, at most [`IDENT_ROWS`] (with every
+/// session's first row and every power-on).
 pub fn identify_thermal(p: &Prepared) -> Option<ThermalPath> {
     let chamber = p.chamber.as_ref()?;
-    let t = &p.t;
-    let n = t.len();
-    if n < 8 {
+    if p.t.len() < 8 {
         return None;
     }
-    let starts = &p.session_starts;
-    let session = p.session_of_rows();
+    // Every k-th row, at most IDENT_ROWS (the paths are exact for inputs linear between the
+    // rows kept), and every session's first row and every power-on.
+    let stride = p.t.len().div_ceil(IDENT_ROWS).max(1);
+    let on = |i: usize| p.power.as_ref().is_some_and(|pw| i > 0 && pw[i] < pw[i - 1]);
+    let first = |i: usize| p.session_starts.binary_search(&i).is_ok();
+    let keep: Vec<usize> = (0..p.t.len()).filter(|&i| i % stride == 0 || first(i) || on(i)).collect();
+    let pick = |v: &[f64]| -> Vec<f64> { keep.iter().map(|&i| v[i]).collect() };
+    let (t, chamber, temp) = (pick(&p.t), pick(chamber), pick(&p.temp));
+    let power = p.power.as_deref().map(pick);
+    let of_row = p.session_of_rows();
+    let session: Vec<usize> = keep.iter().map(|&i| of_row[i]).collect();
+    let mut starts = vec![0; p.session_starts.len().max(1)];
+    for (k, &s) in session.iter().enumerate().rev() {
+        starts[s] = k;
+    }
+    let (t, n) = (&t[..], keep.len());
     let mut best: Option<(f64, ThermalPath)> = None;
     for &tc in &tau_grid(30.0, 30_000.0, 24) {
-        let case_dep = lag_departure(t, chamber, tc, starts);
+        let case_dep = lag_departure(t, &chamber, tc, &starts);
         let case: Vec<f64> = chamber.iter().zip(&case_dep).map(|(c, e)| c + e).collect();
-        let y: Vec<f64> = p.temp.iter().zip(&case).map(|(a, b)| a - b).collect();
+        let y: Vec<f64> = temp.iter().zip(&case).map(|(a, b)| a - b).collect();
         for &td in &tau_grid(5.0, 3000.0, 16) {
-            let g = lag_departure(t, &case, td, starts);
-            let h = p.power.as_ref().map(|pw| heating_unit(t, pw, td)).filter(|h| {
+            let g = lag_departure(t, &case, td, &starts);
+            let h = power.as_ref().map(|pw| heating_unit(t, pw, td)).filter(|h| {
                 let (lo, hi) = h.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
                 hi - lo > 0.01
             });
