@@ -119,3 +119,31 @@ fn real_sweep_steps_on_z_are_located_and_fitted_with_the_model() {
 fn times(path: &Path) -> Vec<f64> {
     Csv::read(path).column("t_s")
 }
+
+/// What `--propose` makes of the sweep (docs/diagnosis.md, "When the data cannot decide"): y's
+/// lag is modelled in a group with plays and a drift, so the recording cannot say which; with
+/// no `chamber_C` in it the candidates' temperatures follow the program. Asserted: y's lag is
+/// paired with at least one play, each pair below what a name needs on this recording; the
+/// best candidate lifts every pair to what it needs within the recording's own limits.
+#[test]
+fn real_sweep_lag_or_play_gets_a_proposal() {
+    use bins_cal::diagnose::mech::Mech;
+    use bins_cal::diagnose::propose;
+    let (sim, real) = (data("tofupilot-sweep-sim.csv"), data("tofupilot-sweep-real.csv"));
+    let d = diagnose_files(&sim, &real, &Default::default()).expect("diagnosis runs");
+    let lim = propose::Limits::from_recording(&d.prepared);
+    let (twin, what) = propose::Twin::identified(&d.prepared, &lim).unwrap();
+    assert!(what.contains("no chamber_C"), "{what}");
+    let p = propose::propose(&d, &twin, Some(lim), &|_, _| {}).unwrap().expect("pairs to separate");
+    let plays = [Mech::BiasHysteresis, Mech::ThermalHysteresis];
+    let lag_play: Vec<usize> = (0..p.pairs.len())
+        .filter(|&k| p.pairs[k].axis == 1 && p.pairs[k].a == Mech::ThermalLag && plays.contains(&p.pairs[k].b))
+        .collect();
+    assert!(!lag_play.is_empty(), "y lag / play among the pairs: {:?}", p.pairs);
+    for &k in &lag_play {
+        assert!(p.pairs[k].recording < p.pairs[k].needed, "{:?}", p.pairs[k]);
+    }
+    let best = p.ranked.first().expect("a candidate within the limits");
+    assert!(best.candidate.duration_s() <= lim.max_duration_s + 1e-9);
+    assert!(best.separates_all, "{}: worst pair at {:.2}× what it needs", best.candidate.name, best.worst_ratio);
+}
