@@ -1136,6 +1136,22 @@ impl PartialLs {
 
     /// SSE with the raw columns `extra` added (infinite when they are collinear).
     pub(crate) fn sse_plus(&self, filt: &Filter, extra: &[Vec<f64>]) -> f64 {
+        match self.solve_plus(filt, extra) {
+            Some((x, b, _)) => (self.yy - x.iter().zip(&b).map(|(x, b)| x * b).sum::<f64>()).max(0.0),
+            None => f64::INFINITY,
+        }
+    }
+
+    /// The generalised-least-squares coefficients of the fixed columns, then of `extra` (`None`
+    /// when they are collinear).
+    pub(crate) fn coef_plus(&self, filt: &Filter, extra: &[Vec<f64>]) -> Option<Vec<f64>> {
+        let (x, _, d) = self.solve_plus(filt, extra)?;
+        Some(x.iter().zip(&d).map(|(x, d)| x / d).collect())
+    }
+
+    /// The normal equations with `extra` beside the fixed columns, scaled to a unit diagonal,
+    /// solved: the scaled solution, right-hand side and the scales.
+    fn solve_plus(&self, filt: &Filter, extra: &[Vec<f64>]) -> Option<(Vec<f64>, Vec<f64>, Vec<f64>)> {
         let we: Vec<Vec<f64>> = extra.iter().map(|c| filt.whitened(c)).collect();
         let (pf, m) = (self.w.len(), self.w.len() + we.len());
         let col = |i: usize| if i < pf { &self.w[i] } else { &we[i - pf] };
@@ -1151,7 +1167,7 @@ impl PartialLs {
         }
         let d: Vec<f64> = (0..m).map(|u| a[u * m + u].sqrt()).collect();
         if d.iter().any(|v| !(*v > 0.0)) {
-            return f64::INFINITY;
+            return None;
         }
         for u in 0..m {
             b[u] /= d[u];
@@ -1159,10 +1175,7 @@ impl PartialLs {
                 a[u * m + v] /= d[u] * d[v];
             }
         }
-        match chol_solve(&a, &b, m, 1e-10) {
-            Some((x, _)) => (self.yy - x.iter().zip(&b).map(|(x, b)| x * b).sum::<f64>()).max(0.0),
-            None => f64::INFINITY,
-        }
+        chol_solve(&a, &b, m, 1e-10).map(|(x, _)| (x, b, d))
     }
 }
 

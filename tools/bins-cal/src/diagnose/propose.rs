@@ -798,44 +798,11 @@ pub fn to_json(prop: Option<&Proposal>, file: Option<&Path>) -> serde_json::Valu
     })
 }
 
-/// Least squares of `y` on `cols` (and a constant): the fitted values (`None` when singular).
-fn ls_fit(y: &[f64], cols: &[Vec<f64>]) -> Option<Vec<f64>> {
-    let n = y.len();
-    let mut x: Vec<Vec<f64>> = vec![vec![1.0; n]];
-    x.extend(cols.iter().cloned());
-    let k = x.len();
-    let mut a = vec![vec![0.0; k + 1]; k];
-    for i in 0..k {
-        for j in 0..k {
-            a[i][j] = x[i].iter().zip(&x[j]).map(|(u, v)| u * v).sum();
-        }
-        a[i][k] = x[i].iter().zip(y).map(|(u, v)| u * v).sum();
-    }
-    let scale = (0..k).map(|i| a[i][i]).fold(0.0f64, f64::max);
-    for c in 0..k {
-        let piv = (c..k).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
-        a.swap(c, piv);
-        if !(a[c][c].abs() > 1e-12 * scale) {
-            return None;
-        }
-        for r in 0..k {
-            if r != c {
-                let f = a[r][c] / a[c][c];
-                let row_c = a[c].clone();
-                for (v, w) in a[r].iter_mut().zip(&row_c) {
-                    *v -= f * w;
-                }
-            }
-        }
-    }
-    let b: Vec<f64> = (0..k).map(|i| a[i][k] / a[i][i]).collect();
-    Some((0..n).map(|r| (0..k).map(|j| b[j] * x[j][r]).sum()).collect())
-}
-
 /// The plot of the best candidate: its temperature (`temp_C`, smoothed) and `power_s` against
 /// time, and below them, for its worst pair, what the modelled term predicts on that test (as
-/// fitted on the recording) beside the rival refitted to it (least squares, the rival's θ
-/// where the separability found it best; absent where the rival is not one of the library's
+/// fitted on the recording) beside the rival refitted to it as the separability refits it
+/// (generalised least squares under the recording's noise model with the nuisance columns
+/// free, the rival's θ where it fits best; absent where the rival is not one of the library's
 /// mechanisms), in mg; each curve broken at the unpowered gaps (one line per session). PNG
 /// bytes, written by the caller with its other outputs.
 pub fn plot(d: &Diagnosis, twin: &Twin, prop: &Proposal, path: &Path) -> Result<Vec<u8>, DiagnoseError> {
@@ -866,11 +833,9 @@ pub fn plot(d: &Diagnosis, twin: &Twin, prop: &Proposal, path: &Path) -> Result<
     };
     let rival: Option<Vec<f64>> = {
         let refit = super::separate::Refit::new(&ctx, fit.q, fit.deviance_scale, &eta, &ctx.nuisance);
-        refit.mechanism(pair.b).and_then(|s| {
-            let mut cols = ctx.columns(pair.b, s.rival_theta.unwrap_or(0.0));
-            cols.extend(ctx.nuisance.iter().cloned());
-            ls_fit(&eta, &cols)
-        })
+        refit
+            .mechanism(pair.b)
+            .and_then(|s| refit.fitted(&ctx.nuisance, &ctx.columns(pair.b, s.rival_theta.unwrap_or(0.0))))
     };
     let hours: Vec<f64> = cp.t.iter().map(|t| t / 3600.0).collect();
     let power_h: Vec<f64> = cp.power.clone().unwrap_or_default().iter().map(|p| p / 3600.0).collect();

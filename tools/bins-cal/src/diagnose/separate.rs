@@ -133,6 +133,20 @@ impl<'c, 'p> Refit<'c, 'p> {
         Some(Separation { deviance: s / self.scale, rival_theta: Some(th) })
     }
 
+    /// The rival's curve as the refit makes it: `cols` beside `shared` (the raw columns this
+    /// refit was made with, in the same order) at their generalised-least-squares coefficients
+    /// under the noise model, summed \[g\]; `None` when they are collinear.
+    pub fn fitted(&self, shared: &[Vec<f64>], cols: &[Vec<f64>]) -> Option<Vec<f64>> {
+        let coef = self.part.coef_plus(&self.filt, cols)?;
+        let mut out = vec![0.0; self.ctx.p.t.len()];
+        for (c, b) in shared.iter().chain(cols).zip(&coef) {
+            for (o, v) in out.iter_mut().zip(c) {
+                *o += b * v;
+            }
+        }
+        Some(out)
+    }
+
     /// The deviance the library's mechanism `rival` cannot absorb (θ searched on its grid where
     /// it has one).
     pub fn mechanism(&self, rival: Mech) -> Option<Separation> {
