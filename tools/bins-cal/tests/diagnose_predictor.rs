@@ -183,16 +183,15 @@ fn summarise(what: &str, out: &[Outcome], simulated: bool) {
         let named = o.realised >= o.pair.threshold;
         let (tlo, thi) = propose::evidence_interval(o.truth, o.df, 0.9);
         let truth_in = (tlo..=thi).contains(&o.realised);
+        let truth = if o.truth.is_finite() {
+            format!(" (REAL's physics {:.1}, {} its interval)", o.truth, if truth_in { "inside" } else { "outside" })
+        } else {
+            String::new()
+        };
         println!(
-            "{}: expected {:.1} (REAL's physics {:.1}{}), df {}, 90 % interval {:.1}–{:.1}, realised {:.1} {}; needed {:.1}, threshold {:.1}{}",
+            "{}: expected {:.1}{truth}, df {}, 90 % interval {:.1}–{:.1}, realised {:.1} {}; needed {:.1}, threshold {:.1}{}",
             o.label,
             o.expected,
-            o.truth,
-            if o.truth.is_finite() {
-                if truth_in { ", inside its interval" } else { ", outside its interval" }
-            } else {
-                ""
-            },
             o.df,
             lo,
             hi,

@@ -17,6 +17,11 @@
 //! likelihood-ratio statistic of `A` against `B` were that test run. A candidate that lifts
 //! every pair to [`super::separate::separation_needed`] ranks before one that does not; among
 //! those alike, the worst pair's evidence (over what it needs) per hour of test decides.
+//!
+//! The expected evidence is checked against runs: [`realised_on`] gives what a run of a test
+//! shows (the rival refitted on its data with and without the term, by the same refits),
+//! [`evidence_interval`] the 90 % interval that draw falls in when the fitted model is true (a
+//! noncentral χ²), [`run_on_design`] a run of a candidate with REAL's physics.
 
 use super::fit::{ALPHA, AxisFit, Term, naming_threshold, separability_of};
 use super::mech::{Context, Mech};
