@@ -876,105 +876,114 @@ pub(crate) fn separability_of(ctx: &Context, fit: &AxisFit) -> Vec<(Mech, Vec<(M
     let mut out = Vec::new();
     for (k, term) in fit.terms.iter().enumerate() {
         let a = [Fitted { mech: term.mech, theta: term.theta, coef: term.coef.clone() }];
-        let shared: Vec<Vec<f64>> = ctx
-            .nuisance
-            .iter()
-            .cloned()
-            .chain(fit.terms.iter().enumerate().filter(|(j, _)| *j != k).flat_map(|(_, t)| t.columns.iter().cloned()))
-            .collect();
-        let refit = Refit::new(ctx, fit.q, fit.deviance_scale, &predict(ctx, &a), &shared);
-        let second_copy =
-            |m: Mech| m.theta().is_some() && fit.terms.iter().enumerate().any(|(j, t)| j != k && t.mech == m);
-        let mut rivals: Vec<(Mech, f64)> = Mech::ALL
-            .iter()
-            .chain(Mech::ALTERNATIVES.iter())
-            .copied()
-            .filter(|&m| m != term.mech && ctx.rival_possible(m))
-            .filter(|&m| !fit.terms.iter().any(|t| t.mech == m) || second_copy(m))
-            .filter_map(|m| refit.mechanism(m).map(|s| (m, s.deviance)))
-            .collect();
-        if matches!(term.mech, Mech::Warmup | Mech::SelfHeating) {
-            let mut add = |m: Mech, d: f64| match rivals.iter_mut().find(|r| r.0 == m) {
-                Some(r) => r.1 = r.1.min(d),
-                None => rivals.push((m, d)),
-            };
-            // A turn-on term beside a temperature form may be that form acting through a die
-            // that runs warmer than the thermistor after power-on: `∂A/∂T · (1 − e^(−P/τ))`, A
-            // the other term's fitted contribution.
-            for (j, other) in fit.terms.iter().enumerate() {
-                if j == k || !other.mech.temperature_form() {
-                    continue;
-                }
-                if let Some(d) = through_self_heating(ctx, &refit, other) {
-                    add(other.mech, d);
-                }
-            }
-            // Or a temperature form the model lacks, acting through a die that self-heats
-            // after power-on unseen by the thermistor (a tempco on a soak is a turn-on
-            // transient).
-            for m in [
-                Mech::BiasTempOrder,
-                Mech::ScaleTemp,
-                Mech::CrossCouplingTemp,
-                Mech::BiasHysteresis,
-                Mech::ThermalHysteresis,
-            ] {
-                if !fit.terms.iter().any(|t| t.mech == m)
-                    && let Some(d) = refit.through_die_rise(m)
-                {
-                    add(m, d);
-                }
-            }
-        }
+        let refit = Refit::new(ctx, fit.q, fit.deviance_scale, &predict(ctx, &a), &shared_with(ctx, fit, k));
+        out.push((term.mech, rivals_of(ctx, fit, k, &refit)));
+    }
+    out
+}
+
+/// The columns free beside term `k` of `fit` and its rivals: the nuisance and every other
+/// term's columns ([`separability_of`]).
+pub(crate) fn shared_with(ctx: &Context, fit: &AxisFit, k: usize) -> Vec<Vec<f64>> {
+    ctx.nuisance
+        .iter()
+        .cloned()
+        .chain(fit.terms.iter().enumerate().filter(|(j, _)| *j != k).flat_map(|(_, t)| t.columns.iter().cloned()))
+        .collect()
+}
+
+/// Every rival of term `k` of `fit` ([`separability_of`]) refitted to what `refit` holds (the
+/// term's prediction, or data), with what `refit` shares: per rival the least whitened residual
+/// sum of squares over its forms, in the deviance's unit; ascending.
+pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::separate::Refit) -> Vec<(Mech, f64)> {
+    let term = &fit.terms[k];
+    let second_copy = |m: Mech| m.theta().is_some() && fit.terms.iter().enumerate().any(|(j, t)| j != k && t.mech == m);
+    let mut rivals: Vec<(Mech, f64)> = Mech::ALL
+        .iter()
+        .chain(Mech::ALTERNATIVES.iter())
+        .copied()
+        .filter(|&m| m != term.mech && ctx.rival_possible(m))
+        .filter(|&m| !fit.terms.iter().any(|t| t.mech == m) || second_copy(m))
+        .filter_map(|m| refit.mechanism(m).map(|s| (m, s.deviance)))
+        .collect();
+    if matches!(term.mech, Mech::Warmup | Mech::SelfHeating) {
         let mut add = |m: Mech, d: f64| match rivals.iter_mut().find(|r| r.0 == m) {
             Some(r) => r.1 = r.1.min(d),
             None => rivals.push((m, d)),
         };
-        // A temperature form may be the die heating after power-on, acting through a
-        // sensitivity SIM does not have, `(1 − e^(−P/τ))·(c0 + c1 ΔT + c2 ΔT²)`; or a die
-        // running steadily warmer than the thermistor, through SIM's own (`S'(T)`).
-        if term.mech.temperature_form() {
-            for d in [refit.self_heating_free(), refit.self_heating_settled()].into_iter().flatten() {
-                add(Mech::SelfHeating, d);
-            }
-        }
-        // Beside a lag, any term may be the rest of a second lag stage.
+        // A turn-on term beside a temperature form may be that form acting through a die
+        // that runs warmer than the thermistor after power-on: `∂A/∂T · (1 − e^(−P/τ))`, A
+        // the other term's fitted contribution.
         for (j, other) in fit.terms.iter().enumerate() {
-            if j != k
-                && other.mech == Mech::ThermalLag
-                && let Some(d) = other.theta.and_then(|tau| refit.second_lag_stage(tau))
-            {
-                add(Mech::ThermalLag, d);
-            }
-        }
-        // Beside a lag or a play, any term may be that lag or play acting on the die's own
-        // rise after each power-on, which the thermistor sees only in part.
-        for (j, other) in fit.terms.iter().enumerate() {
-            if j != k
-                && matches!(other.mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis)
-                && let Some(d) =
-                    refit.fitted_through_die_rise(other.mech, other.theta, &other.coef, &other.contribution)
-            {
-                add(other.mech, d);
-            }
-        }
-        // Or the rest of that lag's or play's shape: a gain varying with temperature, or its
-        // state carried through the unpowered gaps.
-        for (j, other) in fit.terms.iter().enumerate() {
-            if j == k || !matches!(other.mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis) {
+            if j == k || !other.mech.temperature_form() {
                 continue;
             }
-            for d in [refit.gain_with_temperature(other.mech), refit.carried_across_sessions(other.mech)]
-                .into_iter()
-                .flatten()
-            {
+            if let Some(d) = through_self_heating(ctx, refit, other) {
                 add(other.mech, d);
             }
         }
-        rivals.sort_by(|x, y| x.1.total_cmp(&y.1));
-        out.push((term.mech, rivals));
+        // Or a temperature form the model lacks, acting through a die that self-heats
+        // after power-on unseen by the thermistor (a tempco on a soak is a turn-on
+        // transient).
+        for m in [
+            Mech::BiasTempOrder,
+            Mech::ScaleTemp,
+            Mech::CrossCouplingTemp,
+            Mech::BiasHysteresis,
+            Mech::ThermalHysteresis,
+        ] {
+            if !fit.terms.iter().any(|t| t.mech == m)
+                && let Some(d) = refit.through_die_rise(m)
+            {
+                add(m, d);
+            }
+        }
     }
-    out
+    let mut add = |m: Mech, d: f64| match rivals.iter_mut().find(|r| r.0 == m) {
+        Some(r) => r.1 = r.1.min(d),
+        None => rivals.push((m, d)),
+    };
+    // A temperature form may be the die heating after power-on, acting through a
+    // sensitivity SIM does not have, `(1 − e^(−P/τ))·(c0 + c1 ΔT + c2 ΔT²)`; or a die
+    // running steadily warmer than the thermistor, through SIM's own (`S'(T)`).
+    if term.mech.temperature_form() {
+        for d in [refit.self_heating_free(), refit.self_heating_settled()].into_iter().flatten() {
+            add(Mech::SelfHeating, d);
+        }
+    }
+    // Beside a lag, any term may be the rest of a second lag stage.
+    for (j, other) in fit.terms.iter().enumerate() {
+        if j != k
+            && other.mech == Mech::ThermalLag
+            && let Some(d) = other.theta.and_then(|tau| refit.second_lag_stage(tau))
+        {
+            add(Mech::ThermalLag, d);
+        }
+    }
+    // Beside a lag or a play, any term may be that lag or play acting on the die's own
+    // rise after each power-on, which the thermistor sees only in part.
+    for (j, other) in fit.terms.iter().enumerate() {
+        if j != k
+            && matches!(other.mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis)
+            && let Some(d) = refit.fitted_through_die_rise(other.mech, other.theta, &other.coef, &other.contribution)
+        {
+            add(other.mech, d);
+        }
+    }
+    // Or the rest of that lag's or play's shape: a gain varying with temperature, or its
+    // state carried through the unpowered gaps.
+    for (j, other) in fit.terms.iter().enumerate() {
+        if j == k || !matches!(other.mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis) {
+            continue;
+        }
+        for d in
+            [refit.gain_with_temperature(other.mech), refit.carried_across_sessions(other.mech)].into_iter().flatten()
+        {
+            add(other.mech, d);
+        }
+    }
+    rivals.sort_by(|x, y| x.1.total_cmp(&y.1));
+    rivals
 }
 
 /// The separability of a turn-on term (what `refit` holds) from the temperature form `other`

@@ -17,6 +17,11 @@
 //! likelihood-ratio statistic of `A` against `B` were that test run. A candidate that lifts
 //! every pair to [`super::separate::separation_needed`] ranks before one that does not; among
 //! those alike, the worst pair's evidence (over what it needs) per hour of test decides.
+//!
+//! The expected evidence is checked against runs: [`realised_on`] gives what a run of a test
+//! shows (the rival refitted on its data with and without the term, by the same refits),
+//! [`evidence_interval`] the 90 % interval that draw falls in when the fitted model is true (a
+//! noncentral χ²), [`run_on_design`] a run of a candidate with REAL's physics.
 
 use super::fit::{ALPHA, AxisFit, Term, naming_threshold, separability_of};
 use super::mech::{Context, Mech};
@@ -78,6 +83,9 @@ pub struct Pair {
     pub recording: f64,
     /// What a name needs ([`super::separate::separation_needed`]).
     pub needed: f64,
+    /// The naming threshold of the term: the likelihood-ratio statistic a run must exceed to
+    /// name it over the rival ([`naming_threshold`] at the selection's per-test level).
+    pub threshold: f64,
 }
 
 /// The pairs of the diagnosis's ambiguous groups, per accelerometer.
@@ -92,18 +100,21 @@ pub fn pairs(d: &Diagnosis) -> Vec<Pair> {
                     .find(|(m, _)| m == a)
                     .and_then(|(_, r)| r.iter().find(|x| x.0 == b))
                     .map_or(f64::NAN, |x| x.1);
-                out.push(Pair { axis: fit.axis, a: *a, b, recording, needed: needed(fit, *a) });
+                let (threshold, needed) = needed(fit, *a);
+                out.push(Pair { axis: fit.axis, a: *a, b, recording, needed, threshold });
             }
         }
     }
     out
 }
 
-/// The separation the term `m` of `fit` needs from a rival (as the report's groups use it).
-fn needed(fit: &AxisFit, m: Mech) -> f64 {
+/// The naming threshold of the term `m` of `fit` and the separation it needs from a rival (as
+/// the report's groups use them).
+fn needed(fit: &AxisFit, m: Mech) -> (f64, f64) {
     let alpha = ALPHA / (Mech::ALL.len() * 3) as f64;
     let df = fit.terms.iter().find(|t| t.mech == m).map_or(1, |t| t.coef.len() + usize::from(t.theta.is_some()));
-    super::separate::separation_needed(naming_threshold(alpha, df), df)
+    let thr = naming_threshold(alpha, df);
+    (thr, super::separate::separation_needed(thr, df))
 }
 
 /// One step of a candidate's chamber program (a `[[step]]` of the scenario).
@@ -616,6 +627,62 @@ pub fn white_density(p: &Prepared) -> [f64; 3] {
     out
 }
 
+/// The fit of accelerometer `axis` of `d` carried to the design `cp`: its context (SIM's
+/// sensitivity as fitted on the recording) and its terms with their coefficients and θ as
+/// fitted, their columns and contributions on the design, the recording's noise model (a term
+/// with no column on the design, a lag at a constant temperature, left out).
+fn carried<'p>(d: &Diagnosis, cp: &'p Prepared, axis: usize) -> (Context<'p>, AxisFit) {
+    let fit = &d.axes[axis];
+    let mut ctx = Context::new(cp, axis);
+    ctx.s = d.sensitivity[axis].clone();
+    ctx.s_now = (0..cp.t.len()).map(|k| ctx.s.eval(cp.temp_s[k], &cp.f[k])).collect();
+    let terms: Vec<Term> = fit
+        .terms
+        .iter()
+        .filter_map(|t| {
+            let columns = ctx.columns(t.mech, t.theta.unwrap_or(0.0));
+            if columns.iter().all(|c| c.iter().all(|v| v.abs() < 1e-15)) {
+                return None;
+            }
+            let mut contribution = vec![0.0; cp.t.len()];
+            for (c, b) in columns.iter().zip(&t.coef) {
+                for (x, v) in contribution.iter_mut().zip(c) {
+                    *x += b * v;
+                }
+            }
+            Some(Term {
+                mech: t.mech,
+                theta: t.theta,
+                theta_ci: None,
+                coef: t.coef.clone(),
+                se: Vec::new(),
+                lr_drop: f64::NAN,
+                p_drop: f64::NAN,
+                contribution,
+                columns,
+            })
+        })
+        .collect();
+    let on_design = AxisFit {
+        axis,
+        q: fit.q,
+        inflation: fit.inflation,
+        terms,
+        ambiguous: Vec::new(),
+        separability: Vec::new(),
+        deviance_scale: fit.deviance_scale,
+        trace: Vec::new(),
+        drift: Vec::new(),
+        drift_rms: 0.0,
+        prediction: Vec::new(),
+        rms: (0.0, 0.0),
+        heldout_rms: (0.0, 0.0),
+        heldout_resid: (Vec::new(), Vec::new()),
+        heldout_gain: Vec::new(),
+    };
+    (ctx, on_design)
+}
+
 /// Per pair, the deviance its rival cannot absorb on the design `cp` of what its term, as
 /// fitted on the recording, predicts there (NaN where the rival has no column on it).
 pub fn evidence_on(d: &Diagnosis, cp: &Prepared, pairs: &[Pair]) -> Vec<f64> {
@@ -624,56 +691,7 @@ pub fn evidence_on(d: &Diagnosis, cp: &Prepared, pairs: &[Pair]) -> Vec<f64> {
         if !pairs.iter().any(|p| p.axis == axis) {
             continue;
         }
-        let fit = &d.axes[axis];
-        let mut ctx = Context::new(cp, axis);
-        ctx.s = d.sensitivity[axis].clone();
-        ctx.s_now = (0..cp.t.len()).map(|k| ctx.s.eval(cp.temp_s[k], &cp.f[k])).collect();
-        // A term with no column on the design predicts nothing there (a lag at a constant
-        // temperature): left out, its pairs get 0.
-        let terms: Vec<Term> = fit
-            .terms
-            .iter()
-            .filter_map(|t| {
-                let columns = ctx.columns(t.mech, t.theta.unwrap_or(0.0));
-                if columns.iter().all(|c| c.iter().all(|v| v.abs() < 1e-15)) {
-                    return None;
-                }
-                let mut contribution = vec![0.0; cp.t.len()];
-                for (c, b) in columns.iter().zip(&t.coef) {
-                    for (x, v) in contribution.iter_mut().zip(c) {
-                        *x += b * v;
-                    }
-                }
-                Some(Term {
-                    mech: t.mech,
-                    theta: t.theta,
-                    theta_ci: None,
-                    coef: t.coef.clone(),
-                    se: Vec::new(),
-                    lr_drop: f64::NAN,
-                    p_drop: f64::NAN,
-                    contribution,
-                    columns,
-                })
-            })
-            .collect();
-        let on_design = AxisFit {
-            axis,
-            q: fit.q,
-            inflation: fit.inflation,
-            terms,
-            ambiguous: Vec::new(),
-            separability: Vec::new(),
-            deviance_scale: fit.deviance_scale,
-            trace: Vec::new(),
-            drift: Vec::new(),
-            drift_rms: 0.0,
-            prediction: Vec::new(),
-            rms: (0.0, 0.0),
-            heldout_rms: (0.0, 0.0),
-            heldout_resid: (Vec::new(), Vec::new()),
-            heldout_gain: Vec::new(),
-        };
+        let (ctx, on_design) = carried(d, cp, axis);
         let sep = separability_of(&ctx, &on_design);
         for (k, p) in pairs.iter().enumerate().filter(|(_, p)| p.axis == axis) {
             if !on_design.terms.iter().any(|t| t.mech == p.a) {
@@ -686,6 +704,112 @@ pub fn evidence_on(d: &Diagnosis, cp: &Prepared, pairs: &[Pair]) -> Vec<f64> {
         }
     }
     out
+}
+
+/// Per pair, the evidence a run of a test gives (`run`: its residual REAL − SIM, prepared as
+/// the diagnosis prepares a pair): the likelihood-ratio statistic of adding the term, at the θ
+/// fitted on the recording, to its rival refitted on the run's data, `D(B) − D(B + A)`, each
+/// the least over the rival's forms and θ, with the nuisance and the other terms free, under the
+/// recording's noise model, in its deviance unit (`fit::rivals_of` on the data instead of the
+/// term's prediction). With the term's columns linear and the model true, it is a noncentral
+/// χ² of [`pair_df`] degrees of freedom whose noncentrality is [`evidence_on`] on the run's
+/// design ([`evidence_interval`]). NaN where the rival has no column on the run; 0 where the
+/// term has none.
+pub fn realised_on(d: &Diagnosis, run: &Prepared, pairs: &[Pair]) -> Vec<f64> {
+    use super::separate::Refit;
+    let mut out = vec![f64::NAN; pairs.len()];
+    for axis in 0..3 {
+        if !pairs.iter().any(|p| p.axis == axis) {
+            continue;
+        }
+        let (ctx, on_design) = carried(d, run, axis);
+        let y = &run.r[axis];
+        for (k, term) in on_design.terms.iter().enumerate() {
+            if !pairs.iter().any(|p| p.axis == axis && p.a == term.mech) {
+                continue;
+            }
+            let shared = super::fit::shared_with(&ctx, &on_design, k);
+            let without = Refit::new(&ctx, on_design.q, on_design.deviance_scale, y, &shared);
+            let rivals = super::fit::rivals_of(&ctx, &on_design, k, &without);
+            let mut shared = shared;
+            shared.extend(term.columns.iter().cloned());
+            let with = Refit::new(&ctx, on_design.q, on_design.deviance_scale, y, &shared);
+            let beside = super::fit::rivals_of(&ctx, &on_design, k, &with);
+            for (j, p) in pairs.iter().enumerate().filter(|(_, p)| p.axis == axis && p.a == term.mech) {
+                let of = |r: &[(Mech, f64)]| r.iter().find(|x| x.0 == p.b).map(|x| x.1);
+                if let (Some(b), Some(ab)) = (of(&rivals), of(&beside)) {
+                    out[j] = (b - ab).max(0.0);
+                }
+            }
+        }
+        for (j, p) in pairs.iter().enumerate().filter(|(_, p)| p.axis == axis) {
+            if !on_design.terms.iter().any(|t| t.mech == p.a) {
+                out[j] = 0.0;
+            }
+        }
+    }
+    out
+}
+
+/// The degrees of freedom of a pair's realised evidence ([`realised_on`]): the number of its
+/// term's coefficients (its θ held at the recording's).
+pub fn pair_df(d: &Diagnosis, p: &Pair) -> usize {
+    d.axes[p.axis].terms.iter().find(|t| t.mech == p.a).map_or(1, |t| t.coef.len()).max(1)
+}
+
+/// The interval a run's realised evidence falls in with probability `level` when the expected
+/// evidence is `expected` with `df` degrees of freedom: the noncentral χ²'s quantiles at
+/// `(1 − level)/2` and `(1 + level)/2` (noncentrality `expected`). With no expected evidence
+/// (below 10⁻⁹) the interval starts at 0: the term's columns may then lie in the rival's span
+/// on this test, and the statistic is 0 whatever the noise.
+pub fn evidence_interval(expected: f64, df: usize, level: f64) -> (f64, f64) {
+    let k = df.max(1) as f64;
+    let lambda = expected.max(0.0);
+    let lo = if lambda < 1e-9 { 0.0 } else { super::stats::ncx2_quantile(0.5 * (1.0 - level), k, lambda) };
+    (lo, super::stats::ncx2_quantile(0.5 * (1.0 + level), k, lambda))
+}
+
+/// A run of candidate `c` on the design's rows ([`design`]): SIM the twin `sim` (seed
+/// `seeds.0`), REAL the scenario `real` (seed `seeds.1`; its unit, thermal and, with `noise`,
+/// noise tables), each one's white noise per row scaled to the mean of a row's worth of its
+/// own logger's samples (so a row carries the density of the recording), prepared as the
+/// diagnosis prepares a pair; the white-noise variance per row set as the design's
+/// (`white_density`). Without `noise` the residual is what REAL's physics makes of the test
+/// beside SIM's: [`realised_on`] then gives the evidence's true noncentrality.
+pub fn run_on_design(
+    sim: &Twin,
+    real: &Twin,
+    c: &Candidate,
+    white_density: [f64; 3],
+    seeds: (u64, u64),
+    noise: bool,
+) -> Result<Prepared, DiagnoseError> {
+    let rate = (DESIGN_ROWS / c.duration_s()).min(sim.rate_hz());
+    let rows = |tw: &Twin, seed: u64| -> Result<Vec<crate::recording::Row>, DiagnoseError> {
+        let mut t: toml::Table =
+            tw.scenario(c, rate, noise).parse().map_err(|e| DiagnoseError(format!("{}: {e}", tw.path.display())))?;
+        let shrink = (rate / tw.rate_hz()).min(1.0).sqrt();
+        if let Some(w) = t.get_mut("noise").and_then(|n| n.as_table_mut()).and_then(|n| n.get_mut("white_V")) {
+            let num = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
+            let scaled = match &*w {
+                toml::Value::Array(a) => {
+                    toml::Value::Array(a.iter().map(|v| toml::Value::Float(num(v).unwrap_or(0.0) * shrink)).collect())
+                }
+                v => toml::Value::Float(num(v).unwrap_or(0.0) * shrink),
+            };
+            *w = scaled;
+        }
+        let text = toml::to_string(&t).map_err(|e| DiagnoseError(e.to_string()))?;
+        let sc =
+            crate::sim::scenario::ScenarioFile::parse(&text, &tw.path).map_err(|e| DiagnoseError(e.to_string()))?;
+        Ok(sc.build(&tw.path).map_err(|e| DiagnoseError(e.to_string()))?.all_rows(seed))
+    };
+    let (s, r) = (rows(sim, seeds.0)?, rows(real, seeds.1)?);
+    let mut p = prep::prepare_blocks(&s, &r, &sim.path, &real.path, Some(0.0))?;
+    for (axis, d) in white_density.iter().enumerate() {
+        p.r_white[axis] = vec![d * rate; p.t.len()];
+    }
+    Ok(p)
 }
 
 /// Every candidate's expected evidence, best first (those that lift every pair to what it
