@@ -787,7 +787,7 @@ pub fn run_on_design(
     let rate = (DESIGN_ROWS / c.duration_s()).min(sim.rate_hz());
     let rows = |tw: &Twin, seed: u64| -> Result<Vec<crate::recording::Row>, DiagnoseError> {
         let mut t: toml::Table =
-            tw.scenario(c, rate, noise).parse().map_err(|e| DiagnoseError(format!("{}: {e}", tw.path.display())))?;
+            tw.scenario(c, rate, noise).parse().map_err(|e| DiagnoseError(format!("{}: {e}", tw.source)))?;
         let shrink = (rate / tw.rate_hz()).min(1.0).sqrt();
         if let Some(w) = t.get_mut("noise").and_then(|n| n.as_table_mut()).and_then(|n| n.get_mut("white_V")) {
             let num = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
@@ -800,12 +800,12 @@ pub fn run_on_design(
             *w = scaled;
         }
         let text = toml::to_string(&t).map_err(|e| DiagnoseError(e.to_string()))?;
-        let sc =
-            crate::sim::scenario::ScenarioFile::parse(&text, &tw.path).map_err(|e| DiagnoseError(e.to_string()))?;
-        Ok(sc.build(&tw.path).map_err(|e| DiagnoseError(e.to_string()))?.all_rows(seed))
+        let name = Path::new(&tw.source);
+        let sc = crate::sim::scenario::ScenarioFile::parse(&text, name).map_err(|e| DiagnoseError(e.to_string()))?;
+        Ok(sc.build(name).map_err(|e| DiagnoseError(e.to_string()))?.all_rows(seed))
     };
     let (s, r) = (rows(sim, seeds.0)?, rows(real, seeds.1)?);
-    let mut p = prep::prepare_blocks(&s, &r, &sim.path, &real.path, Some(0.0))?;
+    let mut p = prep::prepare_blocks(&s, &r, Path::new(&sim.source), Path::new(&real.source), Some(0.0))?;
     for (axis, d) in white_density.iter().enumerate() {
         p.r_white[axis] = vec![d * rate; p.t.len()];
     }
