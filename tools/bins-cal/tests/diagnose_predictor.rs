@@ -127,7 +127,7 @@ fn realised_evidence_is_a_noncentral_chi2_draw_around_the_expected() {
     }
     let (mut inside, mut counted) = (0usize, 0usize);
     for (k, pair) in p.pairs.iter().enumerate() {
-        let (lambda, df) = (expected[k], propose::pair_df(&d, pair));
+        let (lambda, df) = (expected[k], pair.df);
         if !lambda.is_finite() || lambda <= 0.0 {
             continue;
         }
@@ -163,6 +163,8 @@ struct Outcome {
     /// The noncentrality REAL's physics gives on the run (NaN where unknown).
     truth: f64,
     df: usize,
+    /// The term's likelihood-ratio statistic on the recording (`propose::Pair::lr`).
+    lr: f64,
     realised: f64,
     pair: Pair,
     /// Whether the pair's term is one of the mechanisms REAL has (simulated cases).
@@ -176,8 +178,16 @@ fn summarise(what: &str, out: &[Outcome], simulated: bool) {
     // Inside / counted: the pairs whose term REAL has, those whose term stands in for another,
     // and each case's worst pair.
     let mut split = [(0usize, 0usize); 4];
+    // The interval of the run's noise alone, and the one that also carries what the recording
+    // knows of the term's size (`propose::predictive_interval`).
+    let mut noise_only = (0usize, 0usize, 0usize);
     for o in out {
-        let (lo, hi) = propose::evidence_interval(o.expected, o.df, 0.9);
+        let (nlo, nhi) = propose::evidence_interval(o.expected, o.df, 0.9);
+        let n_in = (nlo..=nhi).contains(&o.realised);
+        noise_only.0 += usize::from(n_in);
+        noise_only.1 += usize::from(n_in && o.true_term);
+        noise_only.2 += usize::from(n_in && !o.true_term);
+        let (lo, hi) = propose::predictive_interval(o.expected, o.df, 0.9, o.lr);
         let is_in = (lo..=hi).contains(&o.realised);
         let sep = o.expected >= o.pair.needed;
         let named = o.realised >= o.pair.threshold;
@@ -218,21 +228,25 @@ fn summarise(what: &str, out: &[Outcome], simulated: bool) {
     }
     let pc = |a: usize, b: usize| 100.0 * a as f64 / b.max(1) as f64;
     println!(
-        "{what}: {counted} pairs; realised inside the predicted 90 % interval {inside} ({:.1} %); predicted to separate {predicted}, separated {did} ({:.1} %)",
+        "{what}: {counted} pairs; realised inside the predicted 90 % interval {inside} ({:.1} %; the run's noise alone {} ({:.1} %)); predicted to separate {predicted}, separated {did} ({:.1} %)",
         pc(inside, counted),
+        noise_only.0,
+        pc(noise_only.0, counted),
         pc(did, predicted)
     );
     if !simulated {
         return;
     }
     println!(
-        "{what}: inside the interval, pairs whose term REAL has {} of {} ({:.1} %), whose term stands in for another {} of {} ({:.1} %); each case's worst pair {} of {} ({:.1} %)",
+        "{what}: inside the interval, pairs whose term REAL has {} of {} ({:.1} %; noise alone {}), whose term stands in for another {} of {} ({:.1} %; noise alone {}); each case's worst pair {} of {} ({:.1} %)",
         split[0].0,
         split[0].1,
         pc(split[0].0, split[0].1),
+        noise_only.1,
         split[1].0,
         split[1].1,
         pc(split[1].0, split[1].1),
+        noise_only.2,
         split[2].0,
         split[2].1,
         pc(split[2].0, split[2].1)
@@ -310,7 +324,8 @@ fn simulated_proposed_tests_realise_their_expected_evidence() {
                 label: format!("case {i} {} {} / {}", ["x", "y", "z"][pair.axis], pair.a.id(), pair.b.id()),
                 expected: best.deviance[k],
                 truth: truth[k],
-                df: propose::pair_df(&d, pair),
+                df: pair.df,
+                lr: pair.lr,
                 realised: realised[k],
                 pair: *pair,
                 true_term: matches!(pair.a, Mech::Warmup | Mech::ThermalLag),
@@ -360,7 +375,8 @@ fn real_sweep_first_part_predicts_its_remainder() {
                 label: format!("{} {} / {}", ["x", "y", "z"][pair.axis], pair.a.id(), pair.b.id()),
                 expected: expected[k],
                 truth: f64::NAN,
-                df: propose::pair_df(&d, pair),
+                df: pair.df,
+                lr: pair.lr,
                 realised: realised[k],
                 pair: *pair,
                 true_term: false,

@@ -361,11 +361,14 @@ fn print_proposal(
             .iter()
             .zip(&e.deviance)
             .map(|(q, v)| match v.is_finite() {
-                true => format!("{} {v:.1}", name(q)),
+                true => {
+                    let (lo, hi) = propose::predictive_interval(*v, q.df, 0.9, q.lr);
+                    format!("{} {v:.1} ({lo:.0}–{hi:.0})", name(q))
+                }
                 false => format!("{} (the rival has no column on this test)", name(q)),
             })
             .collect();
-        println!("    expected deviance: {}", list.join(", "));
+        println!("    expected deviance (90 % of runs within): {}", list.join(", "));
     }
     if let (true, Some(n), Some(g)) = (written, next, png) {
         println!("proposed test: {} (bins-cal simulate runs it; plot {})", n.display(), g.display());

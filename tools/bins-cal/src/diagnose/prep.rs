@@ -36,7 +36,7 @@ pub struct Prepared {
     /// `power_s` \[s\] when every used row has it.
     pub power: Option<Vec<f64>>,
     /// REAL's `chamber_C` [°C] when every used row has it (the proposal's thermal path is
-    /// identified from it, [`super::propose::Twin::identify`]).
+    /// identified from it, [`super::propose::identify_thermal`]).
     pub chamber: Option<Vec<f64>>,
     /// Constant-reference segment of each row.
     pub seg: Vec<usize>,

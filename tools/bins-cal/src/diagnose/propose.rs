@@ -86,6 +86,12 @@ pub struct Pair {
     /// The naming threshold of the term: the likelihood-ratio statistic a run must exceed to
     /// name it over the rival ([`naming_threshold`] at the selection's per-test level).
     pub threshold: f64,
+    /// The term's coefficients: the degrees of freedom of a run's statistic ([`realised_on`],
+    /// θ held at the recording's).
+    pub df: usize,
+    /// The term's likelihood-ratio statistic on the recording (dropping it from the final
+    /// model): what the recording knows of its size ([`predictive_interval`]).
+    pub lr: f64,
 }
 
 /// The pairs of the diagnosis's ambiguous groups, per accelerometer.
@@ -101,7 +107,10 @@ pub fn pairs(d: &Diagnosis) -> Vec<Pair> {
                     .and_then(|(_, r)| r.iter().find(|x| x.0 == b))
                     .map_or(f64::NAN, |x| x.1);
                 let (threshold, needed) = needed(fit, *a);
-                out.push(Pair { axis: fit.axis, a: *a, b, recording, needed, threshold });
+                let term = fit.terms.iter().find(|t| t.mech == *a);
+                let df = term.map_or(1, |t| t.coef.len()).max(1);
+                let lr = term.map_or(f64::NAN, |t| t.lr_drop);
+                out.push(Pair { axis: fit.axis, a: *a, b, recording, needed, threshold, df, lr });
             }
         }
     }
@@ -406,12 +415,12 @@ fn heating_unit(t: &[f64], power: &[f64], tau_s: f64) -> Vec<f64> {
 /// `b + s·h + a·g` plus, per session, the case's unknown departure from the chamber at its
 /// start decaying with the case's time constant (`e^(−(t − t_s)/τ_case)`; the die starts each
 /// session at the case, heated from its power-on): `case` the chamber through the case's lag
-/// ([`lag_departure`]), `h` the heating of a unit rise ([`heating_unit`]; left out without
+/// (`lag_departure`), `h` the heating of a unit rise (`heating_unit`; left out without
 /// `power_s`, or where it does not change: a unit powered long before the record), `g` the
 /// die's lag behind the case. The thermistor's share is `a`
 /// (clamped to [0.05, 1]) and the rise `s/a`. The pair with the least squared residual is
 /// kept. On ramps the data fix the thermistor's total lag (`τ_case + a·τ_die`) better than its
-/// split. A longer recording is fitted on every k-th row, at most [`IDENT_ROWS`] (with every
+/// split. A longer recording is fitted on every k-th row, at most 20 000 (with every
 /// session's first row and every power-on).
 pub fn identify_thermal(p: &Prepared) -> Option<ThermalPath> {
     let chamber = p.chamber.as_ref()?;
@@ -712,7 +721,7 @@ pub fn evidence_on(d: &Diagnosis, cp: &Prepared, pairs: &[Pair]) -> Vec<f64> {
 /// the least over the rival's forms and θ, with the nuisance and the other terms free, under the
 /// recording's noise model, in its deviance unit (`fit::rivals_of` on the data instead of the
 /// term's prediction). With the term's columns linear and the model true, it is a noncentral
-/// χ² of [`pair_df`] degrees of freedom whose noncentrality is [`evidence_on`] on the run's
+/// χ² of [`Pair::df`] degrees of freedom whose noncentrality is [`evidence_on`] on the run's
 /// design ([`evidence_interval`]). NaN where the rival has no column on the run; 0 where the
 /// term has none.
 pub fn realised_on(d: &Diagnosis, run: &Prepared, pairs: &[Pair]) -> Vec<f64> {
@@ -751,12 +760,6 @@ pub fn realised_on(d: &Diagnosis, run: &Prepared, pairs: &[Pair]) -> Vec<f64> {
     out
 }
 
-/// The degrees of freedom of a pair's realised evidence ([`realised_on`]): the number of its
-/// term's coefficients (its θ held at the recording's).
-pub fn pair_df(d: &Diagnosis, p: &Pair) -> usize {
-    d.axes[p.axis].terms.iter().find(|t| t.mech == p.a).map_or(1, |t| t.coef.len()).max(1)
-}
-
 /// The interval a run's realised evidence falls in with probability `level` when the expected
 /// evidence is `expected` with `df` degrees of freedom: the noncentral χ²'s quantiles at
 /// `(1 − level)/2` and `(1 + level)/2` (noncentrality `expected`). With no expected evidence
@@ -767,6 +770,37 @@ pub fn evidence_interval(expected: f64, df: usize, level: f64) -> (f64, f64) {
     let lambda = expected.max(0.0);
     let lo = if lambda < 1e-9 { 0.0 } else { super::stats::ncx2_quantile(0.5 * (1.0 - level), k, lambda) };
     (lo, super::stats::ncx2_quantile(0.5 * (1.0 + level), k, lambda))
+}
+
+/// [`evidence_interval`] with the uncertainty of the term as the recording fitted it: its
+/// amplitude is known to a relative standard error of about `1/√lr` (`lr`, [`Pair::lr`]: the
+/// term's likelihood-ratio statistic there), and the noncentrality scales with the amplitude
+/// squared, so the run's statistic is a noncentral χ² of noncentrality `expected·(1 + ε)²`,
+/// `ε ~ N(0, 1/lr)`; the interval is that mixture's quantiles (ε on 33 points over ±4σ).
+/// Where `lr` is not finite and positive, [`evidence_interval`].
+pub fn predictive_interval(expected: f64, df: usize, level: f64, lr: f64) -> (f64, f64) {
+    if !(lr > 0.0 && lr.is_finite() && expected > 1e-9) {
+        return evidence_interval(expected, df, level);
+    }
+    let (k, sigma) = (df.max(1) as f64, 1.0 / lr.sqrt());
+    const POINTS: usize = 33;
+    let z: Vec<f64> = (0..POINTS).map(|i| -4.0 + 8.0 * i as f64 / (POINTS - 1) as f64).collect();
+    let w: Vec<f64> = z.iter().map(|z| (-0.5 * z * z).exp()).collect();
+    let wsum: f64 = w.iter().sum();
+    let lambdas: Vec<f64> = z.iter().map(|z| expected * (1.0 + sigma * z).powi(2)).collect();
+    let cdf = |x: f64| -> f64 {
+        lambdas.iter().zip(&w).map(|(l, w)| w * super::stats::ncx2_cdf(x, k, *l)).sum::<f64>() / wsum
+    };
+    let quantile = |p: f64| -> f64 {
+        let top = lambdas.iter().copied().fold(0.0, f64::max);
+        let (mut lo, mut hi) = (0.0, super::stats::ncx2_quantile(p.max(0.999), k, top) + 1.0);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if cdf(mid) < p { lo = mid } else { hi = mid }
+        }
+        0.5 * (lo + hi)
+    };
+    (quantile(0.5 * (1.0 - level)), quantile(0.5 * (1.0 + level)))
 }
 
 /// A run of candidate `c` on the design's rows ([`design`]): SIM the twin `sim` (seed
@@ -908,6 +942,14 @@ pub fn to_json(prop: Option<&Proposal>, file: Option<&Path>) -> serde_json::Valu
                 "separates_all": e.separates_all, "worst_ratio": num(e.worst_ratio),
                 "worst_ratio_per_h": num(e.worst_ratio_per_h),
                 "deviance": e.deviance.iter().map(|v| num(*v)).collect::<Vec<_>>(),
+                "deviance_90": e.deviance.iter().zip(&p.pairs).map(|(v, q)| {
+                    if v.is_finite() {
+                        let (lo, hi) = predictive_interval(*v, q.df, 0.9, q.lr);
+                        json!([lo, hi])
+                    } else {
+                        serde_json::Value::Null
+                    }
+                }).collect::<Vec<_>>(),
             })
         })
         .collect();
@@ -1051,4 +1093,44 @@ pub fn plot(d: &Diagnosis, twin: &Twin, prop: &Proposal, path: &Path) -> Result<
             .draw()
             .map_err(drawing_error)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{evidence_interval, predictive_interval};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    /// The predictive interval against draws made as it describes them, independently: an
+    /// amplitude off by `ε ~ N(0, 1/lr)`, then the run's noise on each of the term's `df`
+    /// columns. Also: it tends to the noise-only interval as the recording knows the term
+    /// exactly, and is wider than it otherwise.
+    #[test]
+    fn predictive_interval_covers_the_amplitude_and_the_noise() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let n = 100_000;
+        for (expected, df, lr) in [(60.0, 1usize, 40.0), (150.0, 2, 400.0), (20.0, 3, 15.0)] {
+            let (lo, hi) = predictive_interval(expected, df, 0.9, lr);
+            let (nlo, nhi) = evidence_interval(expected, df, 0.9);
+            assert!(lo < nlo && hi > nhi, "({expected}, {df}, {lr}): {lo}–{hi} vs noise alone {nlo}–{nhi}");
+            let mut inside = 0usize;
+            for _ in 0..n {
+                let e: f64 = StandardNormal.sample(&mut rng);
+                let m = (expected * (1.0 + e / lr.sqrt()).powi(2)).sqrt();
+                let x: f64 = (0..df)
+                    .map(|j| {
+                        let z: f64 = StandardNormal.sample(&mut rng);
+                        if j == 0 { (z + m).powi(2) } else { z * z }
+                    })
+                    .sum();
+                inside += usize::from((lo..=hi).contains(&x));
+            }
+            // Binomial standard error of a 90 % share over 100 000 draws: 0.00095.
+            let share = inside as f64 / n as f64;
+            assert!((share - 0.9).abs() < 0.005, "({expected}, {df}, {lr}): {share}");
+        }
+        let (lo, hi) = predictive_interval(80.0, 2, 0.9, 1e12);
+        let (nlo, nhi) = evidence_interval(80.0, 2, 0.9);
+        assert!((lo / nlo - 1.0).abs() < 1e-3 && (hi / nhi - 1.0).abs() < 1e-3, "{lo}–{hi} vs {nlo}–{nhi}");
+    }
 }
