@@ -377,8 +377,11 @@ fn lag_departure(t: &[f64], x: &[f64], tau_s: f64, starts: &[usize]) -> Vec<f64>
     let mut e = vec![0.0; t.len()];
     for k in 1..t.len() {
         let dt = t[k] - t[k - 1];
-        if !(dt > 0.0) || starts.binary_search(&k).is_ok() {
-            e[k] = if dt > 0.0 { 0.0 } else { e[k - 1] };
+        if starts.binary_search(&k).is_ok() {
+            continue;
+        }
+        if !(dt > 0.0) {
+            e[k] = e[k - 1];
             continue;
         }
         let a = (-dt / tau_s).exp();
@@ -791,15 +794,8 @@ pub fn predictive_interval(expected: f64, df: usize, level: f64, lr: f64) -> (f6
     let cdf = |x: f64| -> f64 {
         lambdas.iter().zip(&w).map(|(l, w)| w * super::stats::ncx2_cdf(x, k, *l)).sum::<f64>() / wsum
     };
-    let quantile = |p: f64| -> f64 {
-        let top = lambdas.iter().copied().fold(0.0, f64::max);
-        let (mut lo, mut hi) = (0.0, super::stats::ncx2_quantile(p.max(0.999), k, top) + 1.0);
-        for _ in 0..60 {
-            let mid = 0.5 * (lo + hi);
-            if cdf(mid) < p { lo = mid } else { hi = mid }
-        }
-        0.5 * (lo + hi)
-    };
+    let top = lambdas.iter().copied().fold(0.0, f64::max);
+    let quantile = |p: f64| super::stats::quantile_of(&cdf, p, k + top);
     (quantile(0.5 * (1.0 - level)), quantile(0.5 * (1.0 + level)))
 }
 

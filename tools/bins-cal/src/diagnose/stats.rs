@@ -218,17 +218,22 @@ pub fn ncx2_cdf(x: f64, k: f64, lambda: f64) -> f64 {
     sum.clamp(0.0, 1.0)
 }
 
-/// The `x` with `P(X ≤ x) = p` for the noncentral χ² of [`ncx2_cdf`] (bisection, to 10⁻¹⁰
-/// relative).
+/// The `x` with `P(X ≤ x) = p` for the noncentral χ² of [`ncx2_cdf`] ([`quantile_of`]).
 pub fn ncx2_quantile(p: f64, k: f64, lambda: f64) -> f64 {
     let lambda = lambda.max(0.0);
-    let (mut lo, mut hi) = (0.0, k + lambda + 10.0 * (2.0 * (k + 2.0 * lambda)).sqrt() + 10.0);
-    while ncx2_cdf(hi, k, lambda) < p && hi < 1e12 {
+    quantile_of(&|x| ncx2_cdf(x, k, lambda), p, k + lambda + 10.0 * (2.0 * (k + 2.0 * lambda)).sqrt() + 10.0)
+}
+
+/// The `x ≥ 0` with `cdf(x) = p` for a distribution on `[0, ∞)`: the bracket `[0, hi]` doubled
+/// until it holds `p` (up to 10¹²), then bisection to 10⁻¹⁰ relative.
+pub fn quantile_of(cdf: &dyn Fn(f64) -> f64, p: f64, hi: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0, hi.max(1e-12));
+    while cdf(hi) < p && hi < 1e12 {
         hi *= 2.0;
     }
     for _ in 0..200 {
         let mid = 0.5 * (lo + hi);
-        if ncx2_cdf(mid, k, lambda) < p {
+        if cdf(mid) < p {
             lo = mid;
         } else {
             hi = mid;
