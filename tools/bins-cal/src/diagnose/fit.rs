@@ -848,6 +848,27 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                         }
                     }
                 }
+                // An additive play in one orientation whose gain has the sign a held
+                // temperature gives is also a thermal play on a temperature the thermistor does
+                // not follow: one group, whatever the measured separability (which holds the
+                // play to SIM's slope at the thermistor's temperature).
+                if let Some(bh) = fit.terms.iter().find(|t| t.mech == Mech::BiasHysteresis)
+                    && held_temperature_play(ctx, bh)
+                {
+                    let on_data = all_dev
+                        .iter()
+                        .find(|(a, _)| *a == Mech::BiasHysteresis)
+                        .and_then(|(_, alts)| alts.iter().find(|x| x.0 == Mech::ThermalHysteresis))
+                        .map_or(f64::NAN, |x| x.1);
+                    match amb.iter_mut().find(|(a, _)| *a == Mech::BiasHysteresis) {
+                        Some((_, alts)) => {
+                            if !alts.iter().any(|x| x.0 == Mech::ThermalHysteresis) {
+                                alts.push((Mech::ThermalHysteresis, on_data));
+                            }
+                        }
+                        None => amb.push((Mech::BiasHysteresis, vec![(Mech::ThermalHysteresis, on_data)])),
+                    }
+                }
                 fit.trace = trace;
                 fit.ambiguous = amb;
                 fit.separability = sep;
@@ -855,6 +876,55 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
             }
         }
     }
+}
+
+/// Largest spread (standard deviation) of the accelerometer's own gravity component [g] at
+/// which its recording counts as one orientation: the scale part of a thermal play is then a
+/// constant, and nothing but SIM's slope tells it from an additive play.
+pub const ONE_ORIENTATION_SPREAD_G: f64 = 0.05;
+
+/// Share of the engaged rows on which an additive play's gain must have the sign of SIM's
+/// slope for it to be also a held temperature ([`held_temperature_play`]).
+pub const HELD_SIGN_SHARE: f64 = 0.9;
+
+/// Whether a fitted additive bias play (`bias_hysteresis`, columns `d`, `d·ΔT` with `d` the
+/// play's offset over its half-width) is also a thermal play: the accelerometer stays in one
+/// orientation ([`ONE_ORIENTATION_SPREAD_G`]) and on at least [`HELD_SIGN_SHARE`] of the rows
+/// where the play is engaged its gain `c0 + c1·ΔT` has the sign of SIM's slope `S'(T)`.
+/// A thermal play of width `w` holds the temperature at `T + d·w/2` and gives
+/// `S(T + d·w/2) − S(T) ≈ S'(T)·d·w/2`, exactly `d·(c0 + c1·ΔT)` with a gain of that sign
+/// wherever `S'` is linear in T over the swept range: the
+/// additive form with the same sign *is* a play of a temperature the thermistor does not
+/// follow (a die running warmer, its own slope), and only a second orientation or a range
+/// where the slope bends tells the two apart. An additive play of the other sign (a bias higher
+/// while warming on a rising slope) is not what a held temperature makes.
+pub(crate) fn held_temperature_play(ctx: &Context, term: &Term) -> bool {
+    let p = ctx.p;
+    let i = ctx.axis;
+    let n = p.t.len();
+    if n < 2 || term.coef.len() < 2 || !ctx.s.from_sim {
+        return false;
+    }
+    let mean = p.f.iter().map(|f| f[i]).sum::<f64>() / n as f64;
+    let var = p.f.iter().map(|f| (f[i] - mean).powi(2)).sum::<f64>() / n as f64;
+    if var.sqrt() > ONE_ORIENTATION_SPREAD_G {
+        return false;
+    }
+    let d = &term.columns[0];
+    let (mut engaged, mut agree) = (0.0f64, 0.0f64);
+    for r in 0..n {
+        if d[r].abs() < 0.5 {
+            continue;
+        }
+        let gain = term.coef[0] + term.coef[1] * (p.temp_s[r] - super::mech::T0_C);
+        let both = gain * ctx.s.deriv(p.temp_s[r], &p.f[r]);
+        engaged += both.abs();
+        agree += both.max(0.0);
+    }
+    if std::env::var("DBG_HELD").is_ok() {
+        eprintln!("held axis {i} engaged {engaged} agree {agree} spread {} coef {:?} theta {:?}", var.sqrt(), term.coef, term.theta);
+    }
+    engaged > 0.0 && agree >= HELD_SIGN_SHARE * engaged
 }
 
 /// The naming threshold of a term of `df` parameters: the likelihood-ratio statistic whose χ²
