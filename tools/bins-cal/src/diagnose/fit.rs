@@ -883,14 +883,17 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
 /// constant, and nothing but SIM's slope tells it from an additive play.
 pub const ONE_ORIENTATION_SPREAD_G: f64 = 0.05;
 
-/// Share of the engaged rows on which an additive play's gain must have the sign of SIM's
-/// slope for it to be also a held temperature ([`held_temperature_play`]).
+/// Share of `|gain · S'(T)|` over the engaged rows that must come from rows where the additive
+/// play's gain has the sign of SIM's slope for it to be also a held temperature
+/// ([`held_temperature_play`]); weighting by the product lets rows where the slope crosses zero,
+/// which a play hardly moves, count little.
 pub const HELD_SIGN_SHARE: f64 = 0.9;
 
 /// Whether a fitted additive bias play (`bias_hysteresis`, columns `d`, `d·ΔT` with `d` the
 /// play's offset over its half-width) is also a thermal play: the accelerometer stays in one
-/// orientation ([`ONE_ORIENTATION_SPREAD_G`]) and on at least [`HELD_SIGN_SHARE`] of the rows
-/// where the play is engaged its gain `c0 + c1·ΔT` has the sign of SIM's slope `S'(T)`.
+/// orientation ([`ONE_ORIENTATION_SPREAD_G`]) and, over the rows where the play is engaged
+/// (`|d| ≥ 0.5`), its gain `c0 + c1·ΔT` has the sign of SIM's slope `S'(T)` on at least
+/// [`HELD_SIGN_SHARE`] of `Σ|gain·S'(T)|`.
 /// A thermal play of width `w` holds the temperature at `T + d·w/2` and gives
 /// `S(T + d·w/2) − S(T) ≈ S'(T)·d·w/2`, exactly `d·(c0 + c1·ΔT)` with a gain of that sign
 /// wherever `S'` is linear in T over the swept range: the
@@ -920,9 +923,6 @@ pub(crate) fn held_temperature_play(ctx: &Context, term: &Term) -> bool {
         let both = gain * ctx.s.deriv(p.temp_s[r], &p.f[r]);
         engaged += both.abs();
         agree += both.max(0.0);
-    }
-    if std::env::var("DBG_HELD").is_ok() {
-        eprintln!("held axis {i} engaged {engaged} agree {agree} spread {} coef {:?} theta {:?}", var.sqrt(), term.coef, term.theta);
     }
     engaged > 0.0 && agree >= HELD_SIGN_SHARE * engaged
 }
