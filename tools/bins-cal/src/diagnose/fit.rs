@@ -878,7 +878,7 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
     }
 }
 
-/// Largest spread (standard deviation) of the accelerometer's own gravity component [g] at
+/// Largest spread (standard deviation) of the accelerometer's own gravity component \[g\] at
 /// which its recording counts as one orientation: the scale part of a thermal play is then a
 /// constant, and nothing but SIM's slope tells it from an additive play.
 pub const ONE_ORIENTATION_SPREAD_G: f64 = 0.05;
@@ -901,7 +901,7 @@ pub const HELD_SIGN_SHARE: f64 = 0.9;
 /// follow (a die running warmer, its own slope), and only a second orientation or a range
 /// where the slope bends tells the two apart. An additive play of the other sign (a bias higher
 /// while warming on a rising slope) is not what a held temperature makes.
-pub(crate) fn held_temperature_play(ctx: &Context, term: &Term) -> bool {
+pub fn held_temperature_play(ctx: &Context, term: &Term) -> bool {
     let p = ctx.p;
     let i = ctx.axis;
     let n = p.t.len();
