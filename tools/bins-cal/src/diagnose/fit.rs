@@ -823,6 +823,23 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                     model.remove(k);
                     continue;
                 }
+                // Joins rival `b` to the group of the selected `m`, with the deviance difference
+                // on the data where the search has it.
+                let mut join = |m: Mech, b: Mech| {
+                    let on_data = all_dev
+                        .iter()
+                        .find(|(a, _)| *a == m)
+                        .and_then(|(_, alts)| alts.iter().find(|x| x.0 == b))
+                        .map_or(f64::NAN, |x| x.1);
+                    match amb.iter_mut().find(|(a, _)| *a == m) {
+                        Some((_, alts)) => {
+                            if !alts.iter().any(|x| x.0 == b) {
+                                alts.push((b, on_data));
+                            }
+                        }
+                        None => amb.push((m, vec![(b, on_data)])),
+                    }
+                };
                 let sep = separability_of(ctx, &fit);
                 for (m, rivals) in &sep {
                     let df = fit
@@ -832,42 +849,15 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                         .map_or(1, |t| t.coef.len() + usize::from(t.theta.is_some()));
                     let needed = super::separate::separation_needed(naming_threshold(alpha, df), df);
                     for &(b, _) in rivals.iter().filter(|r| r.1 < needed) {
-                        // The rival's deviance difference on the data, where the search has it.
-                        let on_data = all_dev
-                            .iter()
-                            .find(|(a, _)| a == m)
-                            .and_then(|(_, alts)| alts.iter().find(|x| x.0 == b))
-                            .map_or(f64::NAN, |x| x.1);
-                        match amb.iter_mut().find(|(a, _)| a == m) {
-                            Some((_, alts)) => {
-                                if !alts.iter().any(|x| x.0 == b) {
-                                    alts.push((b, on_data));
-                                }
-                            }
-                            None => amb.push((*m, vec![(b, on_data)])),
-                        }
+                        join(*m, b);
                     }
                 }
                 // An additive play in one orientation whose gain has the sign a held
                 // temperature gives is also a thermal play on a temperature the thermistor does
                 // not follow: one group, whatever the measured separability (which holds the
                 // play to SIM's slope at the thermistor's temperature).
-                if let Some(bh) = fit.terms.iter().find(|t| t.mech == Mech::BiasHysteresis)
-                    && held_temperature_play(ctx, bh)
-                {
-                    let on_data = all_dev
-                        .iter()
-                        .find(|(a, _)| *a == Mech::BiasHysteresis)
-                        .and_then(|(_, alts)| alts.iter().find(|x| x.0 == Mech::ThermalHysteresis))
-                        .map_or(f64::NAN, |x| x.1);
-                    match amb.iter_mut().find(|(a, _)| *a == Mech::BiasHysteresis) {
-                        Some((_, alts)) => {
-                            if !alts.iter().any(|x| x.0 == Mech::ThermalHysteresis) {
-                                alts.push((Mech::ThermalHysteresis, on_data));
-                            }
-                        }
-                        None => amb.push((Mech::BiasHysteresis, vec![(Mech::ThermalHysteresis, on_data)])),
-                    }
+                if fit.terms.iter().any(|t| t.mech == Mech::BiasHysteresis && held_temperature_play(ctx, t)) {
+                    join(Mech::BiasHysteresis, Mech::ThermalHysteresis);
                 }
                 fit.trace = trace;
                 fit.ambiguous = amb;
