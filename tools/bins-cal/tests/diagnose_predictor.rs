@@ -156,6 +156,96 @@ fn realised_evidence_is_a_noncentral_chi2_draw_around_the_expected() {
     assert!((0.8..=0.98).contains(&share), "{share:.3} of the realised evidence inside the 90 % interval");
 }
 
+/// Were another member of a group true instead of the modelled term (that member refitted to
+/// the recording in the term's place, `propose::plausible_others`), runs of the proposed test
+/// drawn from that model give realised evidence about what `propose::evidence_if_others_true`
+/// expects: a noncentral χ² whose mean is that expectation plus the degrees of freedom.
+#[test]
+fn evidence_were_another_member_true_is_what_runs_drawn_from_it_give() {
+    let case = Case { warm_v: 3.0e-4, warm_tau_s: 600.0, die_tau_s: 120.0, end_c: -20.0, seed: 0 };
+    let dir = tempfile::tempdir().unwrap();
+    let (d, sim, _) = diagnose_case(&case, dir.path());
+    let p = propose::propose(&d, &sim, None, &|_, _| {}).unwrap().expect("pairs to separate");
+    let best = &p.ranked[0];
+    let cp = propose::design(&sim, &best.candidate, propose::white_density(&d.prepared)).unwrap();
+    let eta: Vec<Vec<f64>> = (0..3).map(|a| model_on(&d, &cp, a)).collect();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let draws = 12;
+    let (mut inside, mut counted, mut checked) = (0usize, 0usize, 0usize);
+    for axis in 0..3 {
+        let mut ctx = Context::new(&cp, axis);
+        ctx.s = d.sensitivity[axis].clone();
+        ctx.s_now = (0..cp.t.len()).map(|k| ctx.s.eval(cp.temp_s[k], &cp.f[k])).collect();
+        for term in &d.axes[axis].terms {
+            let own = predict(&ctx, &[Fitted { mech: term.mech, theta: term.theta, coef: term.coef.clone() }]);
+            for other in propose::plausible_others(&d, axis, term.mech).into_iter().take(1) {
+                let h = other.mech;
+                let theirs = predict(&ctx, &[other]);
+                // The pairs of this term whose evidence under `h` was predicted.
+                let want: Vec<(usize, f64)> = p
+                    .pairs
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, q)| q.axis == axis && q.a == term.mech)
+                    .filter_map(|(j, _)| best.if_others[j].iter().find(|x| x.0 == h).map(|x| (j, x.1)))
+                    .collect();
+                if want.is_empty() {
+                    continue;
+                }
+                let mut realised = vec![Vec::new(); want.len()];
+                for _ in 0..draws {
+                    let mut run = cp.clone();
+                    for a in 0..3 {
+                        let fit = &d.axes[a];
+                        let unit = fit.deviance_scale;
+                        let mut level = 0.0;
+                        for k in 0..run.t.len() {
+                            if k > 0 {
+                                let z: f64 = StandardNormal.sample(&mut rng);
+                                level += z * (fit.q * unit * (run.t[k] - run.t[k - 1])).sqrt();
+                            }
+                            let z: f64 = StandardNormal.sample(&mut rng);
+                            let model = if a == axis { eta[a][k] - own[k] + theirs[k] } else { eta[a][k] };
+                            run.r[a][k] = model + level + z * (cp.r_white[a][k] * unit).sqrt();
+                        }
+                    }
+                    let got = propose::realised_on(&d, &run, &p.pairs);
+                    for (v, (j, _)) in realised.iter_mut().zip(&want) {
+                        v.push(got[*j]);
+                    }
+                }
+                for (v, (j, lambda)) in realised.iter().zip(&want) {
+                    let q = &p.pairs[*j];
+                    let df = q.df as f64;
+                    let mean = v.iter().sum::<f64>() / v.len() as f64;
+                    let sd = (2.0 * (df + 2.0 * lambda) / draws as f64).sqrt();
+                    let (lo, hi) = propose::evidence_interval(*lambda, q.df, 0.9);
+                    let n_in = v.iter().filter(|x| (lo..=hi).contains(*x)).count();
+                    eprintln!(
+                        "{} {} / {}, were {} true: expected {lambda:.1} (df {}), interval {lo:.1}–{hi:.1}; realised mean {mean:.1} ± {sd:.1}, {n_in}/{draws} inside",
+                        ["x", "y", "z"][axis],
+                        q.a.id(),
+                        q.b.id(),
+                        h.id(),
+                        q.df
+                    );
+                    assert!(
+                        (mean - (lambda + df)).abs() <= 4.0 * sd,
+                        "{q:?} were {h:?} true: mean {mean:.2}, expected {lambda:.2} + {df}"
+                    );
+                    inside += n_in;
+                    counted += draws;
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert!(checked >= 3, "pairs checked under another member: {checked}");
+    let share = inside as f64 / counted as f64;
+    eprintln!("inside the 90 % interval: {inside} of {counted} ({share:.3})");
+    assert!((0.75..=0.99).contains(&share), "{share:.3} of the realised evidence inside the 90 % interval");
+}
+
 /// One pair's outcome in a measurement.
 struct Outcome {
     label: String,
@@ -171,6 +261,9 @@ struct Outcome {
     true_term: bool,
     /// Whether it is its case's worst pair on the proposed test (over what it needs).
     worst: bool,
+    /// The expected evidence were each other member of the pair's group true
+    /// (`propose::evidence_if_others_true`).
+    if_others: Vec<(Mech, f64)>,
 }
 
 fn summarise(what: &str, out: &[Outcome], simulated: bool) {
@@ -181,7 +274,24 @@ fn summarise(what: &str, out: &[Outcome], simulated: bool) {
     // The interval of the run's noise alone, and the one that also carries what the recording
     // knows of the term's size (`propose::predictive_interval`).
     let mut noise_only = (0usize, 0usize, 0usize);
+    // Inside one of the group members' intervals (`propose::group_intervals`): all, term REAL
+    // has, stand-in, worst pair.
+    let mut group = [(0usize, 0usize); 4];
+    // How much longer the set is than the term's own interval, and how often it reaches below
+    // the naming threshold (a run may then not name the term).
+    let (mut widen, mut low_below) = (Vec::new(), 0usize);
     for o in out {
+        let iv = propose::group_intervals(o.expected, &o.if_others, o.df, 0.9, o.lr);
+        let g_in = iv.iter().any(|(lo, hi)| (*lo..=*hi).contains(&o.realised));
+        let (tlo, thi) = propose::predictive_interval(o.expected, o.df, 0.9, o.lr);
+        widen.push(iv.iter().map(|(lo, hi)| hi - lo).sum::<f64>() / (thi - tlo).max(1e-9));
+        low_below += usize::from(iv.first().is_some_and(|x| x.0 < o.pair.threshold));
+        for (j, member) in [true, o.true_term, !o.true_term, o.worst].into_iter().enumerate() {
+            if member {
+                group[j].0 += usize::from(g_in);
+                group[j].1 += 1;
+            }
+        }
         let (nlo, nhi) = propose::evidence_interval(o.expected, o.df, 0.9);
         let n_in = (nlo..=nhi).contains(&o.realised);
         noise_only.0 += usize::from(n_in);
@@ -233,6 +343,30 @@ fn summarise(what: &str, out: &[Outcome], simulated: bool) {
         noise_only.0,
         pc(noise_only.0, counted),
         pc(did, predicted)
+    );
+    println!(
+        "{what}: realised inside one of the group members' 90 % intervals {} of {} ({:.1} %); pairs whose term REAL has {} of {} ({:.1} %), stand-in terms {} of {} ({:.1} %), each case's worst pair {} of {} ({:.1} %)",
+        group[0].0,
+        group[0].1,
+        pc(group[0].0, group[0].1),
+        group[1].0,
+        group[1].1,
+        pc(group[1].0, group[1].1),
+        group[2].0,
+        group[2].1,
+        pc(group[2].0, group[2].1),
+        group[3].0,
+        group[3].1,
+        pc(group[3].0, group[3].1)
+    );
+    widen.sort_by(f64::total_cmp);
+    let q = |f: f64| widen.get(((widen.len().max(1) - 1) as f64 * f) as usize).copied().unwrap_or(f64::NAN);
+    println!(
+        "{what}: the intervals' total length over the term's own interval's: median {:.2}, 90th percentile {:.2}; the lowest below the naming threshold in {} of {}",
+        q(0.5),
+        q(0.9),
+        low_below,
+        out.len()
     );
     if !simulated {
         return;
@@ -296,6 +430,8 @@ fn simulated_proposed_tests_realise_their_expected_evidence() {
         // The same run without noise: the evidence REAL's physics gives (its noncentrality).
         let clean = propose::run_on_design(&sim, &real, &best.candidate, dens, seeds, false).unwrap();
         let truth = propose::realised_on(&d, &clean, &p.pairs);
+        let design = propose::design(&sim, &best.candidate, dens).unwrap();
+        let if_others = propose::evidence_if_others_true(&d, &design, &p.pairs);
         println!(
             "case {i}: warm-up {:.1} mV τ {} s, die lag {} s, ramp to {} °C; proposed {} ({:.1} h); {} pairs ({:.1} s)",
             case.warm_v * 1e3,
@@ -330,6 +466,7 @@ fn simulated_proposed_tests_realise_their_expected_evidence() {
                 pair: *pair,
                 true_term: matches!(pair.a, Mech::Warmup | Mech::ThermalLag),
                 worst: worst == Some(k),
+                if_others: if_others[k].clone(),
             });
         }
     }
@@ -357,6 +494,7 @@ fn real_sweep_first_part_predicts_its_remainder() {
         let rem = bins_cal::diagnose::prep::prepare_blocks(&s[cut..], &r[cut..], n2, n2, None).unwrap();
         let expected = propose::evidence_on(&d, &rem, &pairs);
         let realised = propose::realised_on(&d, &rem, &pairs);
+        let if_others = propose::evidence_if_others_true(&d, &rem, &pairs);
         let dr = diagnose_with(&s[cut..], &r[cut..], n2, n2, &Options::default()).unwrap();
         let rep = &dr.report;
         println!(
@@ -381,6 +519,7 @@ fn real_sweep_first_part_predicts_its_remainder() {
                 pair: *pair,
                 true_term: false,
                 worst: false,
+                if_others: if_others[k].clone(),
             })
             .collect();
         summarise(&format!("real sweep split at {:.0} %", share * 100.0), &out, false);

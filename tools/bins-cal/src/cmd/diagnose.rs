@@ -344,7 +344,7 @@ fn print_proposal(
         println!("proposal: no candidate fits the chamber's limits: no file written");
         return;
     }
-    for (i, e) in p.ranked.iter().take(3).enumerate() {
+    for (i, e) in p.ranked.iter().take(propose::REPORTED).enumerate() {
         let c = &e.candidate;
         println!(
             "candidate {}: {} ({:.1} h{}; worst pair at {:.2}× what it needs, {:.2}× per hour): {}",
@@ -360,15 +360,20 @@ fn print_proposal(
             .pairs
             .iter()
             .zip(&e.deviance)
-            .map(|(q, v)| match v.is_finite() {
-                true => {
-                    let (lo, hi) = propose::predictive_interval(*v, q.df, 0.9, q.lr);
-                    format!("{} {v:.1} ({lo:.0}–{hi:.0})", name(q))
+            .enumerate()
+            .map(|(k, (q, v))| match e.intervals.get(k).cloned().flatten() {
+                Some(iv) => {
+                    let iv: Vec<String> = iv.iter().map(|(lo, hi)| format!("{lo:.0}–{hi:.0}")).collect();
+                    format!("{} {v:.1} ({})", name(q), iv.join(" or "))
                 }
-                false => format!("{} (the rival has no column on this test)", name(q)),
+                None => format!("{} (the rival has no column on this test)", name(q)),
             })
             .collect();
-        println!("    expected deviance (90 % of runs within): {}", list.join(", "));
+        println!(
+            "    expected deviance were the modelled term true (90 % of runs within{}): {}",
+            if e.if_others.is_empty() { "" } else { ", whichever member of its group is true" },
+            list.join(", ")
+        );
     }
     if let (true, Some(n), Some(g)) = (written, next, png) {
         println!("proposed test: {} (bins-cal simulate runs it; plot {})", n.display(), g.display());

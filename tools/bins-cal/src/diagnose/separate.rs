@@ -147,6 +147,18 @@ impl<'c, 'p> Refit<'c, 'p> {
         Some(out)
     }
 
+    /// The library's mechanism `rival` as this refit fits it: θ where it absorbs most (as
+    /// [`Refit::mechanism`] searches it) and its coefficients beside the shared columns by
+    /// generalised least squares. Refitted to a recording's data, it is the rival's own
+    /// explanation of that recording, which [`predict`] carries to another design.
+    pub fn fitted_mechanism(&self, rival: Mech) -> Option<Fitted> {
+        let sep = self.mechanism(rival)?;
+        let cols = self.ctx.columns(rival, sep.rival_theta.unwrap_or(0.0));
+        let coef = self.part.coef_plus(&self.filt, &cols)?;
+        let own = coef[coef.len().checked_sub(cols.len())?..].to_vec();
+        Some(Fitted { mech: rival, theta: sep.rival_theta, coef: own })
+    }
+
     /// The deviance the library's mechanism `rival` cannot absorb (θ searched on its grid where
     /// it has one).
     pub fn mechanism(&self, rival: Mech) -> Option<Separation> {

@@ -182,7 +182,9 @@ pub fn chi2_isf(p: f64, k: f64) -> f64 {
 /// `P(X ≤ x)` for `X` a noncentral χ² of `k` degrees of freedom and noncentrality `lambda`
 /// (the sum of `k` squared unit normals whose means' squares sum to `lambda`): the Poisson
 /// mixture `Σⱼ e^(−λ/2) (λ/2)ʲ/j! · P(χ²_{k+2j} ≤ x)`, summed outward from its largest
-/// weight until the weights fall below 10⁻¹⁷ of the total.
+/// weight until the weights fall below 10⁻¹⁷ of the total. The central χ² probabilities come
+/// from one incomplete gamma function at the largest weight and the recurrence
+/// `P(χ²_{2a+2} ≤ x) = P(χ²_{2a} ≤ x) − (x/2)^a e^(−x/2)/Γ(a+1)` outward from it.
 pub fn ncx2_cdf(x: f64, k: f64, lambda: f64) -> f64 {
     if !(x > 0.0) {
         return 0.0;
@@ -190,25 +192,30 @@ pub fn ncx2_cdf(x: f64, k: f64, lambda: f64) -> f64 {
     if !(lambda > 0.0) {
         return 1.0 - chi2_sf(x, k);
     }
-    let h = 0.5 * lambda;
+    let (h, y) = (0.5 * lambda, 0.5 * x);
     let j0 = h.floor();
     let weight = |j: f64| (-h + j * h.ln() - ln_gamma(j + 1.0)).exp();
-    let term = |j: f64| weight(j) * (1.0 - gamma_q(0.5 * k + j, 0.5 * x));
-    let (mut sum, mut wsum) = (term(j0), weight(j0));
-    let mut j = j0 - 1.0;
+    // (x/2)^a e^(−x/2) / Γ(a+1): the step of the recurrence from a to a + 1.
+    let step = |a: f64| (a * y.ln() - y - ln_gamma(a + 1.0)).exp();
+    let a0 = 0.5 * k + j0;
+    let p0 = 1.0 - gamma_q(a0, y);
+    let (mut sum, mut wsum) = (weight(j0) * p0, weight(j0));
+    let (mut j, mut p) = (j0 - 1.0, p0);
     while j >= 0.0 {
+        p = (p + step(0.5 * k + j)).min(1.0);
         let w = weight(j);
-        sum += term(j);
+        sum += w * p;
         wsum += w;
         if w < 1e-17 * wsum {
             break;
         }
         j -= 1.0;
     }
-    let mut j = j0 + 1.0;
+    let (mut j, mut p) = (j0 + 1.0, p0);
     loop {
+        p = (p - step(0.5 * k + j - 1.0)).max(0.0);
         let w = weight(j);
-        sum += term(j);
+        sum += w * p;
         wsum += w;
         if w < 1e-17 * wsum {
             break;
