@@ -91,36 +91,49 @@ fn model_on(d: &Diagnosis, cp: &Prepared, axis: usize) -> Vec<f64> {
     predict(&ctx, &members)
 }
 
-#[test]
-fn realised_evidence_is_a_noncentral_chi2_draw_around_the_expected() {
+/// A run on the design `cp`: the model `eta` (per axis) plus the recording's noise model in its
+/// deviance unit, a level walking with intensity q and white noise of the design's variance per
+/// row, both times the unit (the whitened innovations then have the unit's variance).
+fn drawn(d: &Diagnosis, cp: &Prepared, eta: &[Vec<f64>], rng: &mut rand_chacha::ChaCha8Rng) -> Prepared {
+    let mut run = cp.clone();
+    for axis in 0..3 {
+        let fit = &d.axes[axis];
+        let unit = fit.deviance_scale;
+        let mut level = 0.0;
+        for k in 0..run.t.len() {
+            if k > 0 {
+                let z: f64 = StandardNormal.sample(rng);
+                level += z * (fit.q * unit * (run.t[k] - run.t[k - 1])).sqrt();
+            }
+            let z: f64 = StandardNormal.sample(rng);
+            run.r[axis][k] = eta[axis][k] + level + z * (cp.r_white[axis][k] * unit).sqrt();
+        }
+    }
+    run
+}
+
+/// The first case of docs/diagnosis.md's table (a warm-up of 0.3 mV, τ 600 s, and a 120 s die
+/// lag after one power-on on a ramp to −20 °C; SIM seed 0): its diagnosis, its proposal and the
+/// design of the proposed test.
+fn first_case() -> (Diagnosis, propose::Proposal, Prepared) {
     let case = Case { warm_v: 3.0e-4, warm_tau_s: 600.0, die_tau_s: 120.0, end_c: -20.0, seed: 0 };
     let dir = tempfile::tempdir().unwrap();
     let (d, sim, _) = diagnose_case(&case, dir.path());
     let p = propose::propose(&d, &sim, None, &|_, _| {}).unwrap().expect("pairs to separate");
     let cp = propose::design(&sim, &p.ranked[0].candidate, propose::white_density(&d.prepared)).unwrap();
+    (d, p, cp)
+}
+
+#[test]
+fn realised_evidence_is_a_noncentral_chi2_draw_around_the_expected() {
+    let (d, p, cp) = first_case();
     let expected = propose::evidence_on(&d, &cp, &p.pairs);
     let eta: Vec<Vec<f64>> = (0..3).map(|a| model_on(&d, &cp, a)).collect();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
     let draws = 24;
     let mut realised = vec![Vec::new(); p.pairs.len()];
     for _ in 0..draws {
-        let mut run = cp.clone();
-        for axis in 0..3 {
-            // The recording's noise model, in its deviance unit: a level walking with
-            // intensity q and white noise of the design's variance per row, both times the
-            // unit (the whitened innovations then have the unit's variance).
-            let fit = &d.axes[axis];
-            let unit = fit.deviance_scale;
-            let mut level = 0.0;
-            for k in 0..run.t.len() {
-                if k > 0 {
-                    let z: f64 = StandardNormal.sample(&mut rng);
-                    level += z * (fit.q * unit * (run.t[k] - run.t[k - 1])).sqrt();
-                }
-                let z: f64 = StandardNormal.sample(&mut rng);
-                run.r[axis][k] = eta[axis][k] + level + z * (cp.r_white[axis][k] * unit).sqrt();
-            }
-        }
+        let run = drawn(&d, &cp, &eta, &mut rng);
         for (v, r) in realised.iter_mut().zip(propose::realised_on(&d, &run, &p.pairs)) {
             v.push(r);
         }
@@ -162,12 +175,8 @@ fn realised_evidence_is_a_noncentral_chi2_draw_around_the_expected() {
 /// expects: a noncentral χ² whose mean is that expectation plus the degrees of freedom.
 #[test]
 fn evidence_were_another_member_true_is_what_runs_drawn_from_it_give() {
-    let case = Case { warm_v: 3.0e-4, warm_tau_s: 600.0, die_tau_s: 120.0, end_c: -20.0, seed: 0 };
-    let dir = tempfile::tempdir().unwrap();
-    let (d, sim, _) = diagnose_case(&case, dir.path());
-    let p = propose::propose(&d, &sim, None, &|_, _| {}).unwrap().expect("pairs to separate");
+    let (d, p, cp) = first_case();
     let best = &p.ranked[0];
-    let cp = propose::design(&sim, &best.candidate, propose::white_density(&d.prepared)).unwrap();
     let eta: Vec<Vec<f64>> = (0..3).map(|a| model_on(&d, &cp, a)).collect();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
     let draws = 12;
@@ -192,23 +201,14 @@ fn evidence_were_another_member_true_is_what_runs_drawn_from_it_give() {
                 if want.is_empty() {
                     continue;
                 }
+                // The fitted model with the term replaced by the other member on this axis.
+                let mut model = eta.clone();
+                for (m, (o, t)) in model[axis].iter_mut().zip(own.iter().zip(&theirs)) {
+                    *m += t - o;
+                }
                 let mut realised = vec![Vec::new(); want.len()];
                 for _ in 0..draws {
-                    let mut run = cp.clone();
-                    for a in 0..3 {
-                        let fit = &d.axes[a];
-                        let unit = fit.deviance_scale;
-                        let mut level = 0.0;
-                        for k in 0..run.t.len() {
-                            if k > 0 {
-                                let z: f64 = StandardNormal.sample(&mut rng);
-                                level += z * (fit.q * unit * (run.t[k] - run.t[k - 1])).sqrt();
-                            }
-                            let z: f64 = StandardNormal.sample(&mut rng);
-                            let model = if a == axis { eta[a][k] - own[k] + theirs[k] } else { eta[a][k] };
-                            run.r[a][k] = model + level + z * (cp.r_white[a][k] * unit).sqrt();
-                        }
-                    }
+                    let run = drawn(&d, &cp, &model, &mut rng);
                     let got = propose::realised_on(&d, &run, &p.pairs);
                     for (v, (j, _)) in realised.iter_mut().zip(&want) {
                         v.push(got[*j]);
