@@ -15,7 +15,7 @@
 use bins_cal::diagnose::mech::Mech;
 use bins_cal::diagnose::propose::{self, Pair};
 use bins_cal::diagnose::separate::{Fitted, predict};
-use bins_cal::diagnose::{Diagnosis, Options, diagnose_with, mech::Context, prep::Prepared};
+use bins_cal::diagnose::{Diagnosis, Options, diagnose_with, prep::Prepared};
 use bins_cal::recording::Row;
 use bins_cal::sim::scenario::ScenarioFile;
 use rand::SeedableRng;
@@ -83,9 +83,7 @@ fn diagnose_case(c: &Case, dir: &Path) -> (Diagnosis, propose::Twin, propose::Tw
 /// What the fitted model of accelerometer `axis` predicts on the design `cp` (every term, at
 /// its coefficients and θ as fitted on the recording, through the recording's sensitivity).
 fn model_on(d: &Diagnosis, cp: &Prepared, axis: usize) -> Vec<f64> {
-    let mut ctx = Context::new(cp, axis);
-    ctx.s = d.sensitivity[axis].clone();
-    ctx.s_now = (0..cp.t.len()).map(|k| ctx.s.eval(cp.temp_s[k], &cp.f[k])).collect();
+    let ctx = propose::context_on(d, cp, axis);
     let members: Vec<Fitted> =
         d.axes[axis].terms.iter().map(|t| Fitted { mech: t.mech, theta: t.theta, coef: t.coef.clone() }).collect();
     predict(&ctx, &members)
@@ -182,9 +180,7 @@ fn evidence_were_another_member_true_is_what_runs_drawn_from_it_give() {
     let draws = 12;
     let (mut inside, mut counted, mut checked) = (0usize, 0usize, 0usize);
     for axis in 0..3 {
-        let mut ctx = Context::new(&cp, axis);
-        ctx.s = d.sensitivity[axis].clone();
-        ctx.s_now = (0..cp.t.len()).map(|k| ctx.s.eval(cp.temp_s[k], &cp.f[k])).collect();
+        let ctx = propose::context_on(&d, &cp, axis);
         for term in &d.axes[axis].terms {
             let own = predict(&ctx, &[Fitted { mech: term.mech, theta: term.theta, coef: term.coef.clone() }]);
             for other in propose::plausible_others(&d, axis, term.mech).into_iter().take(1) {

@@ -611,24 +611,23 @@ pub struct Evidence {
     /// ([`evidence_if_others_true`]); filled for the best candidate (the test proposed),
     /// empty for the rest.
     pub if_others: Vec<Vec<(Mech, f64)>>,
-    /// Per pair, where a run's evidence falls nine times in ten ([`Evidence::intervals`]);
-    /// filled for the [`REPORTED`] best candidates, empty for the rest.
+    /// Per pair, where a run's evidence falls nine times in ten ([`group_intervals`]; `None`
+    /// where the rival has no column on the candidate); filled for the [`REPORTED`] best
+    /// candidates, empty for the rest.
     pub intervals: Vec<Option<Vec<(f64, f64)>>>,
-}
-
-impl Evidence {
-    /// Where a run's evidence for pair `k` falls nine times in ten ([`group_intervals`]: about
-    /// the term's expected evidence and, where [`Evidence::if_others`] holds them, about the
-    /// other members'); `None` where the rival has no column on the candidate.
-    pub fn intervals(&self, k: usize, pair: &Pair) -> Option<Vec<(f64, f64)>> {
-        let v = *self.deviance.get(k)?;
-        let others = self.if_others.get(k).map_or(&[][..], Vec::as_slice);
-        v.is_finite().then(|| group_intervals(v, others, pair.df, 0.9, pair.lr))
-    }
 }
 
 /// How many of the best candidates the proposal reports.
 pub const REPORTED: usize = 3;
+
+/// Where a run's evidence for pair `k` of candidate `e` falls nine times in ten
+/// ([`group_intervals`]: about the term's expected evidence and, where [`Evidence::if_others`]
+/// holds them, about the other members'); `None` where the rival has no column on it.
+fn intervals_of(e: &Evidence, k: usize, pair: &Pair) -> Option<Vec<(f64, f64)>> {
+    let v = *e.deviance.get(k)?;
+    let others = e.if_others.get(k).map_or(&[][..], Vec::as_slice);
+    v.is_finite().then(|| group_intervals(v, others, pair.df, 0.9, pair.lr))
+}
 
 /// Rows of a candidate's design (its thermal path at the twin's physics).
 const DESIGN_ROWS: f64 = 4000.0;
@@ -664,15 +663,23 @@ pub fn white_density(p: &Prepared) -> [f64; 3] {
     out
 }
 
+/// The context of accelerometer `axis` on the rows `p` (the recording's own, or a design's)
+/// with SIM's sensitivity as `d` fitted it on the recording: the terms' columns there are
+/// those of the fit.
+pub fn context_on<'p>(d: &Diagnosis, p: &'p Prepared, axis: usize) -> Context<'p> {
+    let mut ctx = Context::new(p, axis);
+    ctx.s = d.sensitivity[axis].clone();
+    ctx.s_now = (0..p.t.len()).map(|k| ctx.s.eval(p.temp_s[k], &p.f[k])).collect();
+    ctx
+}
+
 /// The fit of accelerometer `axis` of `d` carried to the design `cp`: its context (SIM's
 /// sensitivity as fitted on the recording) and its terms with their coefficients and θ as
 /// fitted, their columns and contributions on the design, the recording's noise model (a term
 /// with no column on the design, a lag at a constant temperature, left out).
 fn carried<'p>(d: &Diagnosis, cp: &'p Prepared, axis: usize) -> (Context<'p>, AxisFit) {
     let fit = &d.axes[axis];
-    let mut ctx = Context::new(cp, axis);
-    ctx.s = d.sensitivity[axis].clone();
-    ctx.s_now = (0..cp.t.len()).map(|k| ctx.s.eval(cp.temp_s[k], &cp.f[k])).collect();
+    let ctx = context_on(d, cp, axis);
     let terms: Vec<Term> = fit
         .terms
         .iter()
@@ -862,9 +869,7 @@ pub fn plausible_others(d: &Diagnosis, axis: usize, m: Mech) -> Vec<super::separ
         alts.iter().map(|&(b, v)| (b, if v.is_finite() { v } else { f64::INFINITY })).collect();
     plausible.sort_by(|x, y| x.1.total_cmp(&y.1));
     plausible.truncate(PLAUSIBLE_OTHERS);
-    let mut rec = Context::new(&d.prepared, axis);
-    rec.s = d.sensitivity[axis].clone();
-    rec.s_now = (0..d.prepared.t.len()).map(|r| rec.s.eval(d.prepared.temp_s[r], &d.prepared.f[r])).collect();
+    let rec = context_on(d, &d.prepared, axis);
     let on_data =
         Refit::new(&rec, fit.q, fit.deviance_scale, &d.prepared.r[axis], &super::fit::shared_with(&rec, fit, k));
     plausible.into_iter().filter_map(|(b, _)| on_data.fitted_mechanism(b)).collect()
@@ -1037,13 +1042,12 @@ pub fn propose(
     let start = d.prepared.temp_s.first().copied().unwrap_or(20.0);
     let cands = candidates(&limits, start, hold_s(d, &pairs));
     let mut ranked = rank(d, twin, &pairs, cands, progress)?;
-    let dens = white_density(&d.prepared);
-    for (i, e) in ranked.iter_mut().take(REPORTED).enumerate() {
-        if i == 0 {
-            let cp = design(twin, &e.candidate, dens)?;
-            e.if_others = evidence_if_others_true(d, &cp, &pairs);
-        }
-        e.intervals = pairs.iter().enumerate().map(|(k, q)| e.intervals(k, q)).collect();
+    if let Some(best) = ranked.first_mut() {
+        let cp = design(twin, &best.candidate, white_density(&d.prepared))?;
+        best.if_others = evidence_if_others_true(d, &cp, &pairs);
+    }
+    for e in ranked.iter_mut().take(REPORTED) {
+        e.intervals = pairs.iter().enumerate().map(|(k, q)| intervals_of(e, k, q)).collect();
     }
     Ok(Some(Proposal { pairs, limits, ranked }))
 }
@@ -1117,9 +1121,7 @@ pub fn plot(d: &Diagnosis, twin: &Twin, prop: &Proposal, path: &Path) -> Result<
         })
         .unwrap_or(0);
     let pair = prop.pairs[k];
-    let mut ctx = Context::new(&cp, pair.axis);
-    ctx.s = d.sensitivity[pair.axis].clone();
-    ctx.s_now = (0..cp.t.len()).map(|r| ctx.s.eval(cp.temp_s[r], &cp.f[r])).collect();
+    let ctx = context_on(d, &cp, pair.axis);
     let fit = &d.axes[pair.axis];
     let term = fit.terms.iter().find(|t| t.mech == pair.a);
     let eta: Vec<f64> = match term {
