@@ -92,3 +92,44 @@ fn user_profile_cases_are_drawn_and_scored() {
     assert_eq!((a.rate_hz, a.positions, a.dwell_s), (b.rate_hz, b.positions, b.dwell_s));
     let _ = run_user;
 }
+
+/// On an accelerometer the model leaves above its floor, the thermal-history findings are one
+/// group (docs/diagnosis.md, section 4, `report::THERMAL_JOIN_RATIO`). Combined draw 13184: a
+/// self-heating of 14.6 σ on z on one ramp, the thermistor part-way between case and die; the
+/// model leaves z at 1.3× its floor, and a thermal play or an additive one, named beside the
+/// self-heating there, was a definite false name before the rule.
+#[test]
+fn thermal_history_findings_on_an_axis_the_model_does_not_fit_are_one_group() {
+    use bins_cal::diagnose::mech::Mech;
+    use bins_cal::diagnose::report::THERMAL_JOIN_RATIO;
+    let case = Case::draw_user(13184, true);
+    let (sim, real, _) = blind::generator::generate(&case);
+    let r =
+        bins_cal::diagnose::diagnose(&sim, &real, std::path::Path::new("sim.csv"), std::path::Path::new("real.csv"))
+            .expect("the draw diagnoses")
+            .report;
+    let thermal = |id: &str| Mech::from_id(id).is_some_and(Mech::thermal_history);
+    let mut joined_axes = 0;
+    for ax in ["x", "y", "z"] {
+        let ratio = r.heldout_rms_after_mg[ax] / r.noise_floor_mg[ax];
+        let named = r.effects.iter().filter(|e| thermal(&e.id) && e.axes.iter().any(|a| a == ax)).count();
+        let groups =
+            r.ambiguous.iter().filter(|g| g.axes.iter().any(|a| a == ax) && g.ids.iter().any(|i| thermal(i))).count();
+        if ratio > THERMAL_JOIN_RATIO {
+            assert!(named + groups <= 1, "{ax} at {ratio:.2}× its floor: {named} effects and {groups} groups");
+            joined_axes += 1;
+        }
+    }
+    assert!(
+        joined_axes >= 1,
+        "no accelerometer above {THERMAL_JOIN_RATIO}× its floor: the draw no longer shows the rule"
+    );
+    let z = r.ambiguous.iter().find(|g| g.axes.iter().any(|a| a == "z")).expect("a group on z");
+    assert!(z.ids.iter().any(|i| i == "self_heating"), "z's group {:?} lost the true self-heating", z.ids);
+    assert!(r.effects.iter().all(|e| !e.axes.iter().any(|a| a == "z")), "an effect on z beside its group");
+    assert!(
+        r.notes.iter().any(|n| n.starts_with("accelerometer z:") && n.contains("modelled together")),
+        "{:?}",
+        r.notes
+    );
+}

@@ -112,6 +112,24 @@ impl Mech {
         )
     }
 
+    /// Whether `self` is a bias that follows the unit's thermal history: the die's temperature
+    /// through a lag, a play or its own heating, the time since power-on, a second bias form in
+    /// temperature, or a drift in time. Where the model leaves an accelerometer above its floor,
+    /// two of them there stand in for each other and are reported as one group
+    /// ([`super::report::THERMAL_JOIN_RATIO`]).
+    pub fn thermal_history(self) -> bool {
+        matches!(
+            self,
+            Mech::ThermalLag
+                | Mech::ThermalHysteresis
+                | Mech::BiasHysteresis
+                | Mech::SelfHeating
+                | Mech::Warmup
+                | Mech::BiasTempOrder
+                | Mech::Drift
+        )
+    }
+
     /// Whether the mechanism's one coefficient, acting through SIM's sensitivity, is positive
     /// by its physics: a lag's or a play's gain (the sensing element sees a delayed or held
     /// temperature, not one ahead of the thermistor) and a self-heating's rise (the die heats

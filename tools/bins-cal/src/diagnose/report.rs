@@ -580,6 +580,16 @@ fn unresolved_play(p: &Prepared, m: Mech, theta: Option<f64>) -> bool {
 /// ([`Prepared::temp_resolution_c`]): below, it is undetermined and not flown.
 pub const PLAY_MIN_STEPS: f64 = 2.0;
 
+/// An accelerometer whose held-out RMS after the model stays above this multiple of its noise
+/// floor is one the model does not fit; there, two or more thermal-history findings
+/// ([`Mech::thermal_history`]: named terms, or groups with such a member) are reported as one
+/// group. Each was selected beside the others on a thermal path the model does not have
+/// exactly (the die between case and thermistor, its self-heating), so their split between
+/// forms is not what the recording shows. On the user-profile draws (docs/diagnosis-blind.md),
+/// a second thermal-history finding on an accelerometer is false about six times as often as
+/// a lone one.
+pub const THERMAL_JOIN_RATIO: f64 = 1.25;
+
 /// Builds the report.
 pub fn build(
     p: &Prepared,
@@ -638,6 +648,7 @@ pub fn build(
     // share a mechanism are one group (two members each "a drift, or …" are not two findings).
     let mut amb_groups: BTreeMap<Vec<String>, AmbGroup> = BTreeMap::new();
     let mut ambiguous_member: Vec<Vec<Mech>> = vec![Vec::new(); 3];
+    let mut joined_notes: Vec<String> = Vec::new();
     for fit in axes {
         // (members, every id, data deviances, separabilities, threshold)
         type Local = (Vec<Mech>, Vec<Mech>, BTreeMap<String, f64>, BTreeMap<String, f64>, f64);
@@ -687,6 +698,47 @@ pub fn build(
                         break 'outer;
                     }
                 }
+            }
+        }
+        // On an accelerometer the model does not fit, the thermal-history findings are one.
+        if fit.heldout_rms.1 > THERMAL_JOIN_RATIO * floor.0[fit.axis] {
+            let shown = |ms: &[Mech]| !ms.iter().all(|m| immaterial(fit.axis, *m));
+            let touching: Vec<usize> = (0..local.len())
+                .filter(|&k| shown(&local[k].0) && local[k].1.iter().any(|m| m.thermal_history()))
+                .collect();
+            let named: Vec<Mech> = fit
+                .terms
+                .iter()
+                .map(|t| t.mech)
+                .filter(|m| m.thermal_history() && shown(&[*m]) && !is_folded(fit.axis, *m))
+                .filter(|m| local.iter().all(|l| !l.0.contains(m)))
+                .collect();
+            if touching.len() + named.len() >= 2 {
+                let mut joined: Local = (Vec::new(), Vec::new(), BTreeMap::new(), BTreeMap::new(), f64::NAN);
+                for k in touching.into_iter().rev() {
+                    let g = local.remove(k);
+                    joined.0.extend(g.0);
+                    joined.1.extend(g.1);
+                    joined.2.extend(g.2);
+                    joined.3.extend(g.3);
+                    joined.4 = joined.4.max(g.4);
+                }
+                for m in named {
+                    joined.0.push(m);
+                    joined.1.push(m);
+                    joined.4 = joined.4.max(threshold_of(fit, m));
+                }
+                joined.0.sort_by_key(|m| Mech::ALL.iter().position(|a| a == m));
+                joined.0.dedup();
+                joined.1.dedup();
+                let names: Vec<&str> = joined.0.iter().map(|m| m.id()).collect();
+                joined_notes.push(format!(
+                    "accelerometer {}: {} modelled together on an accelerometer left at {:.2}× its noise floor: one group, since each stands in for the others on a thermal path the model does not have exactly",
+                    AXES[fit.axis],
+                    names.join(" + "),
+                    fit.heldout_rms.1 / floor.0[fit.axis]
+                ));
+                local.push(joined);
             }
         }
         let ax = AXES[fit.axis].to_string();
@@ -828,6 +880,7 @@ pub fn build(
             .collect()
     });
     let mut notes = p.notes.clone();
+    notes.extend(joined_notes);
     for (fit, t) in axes.iter().flat_map(|f| f.terms.iter().map(move |t| (f, t))) {
         if unresolved_play(p, t.mech, t.theta) {
             notes.push(format!(
