@@ -133,3 +133,26 @@ fn thermal_history_findings_on_an_axis_the_model_does_not_fit_are_one_group() {
         r.notes
     );
 }
+
+/// A static scale term on a soak in six positions may be the die's rise after power-on acting
+/// through the scale factor's own tempco (docs/diagnosis.md, section 4,
+/// `Refit::self_heating_through_scale`). Combined draw 17035: a self-heating of 1.6 σ beside a
+/// nonlinearity, one soak; `{nonlinearity_k3, scale_factor, scale_temp}` on x and z, without
+/// the self-heating, was a definite false name before that rival.
+#[test]
+fn a_scale_term_on_a_soak_is_grouped_with_the_self_heating_it_may_be() {
+    let case = Case::draw_user(17035, true);
+    let (sim, real, _) = blind::generator::generate(&case);
+    let r =
+        bins_cal::diagnose::diagnose(&sim, &real, std::path::Path::new("sim.csv"), std::path::Path::new("real.csv"))
+            .expect("the draw diagnoses")
+            .report;
+    let scale: Vec<_> = r.ambiguous.iter().filter(|g| g.ids.iter().any(|i| i == "scale_factor")).collect();
+    assert!(!scale.is_empty(), "no group holds the scale factor: {:?}", r.ambiguous);
+    for g in scale {
+        assert!(g.ids.iter().any(|i| i == "self_heating"), "{:?} on {:?} without the self-heating", g.ids, g.axes);
+    }
+    assert!(r.effects.iter().all(|e| !matches!(e.id.as_str(), "scale_factor" | "scale_temp" | "nonlinearity_k3")));
+    let res = run_list(&[case], 1, false);
+    assert_ne!(user_category(&res[0]), "definite false name", "{}", user_line(&res[0]));
+}

@@ -1011,6 +1011,15 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
             add(Mech::SelfHeating, d);
         }
     }
+    // A term odd in the specific force may be the die's rise after power-on acting through
+    // the scale factor's and cross-sensitivities' tempcos, `(1 − e^(−P/τ))·f_j`.
+    if matches!(
+        term.mech,
+        Mech::ScaleFactor | Mech::CrossAxis | Mech::NonlinearityK3 | Mech::ScaleTemp | Mech::CrossCouplingTemp
+    ) && let Some(d) = refit.self_heating_through_scale()
+    {
+        add(Mech::SelfHeating, d);
+    }
     // Beside a lag, any term may be the rest of a second lag stage.
     for (j, other) in fit.terms.iter().enumerate() {
         if j != k

@@ -347,6 +347,30 @@ impl Refit<'_, '_> {
         };
         self.deviance(&grid, &|th| ctx.offered(Mech::SelfHeating, th), &columns).map(|s| s.deviance)
     }
+
+    /// The deviance a die heating after power-on cannot absorb acting through the scale factor
+    /// and cross-sensitivities' own tempcos: `(1 − e^(−P/τ))·f_j` for each specific-force
+    /// component, τ on the turn-on grid. Once the die has settled this is a static scale term,
+    /// and over a soak a scale-factor tempco is one too (the temperature moves only with the
+    /// die's rise): only the transient after each power-on tells them apart. `None` without
+    /// `power_s`, a turn-on τ the recording shows, or a specific force that changes.
+    pub fn self_heating_through_scale(&self) -> Option<f64> {
+        let ctx = self.ctx;
+        let p = ctx.p;
+        let power = p.power.as_deref()?;
+        let grid = ctx.grid(Mech::SelfHeating);
+        let moves = |j: usize| p.f.iter().any(|f| (f[j] - p.f[0][j]).abs() > 0.1);
+        if grid.is_empty() || !(0..3).any(moves) {
+            return None;
+        }
+        let columns = |tau: f64| -> Vec<Vec<f64>> {
+            (0..3)
+                .filter(|&j| moves(j))
+                .map(|j| power.iter().zip(&p.f).map(|(pw, f)| -(-pw / tau).exp_m1() * f[j]).collect())
+                .collect()
+        };
+        self.deviance(&grid, &|th| ctx.offered(Mech::SelfHeating, th), &columns).map(|s| s.deviance)
+    }
 }
 
 /// The die's temperature when it runs `rho` °C above the thermistor's `temp` once settled,
