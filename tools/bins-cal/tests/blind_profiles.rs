@@ -93,6 +93,13 @@ fn user_profile_cases_are_drawn_and_scored() {
     let _ = run_user;
 }
 
+/// The diagnosis's report of a drawn case (the library's defaults).
+fn report_of(case: &Case) -> bins_cal::diagnose::report::Report {
+    let (sim, real, _) = blind::generator::generate(case);
+    let (sim_name, real_name) = (std::path::Path::new("sim.csv"), std::path::Path::new("real.csv"));
+    bins_cal::diagnose::diagnose(&sim, &real, sim_name, real_name).expect("the draw diagnoses").report
+}
+
 /// On an accelerometer the model leaves above its floor, the thermal-history findings are one
 /// group (docs/diagnosis.md, section 4, `report::THERMAL_JOIN_RATIO`). Combined draw 13184: a
 /// self-heating of 14.6 σ on z on one ramp, the thermistor part-way between case and die; the
@@ -102,12 +109,7 @@ fn user_profile_cases_are_drawn_and_scored() {
 fn thermal_history_findings_on_an_axis_the_model_does_not_fit_are_one_group() {
     use bins_cal::diagnose::mech::Mech;
     use bins_cal::diagnose::report::THERMAL_JOIN_RATIO;
-    let case = Case::draw_user(13184, true);
-    let (sim, real, _) = blind::generator::generate(&case);
-    let r =
-        bins_cal::diagnose::diagnose(&sim, &real, std::path::Path::new("sim.csv"), std::path::Path::new("real.csv"))
-            .expect("the draw diagnoses")
-            .report;
+    let r = report_of(&Case::draw_user(13184, true));
     let thermal = |id: &str| Mech::from_id(id).is_some_and(Mech::thermal_history);
     let mut joined_axes = 0;
     for ax in ["x", "y", "z"] {
@@ -142,11 +144,7 @@ fn thermal_history_findings_on_an_axis_the_model_does_not_fit_are_one_group() {
 #[test]
 fn a_scale_term_on_a_soak_is_grouped_with_the_self_heating_it_may_be() {
     let case = Case::draw_user(17035, true);
-    let (sim, real, _) = blind::generator::generate(&case);
-    let r =
-        bins_cal::diagnose::diagnose(&sim, &real, std::path::Path::new("sim.csv"), std::path::Path::new("real.csv"))
-            .expect("the draw diagnoses")
-            .report;
+    let r = report_of(&case);
     let scale: Vec<_> = r.ambiguous.iter().filter(|g| g.ids.iter().any(|i| i == "scale_factor")).collect();
     assert!(!scale.is_empty(), "no group holds the scale factor: {:?}", r.ambiguous);
     for g in scale {
