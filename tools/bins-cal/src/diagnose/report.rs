@@ -552,6 +552,28 @@ pub struct Inputs<'a> {
 /// separabilities and the naming thresholds, per axis.
 type AmbGroup = (Vec<String>, String, PerAxis<BTreeMap<String, f64>>, PerAxis<BTreeMap<String, f64>>, PerAxis<f64>);
 
+/// A group being built on one accelerometer: the members modelled, every id, the data's
+/// deviance differences, the separabilities, the naming threshold (NaN: none).
+type Local = (Vec<Mech>, Vec<Mech>, BTreeMap<String, f64>, BTreeMap<String, f64>, f64);
+
+/// Merges group `g` into `e`: members and ids once each, in order; the figures of both; the
+/// larger threshold.
+fn absorb(e: &mut Local, g: Local) {
+    for m in g.0 {
+        if !e.0.contains(&m) {
+            e.0.push(m);
+        }
+    }
+    for m in g.1 {
+        if !e.1.contains(&m) {
+            e.1.push(m);
+        }
+    }
+    e.2.extend(g.2);
+    e.3.extend(g.3);
+    e.4 = if e.4.is_nan() { g.4 } else { e.4.max(g.4) };
+}
+
 /// The separability of rival `b` against the term `m` of `fit` ([`AxisFit::separability`]).
 fn separability_of(fit: &AxisFit, m: Mech, b: Mech) -> Option<f64> {
     fit.separability.iter().find(|(a, _)| *a == m).and_then(|(_, r)| r.iter().find(|x| x.0 == b)).map(|x| x.1)
@@ -650,8 +672,6 @@ pub fn build(
     let mut ambiguous_member: Vec<Vec<Mech>> = vec![Vec::new(); 3];
     let mut joined_notes: Vec<String> = Vec::new();
     for fit in axes {
-        // (members, every id, data deviances, separabilities, threshold)
-        type Local = (Vec<Mech>, Vec<Mech>, BTreeMap<String, f64>, BTreeMap<String, f64>, f64);
         let mut local: Vec<Local> = Vec::new();
         for (m, alts) in &fit.ambiguous {
             if is_folded(fit.axis, *m) {
@@ -680,20 +700,7 @@ pub fn build(
                 for b in a + 1..local.len() {
                     if local[a].1.iter().any(|m| local[b].1.contains(m)) {
                         let g = local.remove(b);
-                        let e = &mut local[a];
-                        for m in g.0 {
-                            if !e.0.contains(&m) {
-                                e.0.push(m);
-                            }
-                        }
-                        for m in g.1 {
-                            if !e.1.contains(&m) {
-                                e.1.push(m);
-                            }
-                        }
-                        e.2.extend(g.2);
-                        e.3.extend(g.3);
-                        e.4 = if e.4.is_nan() { g.4 } else { e.4.max(g.4) };
+                        absorb(&mut local[a], g);
                         merged = true;
                         break 'outer;
                     }
@@ -716,21 +723,12 @@ pub fn build(
             if touching.len() + named.len() >= 2 {
                 let mut joined: Local = (Vec::new(), Vec::new(), BTreeMap::new(), BTreeMap::new(), f64::NAN);
                 for k in touching.into_iter().rev() {
-                    let g = local.remove(k);
-                    joined.0.extend(g.0);
-                    joined.1.extend(g.1);
-                    joined.2.extend(g.2);
-                    joined.3.extend(g.3);
-                    joined.4 = joined.4.max(g.4);
+                    absorb(&mut joined, local.remove(k));
                 }
                 for m in named {
-                    joined.0.push(m);
-                    joined.1.push(m);
-                    joined.4 = joined.4.max(threshold_of(fit, m));
+                    absorb(&mut joined, (vec![m], vec![m], BTreeMap::new(), BTreeMap::new(), threshold_of(fit, m)));
                 }
                 joined.0.sort_by_key(|m| Mech::ALL.iter().position(|a| a == m));
-                joined.0.dedup();
-                joined.1.dedup();
                 let names: Vec<&str> = joined.0.iter().map(|m| m.id()).collect();
                 joined_notes.push(format!(
                     "accelerometer {}: {} modelled together on an accelerometer left at {:.2}× its noise floor: one group, since each stands in for the others on a thermal path the model does not have exactly",
