@@ -94,6 +94,27 @@ fn user_profile_cases_are_drawn_and_scored() {
 }
 
 /// The diagnosis's report of a drawn case (the library's defaults).
+#[test]
+fn a_turn_on_group_holds_the_play_that_acts_through_the_die_rise() {
+    // Combined draw 37010: one ramp from power-on, a thermal play of 2.8 σ (on the die) beside a
+    // k2 nonlinearity. z's power-on transient was a group of turn-on and additive-play names
+    // without the play; the play through the die's rise explains z's data as well
+    // (`fit::die_rise_on_data`), so the group holds it.
+    let case = Case::draw_user(37010, true);
+    let r = report_of(&case);
+    let turn_on: Vec<_> = r
+        .ambiguous
+        .iter()
+        .filter(|g| g.axes.iter().any(|a| a == "z") && g.ids.iter().any(|i| i == "warmup" || i == "self_heating"))
+        .collect();
+    assert!(!turn_on.is_empty(), "no turn-on group on z: {:?}", r.ambiguous);
+    for g in turn_on {
+        assert!(g.ids.iter().any(|i| i == "thermal_hysteresis"), "{:?} on {:?} without the play", g.ids, g.axes);
+    }
+    let res = run_list(&[case], 1, false);
+    assert_ne!(user_category(&res[0]), "definite false name", "{}", user_line(&res[0]));
+}
+
 fn report_of(case: &Case) -> bins_cal::diagnose::report::Report {
     let (sim, real, _) = blind::generator::generate(case);
     let (sim_name, real_name) = (std::path::Path::new("sim.csv"), std::path::Path::new("real.csv"));

@@ -841,6 +841,7 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                     }
                 };
                 let sep = separability_of(ctx, &fit);
+                let mut by_design: Vec<(Mech, Mech)> = Vec::new();
                 for (m, rivals) in &sep {
                     let df = fit
                         .terms
@@ -850,6 +851,15 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                     let needed = super::separate::separation_needed(naming_threshold(alpha, df), df);
                     for &(b, _) in rivals.iter().filter(|r| r.1 < needed) {
                         join(*m, b);
+                        by_design.push((*m, b));
+                    }
+                }
+                // A term that a rival acting through the die's rise after power-on explains
+                // about as well on the data is that rival as much as itself, whatever the
+                // separability of the term's own prediction says.
+                for (m, b, d) in die_rise_on_data(ctx, &fit, &by_design) {
+                    if d < AMBIGUOUS_LR {
+                        join(m, b);
                     }
                 }
                 // An additive play in one orientation whose gain has the sign a held
@@ -985,13 +995,7 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
         // Or a temperature form the model lacks, acting through a die that self-heats
         // after power-on unseen by the thermistor (a tempco on a soak is a turn-on
         // transient).
-        for m in [
-            Mech::BiasTempOrder,
-            Mech::ScaleTemp,
-            Mech::CrossCouplingTemp,
-            Mech::BiasHysteresis,
-            Mech::ThermalHysteresis,
-        ] {
+        for m in DIE_RISE_FORMS {
             if !fit.terms.iter().any(|t| t.mech == m)
                 && let Some(d) = refit.through_die_rise(m)
             {
@@ -1013,10 +1017,8 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
     }
     // A term odd in the specific force may be the die's rise after power-on acting through
     // the scale factor's and cross-sensitivities' tempcos, `(1 − e^(−P/τ))·f_j`.
-    if matches!(
-        term.mech,
-        Mech::ScaleFactor | Mech::CrossAxis | Mech::NonlinearityK3 | Mech::ScaleTemp | Mech::CrossCouplingTemp
-    ) && let Some(d) = refit.self_heating_through_scale()
+    if ODD_IN_F.contains(&term.mech)
+        && let Some(d) = refit.self_heating_through_scale()
     {
         add(Mech::SelfHeating, d);
     }
@@ -1053,6 +1055,65 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
     }
     rivals.sort_by(|x, y| x.1.total_cmp(&y.1));
     rivals
+}
+
+/// The temperature forms a turn-on term's rivals build from the die's temperature after
+/// power-on ([`super::separate::Refit::through_die_rise`]).
+const DIE_RISE_FORMS: [Mech; 5] =
+    [Mech::BiasTempOrder, Mech::ScaleTemp, Mech::CrossCouplingTemp, Mech::BiasHysteresis, Mech::ThermalHysteresis];
+
+/// The terms odd in the specific force, which the die's rise after power-on may make through
+/// the scale factor's and cross-sensitivities' tempcos
+/// ([`super::separate::Refit::self_heating_through_scale`]).
+const ODD_IN_F: [Mech; 5] =
+    [Mech::ScaleFactor, Mech::CrossAxis, Mech::NonlinearityK3, Mech::ScaleTemp, Mech::CrossCouplingTemp];
+
+/// The rivals of each term of `fit` that act through the die's rise after power-on, refitted
+/// to the recording's residual in the term's place: `(term, rival, D(rival) − D(term))`, the
+/// deviance difference on the data with the nuisance and the other terms free (negative: the
+/// rival explains more). For a turn-on term (`warmup`, `self_heating`), each temperature form
+/// the model lacks built from the die's temperature
+/// ([`super::separate::Refit::through_die_rise`]); for a term odd in the specific force where
+/// the positions change, the rise through the scale factor's and cross-sensitivities' tempcos
+/// ([`super::separate::Refit::self_heating_through_scale`], named `self_heating`). The
+/// separability of the term's own prediction holds these rivals to a first-order rise (and a
+/// tempco to the thermistor's share of it); the data hold them to nothing but themselves, and
+/// a rival that explains them as well is as much the finding as the term.
+/// Pairs in `grouped` (already one group) are not refitted.
+fn die_rise_on_data(ctx: &Context, fit: &AxisFit, grouped: &[(Mech, Mech)]) -> Vec<(Mech, Mech, f64)> {
+    use super::separate::Refit;
+    let y = &ctx.p.r[ctx.axis];
+    let mut out = Vec::new();
+    for (k, term) in fit.terms.iter().enumerate() {
+        let turn_on = matches!(term.mech, Mech::Warmup | Mech::SelfHeating);
+        let open = |m: Mech| !grouped.contains(&(term.mech, m));
+        let asked = if turn_on {
+            DIE_RISE_FORMS.iter().any(|&m| open(m) && !fit.terms.iter().any(|t| t.mech == m))
+        } else {
+            ODD_IN_F.contains(&term.mech) && open(Mech::SelfHeating)
+        };
+        if !asked {
+            continue;
+        }
+        let refit = Refit::new(ctx, fit.q, fit.deviance_scale, y, &shared_with(ctx, fit, k));
+        let Some(own) = refit.deviance(&[], &|_| true, &|_| term.columns.clone()) else { continue };
+        let mut rivals: Vec<(Mech, Option<f64>)> = Vec::new();
+        if turn_on {
+            for m in DIE_RISE_FORMS {
+                if open(m) && !fit.terms.iter().any(|t| t.mech == m) {
+                    rivals.push((m, refit.through_die_rise(m)));
+                }
+            }
+        } else {
+            rivals.push((Mech::SelfHeating, refit.self_heating_through_scale()));
+        }
+        for (m, d) in rivals {
+            if let Some(d) = d {
+                out.push((term.mech, m, d - own.deviance));
+            }
+        }
+    }
+    out
 }
 
 /// The separability of a turn-on term (what `refit` holds) from the temperature form `other`

@@ -677,6 +677,12 @@ impl<'a> Context<'a> {
         (0..=n).map(|k| lo * (hi / lo).powf(k as f64 / n as f64)).collect()
     }
 
+    /// The bias polynomial's columns `ΔTᵉ` for the orders `e` given, `ΔT = T − 20 °C` from the
+    /// temperature `temp` (one value a row).
+    pub fn bias_powers(&self, temp: &[f64], orders: &[i32]) -> Vec<Vec<f64>> {
+        orders.iter().map(|&e| temp.iter().map(|t| (t - T0_C).powi(e)).collect()).collect()
+    }
+
     /// The columns of mechanism `m` at `theta` (ignored for linear mechanisms).
     pub fn columns(&self, m: Mech, theta: f64) -> Vec<Vec<f64>> {
         self.columns_at(m, theta, &self.p.temp_s)
@@ -716,10 +722,10 @@ impl<'a> Context<'a> {
                 let pw = p.power.as_deref().unwrap_or(&[]);
                 vec![(0..n).map(|r| (-pw[r] / theta).exp()).collect()]
             }
-            Mech::BiasTempOrder => (1..=3)
-                .filter(|e| !self.nuisance_orders.contains(e))
-                .map(|e| (0..n).map(|r| dtc(r).powi(e)).collect())
-                .collect(),
+            Mech::BiasTempOrder => {
+                let orders: Vec<i32> = (1..=3).filter(|e| !self.nuisance_orders.contains(e)).collect();
+                self.bias_powers(temp, &orders)
+            }
             Mech::ScaleTemp => (1..=2).map(|e| (0..n).map(|r| p.f[r][i] * dtc(r).powi(e)).collect()).collect(),
             Mech::CrossCouplingTemp => [(j, 1), (k, 1), (j, 2), (k, 2)]
                 .iter()

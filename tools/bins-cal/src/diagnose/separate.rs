@@ -176,10 +176,13 @@ impl<'c, 'p> Refit<'c, 'p> {
 
     /// The deviance the temperature form `rival` cannot absorb acting on a die that self-heats
     /// after each power-on, unseen by the thermistor: its columns built from
-    /// `T + ρ·(1 − e^(−P/τ))` (ρ = 0.3, 1 and [`DIE_RISE_MAX_C`] °C; τ on the turn-on grid; a
-    /// play's width 0.1–3 °C). On a soak after a power-on a tempco acting through the die's
+    /// `T + ρ·(1 − e^(−P/τ))` (ρ = 0.3, 1 and [`DIE_RISE_MAX_C`] °C; τ searched on the turn-on
+    /// grid and refined as any rival's θ, [`Refit::deviance`]; a play's width 0.1–3 °C). On a soak after a power-on a tempco acting through the die's
     /// rise is a turn-on transient; over a wide temperature range the same coefficients must
-    /// also fit the ramps, and then it is not.
+    /// also fit the ramps, and then it is not. The bias polynomial takes all three orders, also
+    /// those SIM's calibration of this recording holds ([`super::mech::sim_fitted_forms`]):
+    /// that calibration fitted them at the thermistor's temperature, and the die's rise is what
+    /// it left.
     pub fn through_die_rise(&self, rival: Mech) -> Option<f64> {
         let ctx = self.ctx;
         let power = ctx.p.power.as_deref()?;
@@ -192,16 +195,36 @@ impl<'c, 'p> Refit<'c, 'p> {
             Mech::ThermalLag => return None,
             _ => vec![0.0],
         };
-        let mut best = f64::INFINITY;
+        let columns = |rho: f64, th: f64, tau: f64| -> Vec<Vec<f64>> {
+            let temp = die_temperature(&ctx.p.temp_s, power, rho, tau);
+            let mut cols = ctx.columns_at(rival, th, &temp);
+            if rival == Mech::BiasTempOrder {
+                // The orders SIM's calibration holds are shared at the thermistor's
+                // temperature: the rival adds their difference at the die's.
+                let at_die = ctx.bias_powers(&temp, &ctx.nuisance_orders);
+                let at_thermistor = ctx.bias_powers(&ctx.p.temp_s, &ctx.nuisance_orders);
+                cols.extend(
+                    at_die.iter().zip(&at_thermistor).map(|(d, t)| d.iter().zip(t).map(|(a, b)| a - b).collect()),
+                );
+            }
+            cols
+        };
+        // The grid over (ρ, width, τ); then τ refined at the best ρ and width.
+        let mut at: Option<(f64, f64, f64)> = None;
         for rho in [0.3, 1.0, DIE_RISE_MAX_C] {
-            for &tau in &taus {
-                let temp = die_temperature(&ctx.p.temp_s, power, rho, tau);
-                for &th in &thetas {
-                    let s = self.sse(&ctx.columns_at(rival, th, &temp));
-                    best = best.min(s / self.scale);
+            for &th in &thetas {
+                for &tau in &taus {
+                    let s = self.sse(&columns(rho, th, tau));
+                    if s.is_finite() && at.is_none_or(|b| s < b.0) {
+                        at = Some((s, rho, th));
+                    }
                 }
             }
         }
+        let (_, rho, th) = at?;
+        let best = self
+            .deviance(&taus, &|tau| ctx.offered(Mech::Warmup, tau), &|tau| columns(rho, th, tau))
+            .map_or(f64::INFINITY, |s| s.deviance);
         best.is_finite().then_some(best)
     }
 }
