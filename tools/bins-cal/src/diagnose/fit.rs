@@ -1078,8 +1078,8 @@ const ODD_IN_F: [Mech; 5] =
 /// ([`super::separate::Refit::self_heating_through_scale`], named `self_heating`). The
 /// separability of the term's own prediction holds these rivals to a first-order rise (and a
 /// tempco to the thermistor's share of it); the data hold them to nothing but themselves, and
-/// a rival that explains them as well is as much the finding as the term.
-/// Pairs in `grouped` (already one group) are not refitted.
+/// a rival that explains them as well is as much the finding as the term. Pairs in `grouped`
+/// (already one group by their separability) are not refitted.
 fn die_rise_on_data(ctx: &Context, fit: &AxisFit, grouped: &[(Mech, Mech)]) -> Vec<(Mech, Mech, f64)> {
     use super::separate::Refit;
     let y = &ctx.p.r[ctx.axis];

@@ -176,10 +176,11 @@ impl<'c, 'p> Refit<'c, 'p> {
 
     /// The deviance the temperature form `rival` cannot absorb acting on a die that self-heats
     /// after each power-on, unseen by the thermistor: its columns built from
-    /// `T + ρ·(1 − e^(−P/τ))` (ρ = 0.3, 1 and [`DIE_RISE_MAX_C`] °C; τ searched on the turn-on
-    /// grid and refined as any rival's θ, [`Refit::deviance`]; a play's width 0.1–3 °C). On a soak after a power-on a tempco acting through the die's
-    /// rise is a turn-on transient; over a wide temperature range the same coefficients must
-    /// also fit the ramps, and then it is not. The bias polynomial takes all three orders, also
+    /// `T + ρ·(1 − e^(−P/τ))` (ρ = 0.3, 1 and [`DIE_RISE_MAX_C`] °C; a play's width 0.1–3 °C; τ
+    /// on the turn-on grid, then refined at the best ρ and width as [`Refit::deviance`] refines
+    /// any rival's θ). On a soak after a power-on a tempco acting through the die's rise is a
+    /// turn-on transient; over a wide temperature range the same coefficients must also fit the
+    /// ramps, and then it is not. The bias polynomial takes all three orders, also
     /// those SIM's calibration of this recording holds ([`super::mech::sim_fitted_forms`]):
     /// that calibration fitted them at the thermistor's temperature, and the die's rise is what
     /// it left.
