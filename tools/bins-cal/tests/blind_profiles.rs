@@ -93,7 +93,6 @@ fn user_profile_cases_are_drawn_and_scored() {
     let _ = run_user;
 }
 
-/// The diagnosis's report of a drawn case (the library's defaults).
 #[test]
 fn a_turn_on_group_holds_the_play_that_acts_through_the_die_rise() {
     // Combined draw 37010: one ramp from power-on, a thermal play of 2.8 σ (on the die) beside a
@@ -115,6 +114,7 @@ fn a_turn_on_group_holds_the_play_that_acts_through_the_die_rise() {
     assert_ne!(user_category(&res[0]), "definite false name", "{}", user_line(&res[0]));
 }
 
+/// The diagnosis's report of a drawn case (the library's defaults).
 fn report_of(case: &Case) -> bins_cal::diagnose::report::Report {
     let (sim, real, _) = blind::generator::generate(case);
     let (sim_name, real_name) = (std::path::Path::new("sim.csv"), std::path::Path::new("real.csv"));
