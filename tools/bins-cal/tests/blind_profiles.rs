@@ -114,6 +114,28 @@ fn a_turn_on_group_holds_the_play_that_acts_through_the_die_rise() {
     assert_ne!(user_category(&res[0]), "definite false name", "{}", user_line(&res[0]));
 }
 
+#[test]
+fn a_soaks_tempco_group_holds_the_play_that_never_engages() {
+    // Single draw 41097: one power-on on a soak at 56 °C, a thermal play 4.5 °C wide acting on
+    // the die, which rises 1.3 °C: the play never engages, and the sensor stays at its starting
+    // temperature. x and y were a group of tempco and self-heating names without the play; the
+    // play wider than the swept range (`Refit::play_never_engaged`) is that same column, so
+    // each tempco group holds it.
+    let case = Case::draw_user(41097, false);
+    let r = report_of(&case);
+    for ax in ["x", "y"] {
+        let g: Vec<_> = r
+            .ambiguous
+            .iter()
+            .filter(|g| g.axes.iter().any(|a| a == ax) && g.ids.iter().any(|i| i == "bias_temp_order"))
+            .collect();
+        assert!(!g.is_empty(), "no tempco group on {ax}: {:?}", r.ambiguous);
+        assert!(g.iter().all(|g| g.ids.iter().any(|i| i == "thermal_hysteresis")), "{ax}: {:?} without the play", g);
+    }
+    let res = run_list(&[case], 1, false);
+    assert_ne!(user_category(&res[0]), "definite false name", "{}", user_line(&res[0]));
+}
+
 /// The diagnosis's report of a drawn case (the library's defaults).
 fn report_of(case: &Case) -> bins_cal::diagnose::report::Report {
     let (sim, real, _) = blind::generator::generate(case);

@@ -1015,6 +1015,14 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
             add(Mech::SelfHeating, d);
         }
     }
+    // A temperature form or a turn-on term may be a thermal play that never engages: the
+    // sensor holds its starting temperature while the thermistor, with the die, moves.
+    if (term.mech.temperature_form() || matches!(term.mech, Mech::Warmup | Mech::SelfHeating))
+        && !fit.terms.iter().any(|t| t.mech == Mech::ThermalHysteresis)
+        && let Some(d) = refit.play_never_engaged()
+    {
+        add(Mech::ThermalHysteresis, d);
+    }
     // A term odd in the specific force may be the die's rise after power-on acting through
     // the scale factor's and cross-sensitivities' tempcos, `(1 − e^(−P/τ))·f_j`.
     if ODD_IN_F.contains(&term.mech)

@@ -395,7 +395,31 @@ impl Refit<'_, '_> {
         };
         self.deviance(&grid, &|th| ctx.offered(Mech::SelfHeating, th), &columns).map(|s| s.deviance)
     }
+
+    /// The deviance a thermal play wider than every temperature the recording swept cannot
+    /// absorb: the sensor held at each session's starting temperature while the thermistor
+    /// moves, `S(T_start, f) − S(T, f)` (the library's play at a width of twice the swept range
+    /// and 1 °C more). Such a play never engages, and on this recording it is a temperature
+    /// function with SIM's own shape, as a tempco or a die the sensor does not follow is. The
+    /// search's grid stops at widths that engage, so only this rival says so. `None` where that
+    /// width exceeds [`NEVER_ENGAGED_MAX_WIDTH_C`]: a recording that swept more would have
+    /// engaged a play of a few °C, and the search's own widths answer it.
+    pub fn play_never_engaged(&self) -> Option<f64> {
+        let ctx = self.ctx;
+        let width_c = 2.0 * ctx.temp_range + 1.0;
+        if width_c > NEVER_ENGAGED_MAX_WIDTH_C {
+            return None;
+        }
+        let cols = ctx.columns(Mech::ThermalHysteresis, width_c);
+        self.deviance(&[], &|_| true, &|_| cols.clone()).map(|s| s.deviance)
+    }
 }
+
+/// The widest play [`Refit::play_never_engaged`] stands for \[°C\]: a thermal backlash of a
+/// few °C, which a recording that swept (8 − 1) / 2 = 3.5 °C or more would have engaged. Over a
+/// wider sweep a play that never engages would have to be wider than any thermal play, and a
+/// temperature function with SIM's shape there is a tempco.
+pub const NEVER_ENGAGED_MAX_WIDTH_C: f64 = 8.0;
 
 /// The die's temperature when it runs `rho` °C above the thermistor's `temp` once settled,
 /// rising as `1 − e^(−P/τ)` after each power-on (`power`: `power_s`).
