@@ -136,6 +136,24 @@ fn a_soaks_tempco_group_holds_the_play_that_never_engages() {
     assert_ne!(user_category(&res[0]), "definite false name", "{}", user_line(&res[0]));
 }
 
+#[test]
+fn a_turn_on_group_on_a_soak_read_coarsely_holds_the_tempco() {
+    // Combined draw 41190: a soak of 41 minutes at 52 °C after one power-on, in one
+    // orientation, a scale tempco of 17.4 σ on y acting on the die, the thermistor reading a
+    // share of the die's 1.1 °C rise in steps of 0.0625 °C. y was a group of turn-on names and
+    // the drift without a tempco: the tempco through the die's rise had to carry the
+    // thermistor's steps. The thermistor reads nothing but a rise there (`soak_rise`), so the
+    // rise alone is also tried as the die's path, and y's group holds the tempco.
+    let case = Case::draw_user(41190, true);
+    let r = report_of(&case);
+    let tempco = |i: &String| i == "bias_temp_order" || i == "scale_temp";
+    let on_y: Vec<_> = r.ambiguous.iter().filter(|g| g.axes.iter().any(|a| a == "y")).collect();
+    assert!(!on_y.is_empty(), "no group on y: {:?}", r.ambiguous);
+    assert!(on_y.iter().all(|g| g.ids.iter().any(tempco)), "y: {on_y:?} without a tempco");
+    let res = run_list(&[case], 1, false);
+    assert_ne!(user_category(&res[0]), "definite false name", "{}", user_line(&res[0]));
+}
+
 /// The diagnosis's report of a drawn case (the library's defaults).
 fn report_of(case: &Case) -> bins_cal::diagnose::report::Report {
     let (sim, real, _) = blind::generator::generate(case);

@@ -183,7 +183,10 @@ impl<'c, 'p> Refit<'c, 'p> {
     /// ramps, and then it is not. The bias polynomial takes all three orders, also
     /// those SIM's calibration of this recording holds ([`super::mech::sim_fitted_forms`]):
     /// that calibration fitted them at the thermistor's temperature, and the die's rise is what
-    /// it left.
+    /// it left. Where the thermistor itself reads nothing but a rise after each power-on
+    /// ([`soak_rise`]), the die's temperature is also tried as that rise alone at a τ of its own,
+    /// `T₀ + A·(1 − e^(−P/τ))`: the thermistor's reading is then no better a record of the die's
+    /// path than its own start and rise, and a coarse reading's steps are not the die's.
     pub fn through_die_rise(&self, rival: Mech) -> Option<f64> {
         let ctx = self.ctx;
         let power = ctx.p.power.as_deref()?;
@@ -196,8 +199,13 @@ impl<'c, 'p> Refit<'c, 'p> {
             Mech::ThermalLag => return None,
             _ => vec![0.0],
         };
+        let soak = soak_rise(ctx);
+        // ρ > 0: the thermistor's reading plus a rise of ρ; ρ = 0: the soak's rise alone.
         let columns = |rho: f64, th: f64, tau: f64| -> Vec<Vec<f64>> {
-            let temp = die_temperature(&ctx.p.temp_s, power, rho, tau);
+            let temp = match &soak {
+                Some(sessions) if rho == 0.0 => soak_temperature(sessions, power, tau),
+                _ => die_temperature(&ctx.p.temp_s, power, rho, tau),
+            };
             let mut cols = ctx.columns_at(rival, th, &temp);
             if rival == Mech::BiasTempOrder {
                 // The orders SIM's calibration holds are shared at the thermistor's
@@ -212,7 +220,8 @@ impl<'c, 'p> Refit<'c, 'p> {
         };
         // The grid over (ρ, width, τ); then τ refined at the best ρ and width.
         let mut at: Option<(f64, f64, f64)> = None;
-        for rho in [0.3, 1.0, DIE_RISE_MAX_C] {
+        let rhos: &[f64] = if soak.is_some() { &[0.0, 0.3, 1.0, DIE_RISE_MAX_C] } else { &[0.3, 1.0, DIE_RISE_MAX_C] };
+        for &rho in rhos {
             for &th in &thetas {
                 for &tau in &taus {
                     let s = self.sse(&columns(rho, th, tau));
@@ -420,6 +429,57 @@ impl Refit<'_, '_> {
 /// wider sweep a play that never engages would have to be wider than any thermal play, and a
 /// temperature function with SIM's shape there is a tempco.
 pub const NEVER_ENGAGED_MAX_WIDTH_C: f64 = 8.0;
+
+/// Largest RMS \[°C\] by which the thermistor's smoothed reading may depart from its start plus
+/// one rise after power-on for [`soak_rise`] to take the session as a soak (or the reading's
+/// resolution, where coarser).
+pub const SOAK_FIT_C: f64 = 0.03;
+
+/// Per session, the thermistor's smoothed reading as its start and one rise after power-on,
+/// `T₀ + A·(1 − e^(−P/τ))` (least squares, τ on the turn-on grid): `(rows, T₀, A)` when every
+/// session's reading is that to within [`SOAK_FIT_C`] RMS or the reading's resolution, so the
+/// case held still and the temperature moved only with the unit's own rise; `None` otherwise
+/// (a ramp, a step of the chamber, no `power_s`).
+pub fn soak_rise(ctx: &Context) -> Option<Vec<(std::ops::Range<usize>, f64, f64)>> {
+    let p = ctx.p;
+    let power = p.power.as_deref()?;
+    let taus = ctx.grid(Mech::Warmup);
+    let tol = SOAK_FIT_C.max(p.temp_resolution_c.unwrap_or(0.0));
+    let mut out = Vec::new();
+    for r in p.sessions() {
+        let temp = &p.temp_s[r.clone()];
+        let n = temp.len() as f64;
+        let mut best: Option<(f64, f64, f64)> = None;
+        for &tau in &taus {
+            let g: Vec<f64> = power[r.clone()].iter().map(|pw| -(-pw / tau).exp_m1()).collect();
+            let (gm, tm) = (g.iter().sum::<f64>() / n, temp.iter().sum::<f64>() / n);
+            let sgg: f64 = g.iter().map(|v| (v - gm).powi(2)).sum();
+            let sgt: f64 = g.iter().zip(temp).map(|(v, t)| (v - gm) * (t - tm)).sum();
+            let a = if sgg > 0.0 { sgt / sgg } else { 0.0 };
+            let t0 = tm - a * gm;
+            let rms = (g.iter().zip(temp).map(|(v, t)| (t0 + a * v - t).powi(2)).sum::<f64>() / n).sqrt();
+            if best.is_none_or(|b| rms < b.0) {
+                best = Some((rms, t0, a));
+            }
+        }
+        let (rms, t0, a) = best?;
+        if !(rms <= tol) {
+            return None;
+        }
+        out.push((r, t0, a));
+    }
+    Some(out)
+}
+
+/// The die's temperature on a soak ([`soak_rise`]): each session's start plus its rise, at the
+/// time constant `tau`.
+fn soak_temperature(sessions: &[(std::ops::Range<usize>, f64, f64)], power: &[f64], tau: f64) -> Vec<f64> {
+    let mut out = Vec::with_capacity(power.len());
+    for (r, t0, a) in sessions {
+        out.extend(power[r.clone()].iter().map(|pw| t0 - a * (-pw / tau).exp_m1()));
+    }
+    out
+}
 
 /// The die's temperature when it runs `rho` °C above the thermistor's `temp` once settled,
 /// rising as `1 − e^(−P/τ)` after each power-on (`power`: `power_s`).
