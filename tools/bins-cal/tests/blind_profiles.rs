@@ -151,6 +151,24 @@ fn a_turn_on_group_on_a_soak_read_coarsely_holds_the_tempco() {
     assert_no_definite_false_name(case);
 }
 
+#[test]
+fn a_turn_on_group_holds_the_bias_play_that_engages_on_the_dies_rise() {
+    // Combined draw 49052: one power-on at −24 °C, a hold of 20 minutes, then one ramp to
+    // −13 °C, in one orientation; an additive play 3.4 °C wide on z acting on the die, which
+    // rises 1.8 °C after power-on while the thermistor sees 0.7 °C of it. The play engages on
+    // the die's rise and looks like a warm-up; z was `{drift, warmup}`, a definite false name.
+    // At the die-rise rival's grid width (3 °C) the play engaged too early and left a deviance
+    // 460 above the warm-up's; refined about the grid's best (`Refit::through_die_rise`), it
+    // explains z as well as the warm-up does.
+    let case = Case::draw_user(49052, true);
+    let r = report_of(&case);
+    let on_z: Vec<_> =
+        r.ambiguous.iter().filter(|g| g.axes.iter().any(|a| a == "z") && g.ids.iter().any(|i| i == "warmup")).collect();
+    assert!(!on_z.is_empty(), "no turn-on group on z: {:?}", r.ambiguous);
+    assert!(on_z.iter().all(|g| g.ids.iter().any(|i| i == "bias_hysteresis")), "z: {on_z:?} without the bias play");
+    assert_no_definite_false_name(case);
+}
+
 /// Scores a drawn case as the draw does and fails on a definite false name.
 fn assert_no_definite_false_name(case: Case) {
     let res = run_list(&[case], 1, false);

@@ -1094,27 +1094,24 @@ fn die_rise_on_data(ctx: &Context, fit: &AxisFit, grouped: &[(Mech, Mech)]) -> V
     let mut out = Vec::new();
     for (k, term) in fit.terms.iter().enumerate() {
         let turn_on = matches!(term.mech, Mech::Warmup | Mech::SelfHeating);
-        let open = |m: Mech| !grouped.contains(&(term.mech, m));
-        let asked = if turn_on {
-            DIE_RISE_FORMS.iter().any(|&m| open(m) && !fit.terms.iter().any(|t| t.mech == m))
+        // The rival forms still to ask: not grouped with the term already, not in the model.
+        let forms: Vec<Mech> = if turn_on {
+            DIE_RISE_FORMS.into_iter().filter(|&m| !fit.terms.iter().any(|t| t.mech == m)).collect()
+        } else if ODD_IN_F.contains(&term.mech) {
+            vec![Mech::SelfHeating]
         } else {
-            ODD_IN_F.contains(&term.mech) && open(Mech::SelfHeating)
+            Vec::new()
         };
-        if !asked {
+        let forms: Vec<Mech> = forms.into_iter().filter(|&m| !grouped.contains(&(term.mech, m))).collect();
+        if forms.is_empty() {
             continue;
         }
         let refit = Refit::new(ctx, fit.q, fit.deviance_scale, y, &shared_with(ctx, fit, k));
         let Some(own) = refit.deviance(&[], &|_| true, &|_| term.columns.clone()) else { continue };
-        let mut rivals: Vec<(Mech, Option<f64>)> = Vec::new();
-        if turn_on {
-            for m in DIE_RISE_FORMS {
-                if open(m) && !fit.terms.iter().any(|t| t.mech == m) {
-                    rivals.push((m, refit.through_die_rise(m)));
-                }
-            }
-        } else {
-            rivals.push((Mech::SelfHeating, refit.self_heating_through_scale()));
-        }
+        let rivals = forms.into_iter().map(|m| {
+            let d = if turn_on { refit.through_die_rise(m) } else { refit.self_heating_through_scale() };
+            (m, d)
+        });
         for (m, d) in rivals {
             if let Some(d) = d {
                 out.push((term.mech, m, d - own.deviance));

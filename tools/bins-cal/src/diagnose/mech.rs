@@ -408,6 +408,12 @@ pub fn lagged(t: &[f64], temp: &[f64], tau: f64) -> Vec<f64> {
     out
 }
 
+/// The bias polynomial's columns `ΔTᵉ` for the orders `e` given, `ΔT = T − 20 °C` from the
+/// temperature `temp` (one value a row).
+pub fn bias_powers(temp: &[f64], orders: &[i32]) -> Vec<Vec<f64>> {
+    orders.iter().map(|&e| temp.iter().map(|t| (t - T0_C).powi(e)).collect()).collect()
+}
+
 /// Play (backlash) operator of width `h`, starting at the first temperature.
 pub fn play(temp: &[f64], h: f64) -> Vec<f64> {
     let mut e = temp.first().copied().unwrap_or(0.0);
@@ -677,12 +683,6 @@ impl<'a> Context<'a> {
         (0..=n).map(|k| lo * (hi / lo).powf(k as f64 / n as f64)).collect()
     }
 
-    /// The bias polynomial's columns `ΔTᵉ` for the orders `e` given, `ΔT = T − 20 °C` from the
-    /// temperature `temp` (one value a row).
-    pub fn bias_powers(&self, temp: &[f64], orders: &[i32]) -> Vec<Vec<f64>> {
-        orders.iter().map(|&e| temp.iter().map(|t| (t - T0_C).powi(e)).collect()).collect()
-    }
-
     /// The columns of mechanism `m` at `theta` (ignored for linear mechanisms).
     pub fn columns(&self, m: Mech, theta: f64) -> Vec<Vec<f64>> {
         self.columns_at(m, theta, &self.p.temp_s)
@@ -724,7 +724,7 @@ impl<'a> Context<'a> {
             }
             Mech::BiasTempOrder => {
                 let orders: Vec<i32> = (1..=3).filter(|e| !self.nuisance_orders.contains(e)).collect();
-                self.bias_powers(temp, &orders)
+                bias_powers(temp, &orders)
             }
             Mech::ScaleTemp => (1..=2).map(|e| (0..n).map(|r| p.f[r][i] * dtc(r).powi(e)).collect()).collect(),
             Mech::CrossCouplingTemp => [(j, 1), (k, 1), (j, 2), (k, 2)]

@@ -177,10 +177,11 @@ impl<'c, 'p> Refit<'c, 'p> {
     /// The deviance the temperature form `rival` cannot absorb acting on a die that self-heats
     /// after each power-on, unseen by the thermistor: its columns built from
     /// `T + ρ·(1 − e^(−P/τ))` (ρ = 0.3, 1 and [`DIE_RISE_MAX_C`] °C; a play's width 0.1–3 °C; τ
-    /// on the turn-on grid, then refined at the best ρ and width as [`Refit::deviance`] refines
-    /// any rival's θ). On a soak after a power-on a tempco acting through the die's rise is a
-    /// turn-on transient; over a wide temperature range the same coefficients must also fit the
-    /// ramps, and then it is not. The bias polynomial takes all three orders, also
+    /// on the turn-on grid; then the best width and ρ each refined by a factor of 0.5–2, ρ not
+    /// beyond [`DIE_RISE_MAX_C`], and τ refined as [`Refit::deviance`] refines any rival's θ).
+    /// On a soak after a power-on a tempco acting through the die's rise is a turn-on
+    /// transient; over a wide temperature range the same coefficients must also fit the ramps,
+    /// and then it is not. The bias polynomial takes all three orders, also
     /// those SIM's calibration of this recording holds ([`super::mech::sim_fitted_forms`]):
     /// that calibration fitted them at the thermistor's temperature, and the die's rise is what
     /// it left. Where the thermistor itself reads nothing but a rise after each power-on
@@ -210,8 +211,8 @@ impl<'c, 'p> Refit<'c, 'p> {
             if rival == Mech::BiasTempOrder {
                 // The orders SIM's calibration holds are shared at the thermistor's
                 // temperature: the rival adds their difference at the die's.
-                let at_die = ctx.bias_powers(&temp, &ctx.nuisance_orders);
-                let at_thermistor = ctx.bias_powers(&ctx.p.temp_s, &ctx.nuisance_orders);
+                let at_die = super::mech::bias_powers(&temp, &ctx.nuisance_orders);
+                let at_thermistor = super::mech::bias_powers(&ctx.p.temp_s, &ctx.nuisance_orders);
                 cols.extend(
                     at_die.iter().zip(&at_thermistor).map(|(d, t)| d.iter().zip(t).map(|(a, b)| a - b).collect()),
                 );
@@ -231,7 +232,33 @@ impl<'c, 'p> Refit<'c, 'p> {
                 }
             }
         }
-        let (_, rho, th) = at?;
+        let (mut sse, mut rho, mut th) = at?;
+        // Then the play's width and the rise ρ, one after the other, about the best (each by a
+        // factor of 2 either way at most, ρ not beyond DIE_RISE_MAX_C): a play engages where
+        // the die has moved half its width, and a width or rise a step of the grid off puts the
+        // engagement in the wrong part of the warm-up.
+        if thetas.len() > 1 {
+            let base = th;
+            for k in REFINE_FACTORS {
+                for &tau in &taus {
+                    let s = self.sse(&columns(rho, base * k, tau));
+                    if s.is_finite() && s < sse {
+                        (sse, th) = (s, base * k);
+                    }
+                }
+            }
+        }
+        if rho > 0.0 {
+            let base = rho;
+            for k in REFINE_FACTORS.into_iter().filter(|k| base * k <= DIE_RISE_MAX_C) {
+                for &tau in &taus {
+                    let s = self.sse(&columns(base * k, th, tau));
+                    if s.is_finite() && s < sse {
+                        (sse, rho) = (s, base * k);
+                    }
+                }
+            }
+        }
         let best = self
             .deviance(&taus, &|tau| ctx.offered(Mech::Warmup, tau), &|tau| columns(rho, th, tau))
             .map_or(f64::INFINITY, |s| s.deviance);
@@ -505,6 +532,9 @@ pub fn separability(
 /// The largest rise of the die over the thermistor after power-on that a rival may assume
 /// [°C] ([`Refit::through_die_rise`]).
 pub const DIE_RISE_MAX_C: f64 = 3.0;
+
+/// The factors [`Refit::through_die_rise`] tries on its grid's best play width and rise ρ.
+const REFINE_FACTORS: [f64; 6] = [0.5, 0.7, 0.85, 1.2, 1.4, 2.0];
 
 /// The separation a name needs from a rival: the expected deviance `T` at which data drawn from
 /// the named explanation exceed the naming threshold `thr` with 95 % probability (the
