@@ -219,46 +219,39 @@ impl<'c, 'p> Refit<'c, 'p> {
             }
             cols
         };
-        // The grid over (ρ, width, τ); then τ refined at the best ρ and width.
+        // The best (SSE, ρ, width) over τ on the turn-on grid, kept in `at`.
         let mut at: Option<(f64, f64, f64)> = None;
+        let try_at = |at: &mut Option<(f64, f64, f64)>, rho: f64, th: f64| {
+            for &tau in &taus {
+                let s = self.sse(&columns(rho, th, tau));
+                if s.is_finite() && at.is_none_or(|b| s < b.0) {
+                    *at = Some((s, rho, th));
+                }
+            }
+        };
+        // The grid over (ρ, width); then the width and ρ, one after the other, about its best
+        // (each by a factor of 2 either way at most, ρ not beyond DIE_RISE_MAX_C): a play
+        // engages where the die has moved half its width, and a width or rise a step of the
+        // grid off puts the engagement in the wrong part of the warm-up. τ is refined last.
         let rhos: &[f64] = if soak.is_some() { &[0.0, 0.3, 1.0, DIE_RISE_MAX_C] } else { &[0.3, 1.0, DIE_RISE_MAX_C] };
         for &rho in rhos {
             for &th in &thetas {
-                for &tau in &taus {
-                    let s = self.sse(&columns(rho, th, tau));
-                    if s.is_finite() && at.is_none_or(|b| s < b.0) {
-                        at = Some((s, rho, th));
-                    }
-                }
+                try_at(&mut at, rho, th);
             }
         }
-        let (mut sse, mut rho, mut th) = at?;
-        // Then the play's width and the rise ρ, one after the other, about the best (each by a
-        // factor of 2 either way at most, ρ not beyond DIE_RISE_MAX_C): a play engages where
-        // the die has moved half its width, and a width or rise a step of the grid off puts the
-        // engagement in the wrong part of the warm-up.
+        let (_, rho, th) = at?;
         if thetas.len() > 1 {
-            let base = th;
             for k in REFINE_FACTORS {
-                for &tau in &taus {
-                    let s = self.sse(&columns(rho, base * k, tau));
-                    if s.is_finite() && s < sse {
-                        (sse, th) = (s, base * k);
-                    }
-                }
+                try_at(&mut at, rho, th * k);
             }
         }
+        let (_, rho, th) = at?;
         if rho > 0.0 {
-            let base = rho;
-            for k in REFINE_FACTORS.into_iter().filter(|k| base * k <= DIE_RISE_MAX_C) {
-                for &tau in &taus {
-                    let s = self.sse(&columns(base * k, th, tau));
-                    if s.is_finite() && s < sse {
-                        (sse, rho) = (s, base * k);
-                    }
-                }
+            for k in REFINE_FACTORS.into_iter().filter(|k| rho * k <= DIE_RISE_MAX_C) {
+                try_at(&mut at, rho * k, th);
             }
         }
+        let (_, rho, th) = at?;
         let best = self
             .deviance(&taus, &|tau| ctx.offered(Mech::Warmup, tau), &|tau| columns(rho, th, tau))
             .map_or(f64::INFINITY, |s| s.deviance);
