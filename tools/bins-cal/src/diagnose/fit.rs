@@ -342,6 +342,10 @@ pub struct AxisFit {
     pub deviance_scale: f64,
     /// The forward search.
     pub trace: Vec<StepInfo>,
+    /// The mechanisms that pass the selection's test as the first term, against the nuisance
+    /// alone (the forward search's first round, whichever of them it then took): each explains
+    /// structure of this accelerometer's data on its own.
+    pub passes_alone: Vec<Mech>,
     /// The drift of the final model at every row \[g\]: the smoothed random-walk level of
     /// what the terms leave. Reported and drawn on its own, never subtracted.
     pub drift: Vec<f64>,
@@ -640,9 +644,12 @@ impl Selector<'_> {
         }
     }
 
-    fn run(&self, start: Vec<usize>, trace: &mut Vec<StepInfo>) -> Vec<usize> {
+    /// The forward search from `start`, with the backward check after each step; every failed
+    /// and accepted step goes to `trace`, and from an empty start, the mechanisms that pass the
+    /// first round to `alone`.
+    fn run(&self, start: Vec<usize>, trace: &mut Vec<StepInfo>, alone: &mut Vec<Mech>) -> Vec<usize> {
         let mut model = start;
-        for _ in 0..12 {
+        for round in 0..12 {
             let idx = self.cols(&model);
             let Some(sse0) = self.grams.sse(&idx) else { break };
             let cv0 = self.grams.cv(&idx).unwrap_or(f64::INFINITY);
@@ -654,6 +661,9 @@ impl Selector<'_> {
                 let Some((c, sse1)) = self.best_of(&model, m) else { continue };
                 let s = self.evaluate(&model, c, sse0, sse1, cv0);
                 let ok = self.passes(&s);
+                if ok && round == 0 && model.is_empty() {
+                    alone.push(m);
+                }
                 if ok && best.as_ref().is_none_or(|b| s.dbic > b.1.dbic) {
                     best = Some((c, s.clone()));
                 }
@@ -752,7 +762,8 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
     };
     let sel = Selector { bank: &bank, grams, infl_of: Box::new(infl_of), alpha };
     let mut trace = Vec::new();
-    let mut model = sel.run(Vec::new(), &mut trace);
+    let mut passes_alone = Vec::new();
+    let mut model = sel.run(Vec::new(), &mut trace, &mut passes_alone);
     let last_grams = Some(sel.grams);
     // Backward pruning on the refined model (θ off the grid): a term that no longer passes
     // was only compensating a grid θ of another.
@@ -870,6 +881,7 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                     join(Mech::BiasHysteresis, Mech::ThermalHysteresis);
                 }
                 fit.trace = trace;
+                fit.passes_alone = passes_alone;
                 fit.ambiguous = amb;
                 fit.separability = sep;
                 return fit;
@@ -1491,6 +1503,7 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
         separability: Vec::new(),
         deviance_scale,
         trace: Vec::new(),
+        passes_alone: Vec::new(),
         drift,
         drift_rms,
         prediction,

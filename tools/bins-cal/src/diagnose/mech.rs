@@ -130,6 +130,19 @@ impl Mech {
         )
     }
 
+    /// Whether `self` belongs to the unit's thermal path rather than to one accelerometer: the
+    /// die's lag behind the case, its play, an additive play of the same width, the die's
+    /// heating after power-on, the settling since power-on. Their θ (τ, width) is the unit's,
+    /// as the compensation core's dynamics stage carries them (one τ, one width, amplitudes
+    /// per accelerometer); only their sizes differ between accelerometers. A second bias form
+    /// in temperature and a drift in time are each accelerometer's own.
+    pub fn thermal_path(self) -> bool {
+        matches!(
+            self,
+            Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis | Mech::SelfHeating | Mech::Warmup
+        )
+    }
+
     /// Whether the mechanism's one coefficient, acting through SIM's sensitivity, is positive
     /// by its physics: a lag's or a play's gain (the sensing element sees a delayed or held
     /// temperature, not one ahead of the thermistor) and a self-heating's rise (the die heats

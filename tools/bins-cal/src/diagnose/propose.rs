@@ -716,6 +716,7 @@ fn carried<'p>(d: &Diagnosis, cp: &'p Prepared, axis: usize) -> (Context<'p>, Ax
         separability: Vec::new(),
         deviance_scale: fit.deviance_scale,
         trace: Vec::new(),
+        passes_alone: Vec::new(),
         drift: Vec::new(),
         drift_rms: 0.0,
         prediction: Vec::new(),

@@ -671,6 +671,8 @@ pub fn build(
     let mut amb_groups: BTreeMap<Vec<String>, AmbGroup> = BTreeMap::new();
     let mut ambiguous_member: Vec<Vec<Mech>> = vec![Vec::new(); 3];
     let mut joined_notes: Vec<String> = Vec::new();
+    let shown = |axis: usize, ms: &[Mech]| !ms.iter().all(|m| immaterial(axis, *m));
+    let mut locals: Vec<Vec<Local>> = Vec::with_capacity(axes.len());
     for fit in axes {
         let mut local: Vec<Local> = Vec::new();
         for (m, alts) in &fit.ambiguous {
@@ -708,11 +710,10 @@ pub fn build(
             }
         }
         // On an accelerometer the model does not fit, the thermal-history findings are one.
+        let shown = |ms: &[Mech]| shown(fit.axis, ms);
+        let thermal_group = |l: &Local| shown(&l.0) && l.1.iter().any(|m| m.thermal_history());
         if fit.heldout_rms.1 > THERMAL_JOIN_RATIO * floor.0[fit.axis] {
-            let shown = |ms: &[Mech]| !ms.iter().all(|m| immaterial(fit.axis, *m));
-            let touching: Vec<usize> = (0..local.len())
-                .filter(|&k| shown(&local[k].0) && local[k].1.iter().any(|m| m.thermal_history()))
-                .collect();
+            let touching: Vec<usize> = (0..local.len()).filter(|&k| thermal_group(&local[k])).collect();
             let named: Vec<Mech> = fit
                 .terms
                 .iter()
@@ -739,6 +740,66 @@ pub fn build(
                 local.push(joined);
             }
         }
+        // Two groups on one accelerometer, each with a thermal-history member, are one: each
+        // term was fitted beside the other, and what one cannot pin the other takes.
+        let thermal: Vec<usize> = (0..local.len()).filter(|&k| thermal_group(&local[k])).collect();
+        if thermal.len() >= 2 {
+            let mut joined: Local = (Vec::new(), Vec::new(), BTreeMap::new(), BTreeMap::new(), f64::NAN);
+            for k in thermal.into_iter().rev() {
+                absorb(&mut joined, local.remove(k));
+            }
+            joined.0.sort_by_key(|m| Mech::ALL.iter().position(|a| a == m));
+            local.push(joined);
+        }
+        locals.push(local);
+    }
+    // The thermal path is the unit's: a lag, play, self-heating or warm-up that one
+    // accelerometer shows (named, or in a group) is also a member of every thermal-history
+    // group of the others, which their own data could not pin.
+    let on_path: Vec<Vec<Mech>> = axes
+        .iter()
+        .zip(&locals)
+        .map(|(fit, local)| {
+            let mut ms: Vec<Mech> = fit
+                .terms
+                .iter()
+                .map(|t| t.mech)
+                .filter(|m| m.thermal_path() && shown(fit.axis, &[*m]) && !is_folded(fit.axis, *m))
+                .collect();
+            for l in local.iter().filter(|l| shown(fit.axis, &l.0)) {
+                ms.extend(l.1.iter().copied().filter(|m| m.thermal_path()));
+            }
+            ms
+        })
+        .collect();
+    for (a, fit) in axes.iter().enumerate() {
+        for l in locals[a].iter_mut() {
+            if !shown(fit.axis, &l.0) || !l.1.iter().any(|m| m.thermal_history()) {
+                continue;
+            }
+            let mut added: Vec<(Mech, usize)> = Vec::new();
+            for (b, other) in axes.iter().enumerate().filter(|(b, _)| *b != a) {
+                for &m in &on_path[b] {
+                    if !l.1.contains(&m) && fit.passes_alone.contains(&m) && !added.iter().any(|x| x.0 == m) {
+                        added.push((m, other.axis));
+                    }
+                }
+            }
+            if added.is_empty() {
+                continue;
+            }
+            l.1.extend(added.iter().map(|x| x.0));
+            l.1.sort_by_key(|m| Mech::ALL.iter().position(|a| a == m));
+            let from: Vec<String> = added.iter().map(|(m, b)| format!("{} (on {})", m.id(), AXES[*b])).collect();
+            joined_notes.push(format!(
+                "accelerometer {}: the thermal-history group modelled as {} also holds {}: the thermal path is the unit's, each of these passes this accelerometer's test on its own, and its data did not pin which thermal-history form acts on it",
+                AXES[fit.axis],
+                l.0.iter().map(|m| m.id()).collect::<Vec<_>>().join(" + "),
+                from.join(", ")
+            ));
+        }
+    }
+    for (fit, local) in axes.iter().zip(locals) {
         let ax = AXES[fit.axis].to_string();
         for (members, mechs, dev, sep, thr) in local {
             let mut ids: Vec<String> = mechs.iter().map(|m| m.id().to_string()).collect();
