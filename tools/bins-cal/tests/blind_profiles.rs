@@ -235,3 +235,43 @@ fn a_scale_term_on_a_soak_is_grouped_with_the_self_heating_it_may_be() {
     assert!(r.effects.iter().all(|e| !matches!(e.id.as_str(), "scale_factor" | "scale_temp" | "nonlinearity_k3")));
     assert_no_definite_false_name(case);
 }
+
+/// The thermal path is the unit's (docs/diagnosis.md, section 4, `Mech::thermal_path`).
+/// Combined draw 45098: a thermal play of 4.4 σ beside a static scale factor on one ramp at
+/// 1 Hz, one orientation. x and z held the play in a thermal-history group, y a group of
+/// tempcos and a lag without it: a definite false name. The play passes y's test on its own,
+/// so y's group now holds it too, with a note saying where it was shown.
+#[test]
+fn a_thermal_group_holds_the_play_another_accelerometer_shows() {
+    let case = Case::draw_user(45098, true);
+    let r = report_of(&case);
+    let on_y: Vec<_> = r.ambiguous.iter().filter(|g| g.axes.iter().any(|a| a == "y")).collect();
+    assert!(!on_y.is_empty(), "no group on y: {:?}", r.ambiguous);
+    assert!(on_y.iter().all(|g| g.ids.iter().any(|i| i == "thermal_hysteresis")), "y: {on_y:?} without the play");
+    assert!(
+        r.notes.iter().any(|n| n.starts_with("accelerometer y:") && n.contains("thermal_hysteresis (on ")),
+        "{:?}",
+        r.notes
+    );
+    assert_no_definite_false_name(case);
+}
+
+/// Two groups on one accelerometer, each with a thermal-history member, are one
+/// (docs/diagnosis.md, section 4). Combined draw 45142: a scale factor, a cross-axis term and a
+/// warm-up of 2.1 σ on steps in six positions; y held `{bias_hysteresis, self_heating}` beside
+/// `{bias_temp_order, drift, warmup}`, the first a definite false name.
+#[test]
+fn two_thermal_history_groups_on_one_accelerometer_are_one() {
+    use bins_cal::diagnose::mech::Mech;
+    let case = Case::draw_user(45142, true);
+    let r = report_of(&case);
+    let thermal = |id: &str| Mech::from_id(id).is_some_and(Mech::thermal_history);
+    for ax in ["x", "y", "z"] {
+        let groups =
+            r.ambiguous.iter().filter(|g| g.axes.iter().any(|a| a == ax) && g.ids.iter().any(|i| thermal(i))).count();
+        assert!(groups <= 1, "{ax}: {groups} thermal-history groups: {:?}", r.ambiguous);
+    }
+    let y = r.ambiguous.iter().find(|g| g.axes.iter().any(|a| a == "y") && g.ids.iter().any(|i| thermal(i)));
+    assert!(y.is_some_and(|g| g.ids.iter().any(|i| i == "warmup")), "y's group lost the warm-up: {y:?}");
+    assert_no_definite_false_name(case);
+}
