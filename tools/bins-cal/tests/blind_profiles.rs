@@ -256,6 +256,34 @@ fn a_thermal_group_holds_the_play_another_accelerometer_shows() {
     assert_no_definite_false_name(case);
 }
 
+/// A scale-factor or cross-coupling tempco named beside the unit's thermal path is one group
+/// with it (docs/diagnosis.md, section 4). Single draw 65094: a lag on one soak in six
+/// positions; z named `cross_coupling_temp` beside its thermal-history group, a definite false
+/// name. The tempco is now a member of that group, with a note saying so.
+#[test]
+fn a_tempco_beside_the_thermal_path_is_grouped_with_it() {
+    let case = Case::draw_user(65094, false);
+    let r = report_of(&case);
+    assert!(
+        r.effects.iter().all(|e| e.id != "cross_coupling_temp"),
+        "{:?}",
+        r.effects.iter().map(|e| &e.id).collect::<Vec<_>>()
+    );
+    let z = r
+        .ambiguous
+        .iter()
+        .find(|g| g.axes.iter().any(|a| a == "z") && g.ids.iter().any(|i| i == "cross_coupling_temp"));
+    assert!(z.is_some_and(|g| g.ids.iter().any(|i| i == "thermal_lag")), "z: {:?}", r.ambiguous);
+    assert!(
+        r.notes
+            .iter()
+            .any(|n| n.starts_with("accelerometer z:") && n.contains("cross_coupling_temp in one group with")),
+        "{:?}",
+        r.notes
+    );
+    assert_no_definite_false_name(case);
+}
+
 /// Two groups on one accelerometer, each with a thermal-history member, are one
 /// (docs/diagnosis.md, section 4). Combined draw 45142: a scale factor, a cross-axis term and a
 /// warm-up of 2.1 σ on steps in six positions; y held `{bias_hysteresis, self_heating}` beside

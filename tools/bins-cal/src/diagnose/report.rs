@@ -574,6 +574,20 @@ fn absorb(e: &mut Local, g: Local) {
     e.4 = if e.4.is_nan() { g.4 } else { e.4.max(g.4) };
 }
 
+/// Removes the groups at `ks` (ascending) from `local` and returns them and `more` as one group
+/// ([`absorb`]), its members in the library's order.
+fn merge_out(local: &mut Vec<Local>, ks: &[usize], more: impl IntoIterator<Item = Local>) -> Local {
+    let mut joined: Local = (Vec::new(), Vec::new(), BTreeMap::new(), BTreeMap::new(), f64::NAN);
+    for &k in ks.iter().rev() {
+        absorb(&mut joined, local.remove(k));
+    }
+    for g in more {
+        absorb(&mut joined, g);
+    }
+    joined.0.sort_by_key(|m| Mech::ALL.iter().position(|a| a == m));
+    joined
+}
+
 /// The separability of rival `b` against the term `m` of `fit` ([`AxisFit::separability`]).
 fn separability_of(fit: &AxisFit, m: Mech, b: Mech) -> Option<f64> {
     fit.separability.iter().find(|(a, _)| *a == m).and_then(|(_, r)| r.iter().find(|x| x.0 == b)).map(|x| x.1)
@@ -722,14 +736,10 @@ pub fn build(
                 .filter(|m| local.iter().all(|l| !l.0.contains(m)))
                 .collect();
             if touching.len() + named.len() >= 2 {
-                let mut joined: Local = (Vec::new(), Vec::new(), BTreeMap::new(), BTreeMap::new(), f64::NAN);
-                for k in touching.into_iter().rev() {
-                    absorb(&mut joined, local.remove(k));
-                }
-                for m in named {
-                    absorb(&mut joined, (vec![m], vec![m], BTreeMap::new(), BTreeMap::new(), threshold_of(fit, m)));
-                }
-                joined.0.sort_by_key(|m| Mech::ALL.iter().position(|a| a == m));
+                let singles = named
+                    .into_iter()
+                    .map(|m| (vec![m], vec![m], BTreeMap::new(), BTreeMap::new(), threshold_of(fit, m)));
+                let joined = merge_out(&mut local, &touching, singles);
                 let names: Vec<&str> = joined.0.iter().map(|m| m.id()).collect();
                 joined_notes.push(format!(
                     "accelerometer {}: {} modelled together on an accelerometer left at {:.2}× its noise floor: one group, since each stands in for the others on a thermal path the model does not have exactly",
@@ -744,11 +754,7 @@ pub fn build(
         // term was fitted beside the other, and what one cannot pin the other takes.
         let thermal: Vec<usize> = (0..local.len()).filter(|&k| thermal_group(&local[k])).collect();
         if thermal.len() >= 2 {
-            let mut joined: Local = (Vec::new(), Vec::new(), BTreeMap::new(), BTreeMap::new(), f64::NAN);
-            for k in thermal.into_iter().rev() {
-                absorb(&mut joined, local.remove(k));
-            }
-            joined.0.sort_by_key(|m| Mech::ALL.iter().position(|a| a == m));
+            let joined = merge_out(&mut local, &thermal, []);
             local.push(joined);
         }
         locals.push(local);
@@ -798,6 +804,73 @@ pub fn build(
                 from.join(", ")
             ));
         }
+    }
+    // A scale-factor or cross-coupling tempco beside the unit's thermal path: where this
+    // accelerometer's groups hold a lag, play, self-heating or warm-up, or another accelerometer
+    // shows one that passes this accelerometer's test on its own, a tempco named here may be that
+    // path's part in f_i, f_j acting through a sensitivity fitted on SIM's thermistor. It joins
+    // this accelerometer's thermal-history group, or forms one with those mechanisms, unless it
+    // cuts more of the held-out RMS than the thermal-path terms modelled beside it: then it is a
+    // finding of its own, not the remainder of their shape.
+    for (a, fit) in axes.iter().enumerate() {
+        let named_here = |m: Mech| fit.terms.iter().any(|t| t.mech == m);
+        let mut path: Vec<(Mech, Option<usize>)> = Vec::new();
+        let mut offer = |m: Mech, from: Option<usize>| {
+            if !path.iter().any(|x| x.0 == m) {
+                path.push((m, from));
+            }
+        };
+        for l in locals[a].iter().filter(|l| shown(fit.axis, &l.0)) {
+            l.1.iter().filter(|m| m.thermal_path()).for_each(|m| offer(*m, None));
+        }
+        for (b, other) in axes.iter().enumerate().filter(|(b, _)| *b != a) {
+            for &m in on_path[b].iter().filter(|m| fit.passes_alone.contains(m) && !named_here(**m)) {
+                offer(m, Some(other.axis));
+            }
+        }
+        if path.is_empty() {
+            continue;
+        }
+        let in_group = |local: &[Local], m: Mech| local.iter().any(|l| l.0.contains(&m) || l.1.contains(&m));
+        let tempcos: Vec<Mech> = fit
+            .terms
+            .iter()
+            .map(|t| t.mech)
+            .filter(|m| matches!(m, Mech::ScaleTemp | Mech::CrossCouplingTemp))
+            .filter(|m| shown(fit.axis, &[*m]) && !in_group(&locals[a], *m))
+            .collect();
+        let cut = |m: Mech| cut_of(fit.axis, m).map_or(0.0, |c| c.0);
+        let path_cut: f64 =
+            fit.terms.iter().filter(|t| t.mech.thermal_path() && shown(fit.axis, &[t.mech])).map(|t| cut(t.mech)).sum();
+        let tempco_cut: f64 = tempcos.iter().map(|m| cut(*m)).sum();
+        if tempcos.is_empty() || (path_cut > 0.0 && tempco_cut > path_cut) {
+            continue;
+        }
+        let mut members = tempcos.clone();
+        members.extend(folded[a].iter().filter(|f| tempcos.contains(&f.1)).map(|f| f.0));
+        let ids: Vec<Mech> = members.iter().copied().chain(path.iter().map(|x| x.0)).collect();
+        let thr = members.iter().map(|m| threshold_of(fit, *m)).fold(f64::NAN, f64::max);
+        let g: Local = (members, ids, BTreeMap::new(), BTreeMap::new(), thr);
+        let local = &mut locals[a];
+        let thermal: Vec<usize> = (0..local.len())
+            .filter(|&k| shown(fit.axis, &local[k].0) && local[k].1.iter().any(|m| m.thermal_history()))
+            .collect();
+        let mut joined = merge_out(local, &thermal, [g]);
+        joined.1.sort_by_key(|m| Mech::ALL.iter().position(|x| x == m));
+        let from: Vec<String> = path
+            .iter()
+            .map(|(m, b)| match b {
+                Some(b) => format!("{} (on {})", m.id(), AXES[*b]),
+                None => m.id().to_string(),
+            })
+            .collect();
+        joined_notes.push(format!(
+            "accelerometer {}: {} in one group with {}: a tempco beside the unit's thermal path may be that path's part in f_i, f_j through a sensitivity fitted on SIM's thermistor; the recording does not tell the two apart",
+            AXES[fit.axis],
+            tempcos.iter().map(|m| m.id()).collect::<Vec<_>>().join(" + "),
+            from.join(", ")
+        ));
+        local.push(joined);
     }
     for (fit, local) in axes.iter().zip(locals) {
         let ax = AXES[fit.axis].to_string();
