@@ -35,6 +35,15 @@ pub struct Args {
     /// without it, estimated from the data with every mechanism of the library in the model.
     #[arg(long, value_name = "MG_PER_SQRT_H")]
     random_walk: Option<f64>,
+    /// The sensor's bias instability [mg] (its specification: the standard deviation of a
+    /// first-order Gauss–Markov bias, with --bias-tau its correlation time): a second state of
+    /// the noise model beside the random walk, so structure at averaging times beyond τ is not
+    /// taken for drift. Without it, white noise and a random walk alone.
+    #[arg(long, value_name = "MG", requires = "bias_tau")]
+    bias_instability: Option<f64>,
+    /// The correlation time [s] of --bias-instability.
+    #[arg(long, value_name = "SECONDS", requires = "bias_instability")]
+    bias_tau: Option<f64>,
     /// Reduce the rows to means over blocks of at most this many seconds before the search;
     /// the noise floor and the held-out figures stay per row of the recording. 0: every row.
     /// Without it: blocks of the length the data allow (a third of a second at 100 Hz), every
@@ -78,7 +87,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     fsio::refuse_overwriting_inputs(inputs.iter(), named_outputs())?;
     let twin = args.twin.as_deref().map(propose::Twin::read).transpose().map_err(|e| anyhow!("{e}"))?;
     let t0 = std::time::Instant::now();
-    let opt = Options { random_walk_mg_per_sqrt_h: args.random_walk, progress: true, block_s: args.block_s };
+    let opt = Options {
+        random_walk_mg_per_sqrt_h: args.random_walk,
+        bias_instability: args.bias_instability.zip(args.bias_tau),
+        progress: true,
+        block_s: args.block_s,
+    };
     let d = match (&args.sim, &args.calib) {
         (Some(sim), _) => diagnose_files(sim, &args.real, &opt),
         (None, Some(calib)) => diagnose_against_calibration(&args.real, calib, &opt),

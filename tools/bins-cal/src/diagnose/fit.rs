@@ -22,7 +22,7 @@
 //! deviance by less than [`AMBIGUOUS_LR`]: the data cannot tell them apart.
 
 use super::mech::{Context, Mech};
-use super::noise::{Filter, Step, q_upper, smooth_level};
+use super::noise::{Filter, Gm, Step, q_upper, smooth_level};
 use super::stats::{chi2_sf, chol_solve, dot};
 
 /// Family-wise false-discovery level of the whole diagnosis.
@@ -153,20 +153,29 @@ fn gram_chunks(n: usize, fold: Option<&[usize]>) -> Vec<(usize, usize, usize)> {
 }
 
 impl Grams {
-    /// The Gram matrices at random-walk intensity `q`; with `folds` false only the entries of
+    /// The Gram matrices under the noise model (random-walk intensity `q`, bias instability where
+    /// known); with `folds` false only the entries of
     /// all rows that [`Grams::sse`] needs for the nuisance plus one candidate
     /// ([`candidate_pairs`]: about `p` products a row instead of `p²/2`; the others are NaN, and
     /// a model reading them finds no fit). The columns are whitened block by block of rows
     /// beside the products ([`Filter::whiten_rows`]), so no whitened column is stored whole:
     /// the sums are those of whitening first and multiplying after ([`gram_blocked`](super::stats::gram_blocked)), in the
     /// same order.
-    fn new(t: &[f64], r: &[f64], q: f64, y: &[f64], bank: &Bank, fold: &[usize], folds: bool) -> Self {
+    fn new(
+        t: &[f64],
+        r: &[f64],
+        (q, gm): (f64, Option<Gm>),
+        y: &[f64],
+        bank: &Bank,
+        fold: &[usize],
+        folds: bool,
+    ) -> Self {
         use super::stats::GRAM_BLOCK;
         let p = bank.cols.len() + 1;
         let n = y.len();
-        let f0 = Filter::new(t, r, q, |_| true);
+        let f0 = Filter::new(t, r, q, gm, |_| true);
         let xs: Vec<&[f64]> = bank.cols.iter().map(Vec::as_slice).chain(std::iter::once(y)).collect();
-        let mut level = vec![0.0; p];
+        let mut level = vec![0.0; p * f0.states()];
         let mut w = vec![0.0; p * GRAM_BLOCK];
         let pairs = if folds { Vec::new() } else { candidate_pairs(bank, p) };
         let mut sums = vec![0.0; pairs.len()];
@@ -326,6 +335,8 @@ pub struct AxisFit {
     pub axis: usize,
     /// Random-walk intensity of the noise model [g²/s].
     pub q: f64,
+    /// The bias instability of the noise model, where known ([`Context::gm`]).
+    pub gm: Option<Gm>,
     /// Variance inflation for the remaining autocorrelation.
     pub inflation: f64,
     /// The selected terms.
@@ -401,7 +412,7 @@ impl RawHeldout {
 }
 
 /// [`RawHeldout`] of `y` on the columns `refs` (none: the offset alone) under the noise model
-/// (times `t`, white variances `r`, random walk `q`).
+/// (times `t`, white variances `r`, random walk `q`, bias instability `gm` where known).
 ///
 /// `blocks`: when the rows are blocks ([`super::prep::Builder::with_blocks`]), each block's
 /// rows and the residual's sum of squares within it: the offset is the rows' mean and the
@@ -409,7 +420,7 @@ impl RawHeldout {
 pub fn raw_heldout(
     t: &[f64],
     r: &[f64],
-    q: f64,
+    (q, gm): (f64, Option<Gm>),
     y: &[f64],
     refs: &[&[f64]],
     fold: &[usize],
@@ -435,10 +446,12 @@ pub fn raw_heldout(
         let bk = if held.is_empty() {
             Vec::new()
         } else {
-            let fk = Filter::new(t, r, q, |i| fold[i] != k);
+            let fk = Filter::new(t, r, q, gm, |i| fold[i] != k);
             match gls(&fk, y, &held) {
                 Some(g) => g.0,
-                None => gls(&Filter::new(t, r, q, |_| true), y, &held).map_or_else(|| vec![0.0; held.len()], |g| g.0),
+                None => {
+                    gls(&Filter::new(t, r, q, gm, |_| true), y, &held).map_or_else(|| vec![0.0; held.len()], |g| g.0)
+                }
             }
         };
         let refs = &held;
@@ -538,7 +551,7 @@ fn gls(f: &Filter, y: &[f64], cols: &[&[f64]]) -> Option<Gls> {
     }
     let xs: Vec<&[f64]> = cols.iter().copied().chain(std::iter::once(y)).collect();
     let mut flat = vec![0.0; xs.len() * n];
-    f.whiten_rows(&xs, 0..n, &mut vec![0.0; xs.len()], &mut flat, n);
+    f.whiten_rows(&xs, 0..n, &mut vec![0.0; xs.len() * f.states()], &mut flat, n);
     let (wx, wy) = flat.split_at(cols.len() * n);
     let wx: Vec<&[f64]> = wx.chunks_exact(n).collect();
     let m = wx.len();
@@ -711,7 +724,7 @@ impl Selector<'_> {
 /// drift (a heating/cooling difference of 10× the noise becomes a few mg/√h) and nothing can
 /// be named against it; estimated by its maximum alone, a weak random walk often comes out
 /// far too small and is then named as a mechanism.
-fn rich_q(bank: &Bank, grams: &Grams, t: &[f64], r: &[f64], y: &[f64]) -> f64 {
+fn rich_q(bank: &Bank, grams: &Grams, t: &[f64], r: &[f64], gm: Option<Gm>, y: &[f64]) -> f64 {
     let mut rich: Vec<usize> = Vec::new();
     for m in Mech::ALL {
         let mut best: Option<(usize, f64)> = None;
@@ -731,7 +744,7 @@ fn rich_q(bank: &Bank, grams: &Grams, t: &[f64], r: &[f64], y: &[f64]) -> f64 {
             rich.push(c);
         }
     }
-    q_upper(t, r, y, &bank.slices_of(&rich))
+    q_upper(t, r, gm, y, &bank.slices_of(&rich))
 }
 
 /// Diagnoses one accelerometer. `random_walk`: the random-walk intensity [g²/s] to test
@@ -744,16 +757,16 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
     let fold = folds_of(n);
     let alpha = ALPHA / (Mech::ALL.len() * n_axes_tested.max(1)) as f64;
     let (q, grams) = match random_walk {
-        Some(q) => (q, Grams::new(t, r, q, y, &bank, &fold, true)),
+        Some(q) => (q, Grams::new(t, r, (q, ctx.gm), y, &bank, &fold, true)),
         None => {
             // θ of the richest model picked by least squares (white noise: the deterministic
             // structure decides), then the random walk estimated with it in.
-            let g0 = Grams::new(t, r, 0.0, y, &bank, &fold, false);
-            let q = rich_q(&bank, &g0, t, r, y);
-            (q, Grams::new(t, r, q, y, &bank, &fold, true))
+            let g0 = Grams::new(t, r, (0.0, None), y, &bank, &fold, false);
+            let q = rich_q(&bank, &g0, t, r, ctx.gm, y);
+            (q, Grams::new(t, r, (q, ctx.gm), y, &bank, &fold, true))
         }
     };
-    let filt = Filter::new(t, r, q, |_| true);
+    let filt = Filter::new(t, r, q, ctx.gm, |_| true);
     let used: Vec<bool> = filt.step.iter().map(|s| *s == Step::Update).collect();
     let bank_ref = &bank;
     let infl_of = move |m: &[usize]| match gls(&filt, y, &bank_ref.slices_of(m)) {
@@ -1226,7 +1239,7 @@ fn drift_alternatives(
     }
     let p = ctx.p;
     let (t, r, y) = (&p.t, &p.r_white[ctx.axis], &p.r[ctx.axis]);
-    let filt = Filter::new(t, r, q, |_| true);
+    let filt = Filter::new(t, r, q, ctx.gm, |_| true);
     let Some((_, _, sse_full, _)) = gls(&filt, y, &bank.slices_of(model)) else { return beyond };
     let n = filt.n_used as f64;
     let grid = ctx.grid(Mech::Drift);
@@ -1340,7 +1353,7 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     let axis = ctx.axis;
     let (t, r, y) = (&p.t, &p.r_white[axis], &p.r[axis]);
     let n = y.len();
-    let filt = Filter::new(t, r, q, |_| true);
+    let filt = Filter::new(t, r, q, ctx.gm, |_| true);
     let used: Vec<bool> = filt.step.iter().map(|s| *s == Step::Update).collect();
     let nu = filt.n_used as f64;
     // Members with their θ; refine θ by golden section in log θ, coordinate-wise, twice.
@@ -1472,13 +1485,13 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     };
     let session_cols = ctx.p.session_columns();
     let session_refs: Vec<&[f64]> = session_cols.iter().map(Vec::as_slice).collect();
-    let hb = raw_heldout(t, r, q, y, &session_refs, fold, blocks);
+    let hb = raw_heldout(t, r, (q, ctx.gm), y, &session_refs, fold, blocks);
     // With nothing named the model is SIM itself: its own terms re-fitted alone are not a
     // finding, and "after" is "before".
     let ha = if members.is_empty() {
-        raw_heldout(t, r, q, y, &session_refs, fold, blocks)
+        raw_heldout(t, r, (q, ctx.gm), y, &session_refs, fold, blocks)
     } else {
-        raw_heldout(t, r, q, y, &refs, fold, blocks)
+        raw_heldout(t, r, (q, ctx.gm), y, &refs, fold, blocks)
     };
     // Each term's cut of the raw held-out RMS: the model without it (the others as fitted),
     // or the offset alone ("before") where that predicts better. SIM's own terms re-fitted
@@ -1490,13 +1503,14 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     for (m, th) in &members {
         let nc = ctx.columns(*m, th.unwrap_or(0.0)).len();
         let without: Vec<&[f64]> = refs[..off].iter().chain(&refs[off + nc..]).copied().collect();
-        let hw = raw_heldout(t, r, q, y, &without, fold, blocks);
+        let hw = raw_heldout(t, r, (q, ctx.gm), y, &without, fold, blocks);
         heldout_gain.push(ha.gain_over(if hb.rms() < hw.rms() { &hb } else { &hw }));
         off += nc;
     }
     AxisFit {
         axis,
         q,
+        gm: ctx.gm,
         inflation: infl,
         terms,
         ambiguous: Vec::new(),
@@ -1543,8 +1557,8 @@ mod tests {
         let r = vec![1e-10; n];
         let spike: Vec<f64> = t.iter().map(|p| (-p / 1.0).exp()).collect();
         let fold = folds_of(n);
-        let with = raw_heldout(&t, &r, 0.0, &y, &[&spike], &fold, None);
-        let without = raw_heldout(&t, &r, 0.0, &y, &[], &fold, None);
+        let with = raw_heldout(&t, &r, (0.0, None), &y, &[&spike], &fold, None);
+        let without = raw_heldout(&t, &r, (0.0, None), &y, &[], &fold, None);
         assert!(with.resid.iter().all(|v| v.is_finite()));
         assert!((with.rms() - without.rms()).abs() < 1e-3 * without.rms(), "{} vs {}", with.rms(), without.rms());
     }

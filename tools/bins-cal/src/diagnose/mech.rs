@@ -522,6 +522,9 @@ pub struct Context<'a> {
     /// The shortest turn-on τ \[s\] whose `e^(−P/τ)` has at most [`TURN_ON_MAX_FOLD_SHARE`] of
     /// its centred energy in one held-out fold (∞ when none has): see [`Context::offered`].
     pub turn_on_min_tau_s: f64,
+    /// The sensor's bias instability beside the random walk in the noise model, where it is
+    /// known ([`super::Options::bias_instability`]); `None`: white + random walk alone.
+    pub gm: Option<super::noise::Gm>,
 }
 
 /// SIM's own calibration forms `b_j(f)·ΔTᵖ` (`b` = 1, f_x, f_y, f_z; p = 1…3; ΔT from the
@@ -614,6 +617,7 @@ impl<'a> Context<'a> {
                 .iter()
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v))),
             turn_on_min_tau_s: turn_on_min_tau_s(p),
+            gm: None,
         }
     }
 

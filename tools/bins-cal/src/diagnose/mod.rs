@@ -69,6 +69,10 @@ pub struct Options {
     /// The sensor's random walk [mg/√h] to test mechanisms against (a specification);
     /// `None`: estimated from the data with the richest model in ([`fit::fit_axis`]).
     pub random_walk_mg_per_sqrt_h: Option<f64>,
+    /// The sensor's bias instability (its specification): the standard deviation \[mg\] and
+    /// correlation time \[s\] of a first-order Gauss–Markov bias, a second state of the noise
+    /// model beside the random walk ([`noise::Gm`]); `None`: white + random walk alone.
+    pub bias_instability: Option<(f64, f64)>,
     /// A progress bar on stderr while the recordings are read (drawn on a terminal only).
     pub progress: bool,
     /// Reduce the rows to means over blocks of at most this many seconds before the search
@@ -101,6 +105,11 @@ impl Options {
     pub fn random_walk_g2_per_s(&self) -> Option<f64> {
         self.random_walk_mg_per_sqrt_h.map(|rw| (rw * 1e-3).powi(2) / 3600.0)
     }
+
+    /// The noise model's bias instability of [`Options::bias_instability`].
+    pub fn gm(&self) -> Option<noise::Gm> {
+        self.bias_instability.map(|(mg, tau_s)| noise::Gm { var_g2: (mg * 1e-3).powi(2), tau_s })
+    }
 }
 
 /// Diagnoses a pair of recordings held in memory (`sim_name`, `real_name` name them in
@@ -128,6 +137,14 @@ fn check_options(opt: &Options) -> Result<(), DiagnoseError> {
     {
         return Err(DiagnoseError(format!("--random-walk {rw}: must be a finite value ≥ 0 mg/√h")));
     }
+    if let Some((mg, tau)) = opt.bias_instability {
+        if !(mg.is_finite() && mg > 0.0) {
+            return Err(DiagnoseError(format!("--bias-instability {mg}: must be a finite value > 0 mg")));
+        }
+        if !(tau.is_finite() && tau > 0.0) {
+            return Err(DiagnoseError(format!("--bias-tau {tau}: must be a finite value > 0 s")));
+        }
+    }
     if let Some(b) = opt.block_s
         && !(b.is_finite() && b >= 0.0)
     {
@@ -147,20 +164,24 @@ fn diagnose_prepared(
     // A given random walk is a floor the data may raise, never a licence to take drift for a
     // mechanism: below what the residual itself shows at averaging times up to a minute
     // (where no mechanism of a chamber test moves), that level is used and the report says so.
+    // A given bias instability wanders like a random walk of 2σ²/τ there, so it counts.
     let runs = p.static_runs();
+    let gm = opt.gm();
+    let short_gm = gm.map_or(0.0, |g| g.short_q());
     let mut qs = Vec::new();
     for axis in 0..3 {
         let q = opt.random_walk_g2_per_s().map(|q| {
             let segs: Vec<&[f64]> = runs.iter().map(|&(a, b)| &p.r[axis][a..b]).collect();
             match noise::short_tau_q(&segs, p.dt) {
-                Some((seen, _)) if seen > q => {
+                Some((seen, _)) if seen > q + short_gm => {
+                    let with = if gm.is_some() { " with the given bias instability's share" } else { "" };
                     p.notes.push(format!(
-                        "accelerometer {}: the given random walk {:.3} mg/√h is below what the residual shows at averaging times up to a minute ({:.3} mg/√h); mechanisms are tested against the latter",
+                        "accelerometer {}: the given random walk {:.3} mg/√h{with} is below what the residual shows at averaging times up to a minute ({:.3} mg/√h); mechanisms are tested against the latter",
                         prep::AXES[axis],
                         (q * 3600.0).sqrt() * 1e3,
                         (seen * 3600.0).sqrt() * 1e3
                     ));
-                    seen
+                    seen - short_gm
                 }
                 _ => q,
             }
@@ -173,6 +194,7 @@ fn diagnose_prepared(
     let mut bias_steps = Vec::new();
     for (axis, q) in qs.into_iter().enumerate() {
         let mut ctx = mech::Context::new(&p, axis);
+        ctx.gm = gm;
         let (fit, found) = fit_with_steps(&mut ctx, q);
         bias_steps.push(found);
         axes.push(fit);
@@ -232,7 +254,7 @@ fn fit_with_steps(ctx: &mut mech::Context, q: Option<f64>) -> (fit::AxisFit, Vec
                 // Not settled: report the steps the final model carries.
                 found = rows.iter().map(|&k| (k, f64::NAN)).collect();
             }
-            let sizes = steps::fit_sizes(t, r, y, &model, fit.q, &found);
+            let sizes = steps::fit_sizes(t, r, y, &model, (fit.q, fit.gm), &found);
             return (fit, sizes);
         }
         rows = now;

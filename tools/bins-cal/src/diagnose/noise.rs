@@ -6,6 +6,12 @@
 //! least squares on filtered columns and the likelihood is exact. The level's start is diffuse
 //! (the first observed row sets it), so a constant offset between SIM and REAL is always part
 //! of the null.
+//!
+//! Where the sensor's bias instability is known (a specification, [`Gm`]), it is a second
+//! state beside the level: a first-order Gauss–Markov bias of variance `σ²` and correlation
+//! time `τ`. Below `τ` it wanders like a random walk of intensity `2σ²/τ`; beyond it stays
+//! within `σ`, so structure at the hour scale is not taken for drift the way a random walk
+//! fitted to the short scales takes it.
 
 /// What the filter does at a row.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -60,12 +66,37 @@ pub struct Filter {
     pub log_det: f64,
     /// Number of updated rows.
     pub n_used: usize,
+    /// With a bias instability: the Kalman gain of its state at each row (empty without).
+    pub gain_gm: Vec<f64>,
+    /// With a bias instability: its decay `e^(−Δt/τ)` into each row (empty without).
+    pub phi: Vec<f64>,
+}
+
+/// A first-order Gauss–Markov bias instability: `b' = −b/τ + w`, stationary variance
+/// `var_g2` \[g²\], correlation time `tau_s` \[s\] (the sensor's specification).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Gm {
+    /// Stationary variance \[g²\].
+    pub var_g2: f64,
+    /// Correlation time \[s\].
+    pub tau_s: f64,
+}
+
+impl Gm {
+    /// The random-walk intensity [g²/s] it shows at averaging times well below `τ`: `2σ²/τ`.
+    pub fn short_q(&self) -> f64 {
+        2.0 * self.var_g2 / self.tau_s
+    }
 }
 
 impl Filter {
-    /// Builds the filter for times `t` \[s\], white variances `r` and random-walk intensity `q`;
-    /// rows with `observed(i) == false` are skipped (the level only diffuses over them).
-    pub fn new(t: &[f64], r: &[f64], q: f64, observed: impl Fn(usize) -> bool) -> Self {
+    /// Builds the filter for times `t` \[s\], white variances `r`, random-walk intensity `q` and
+    /// the bias instability `gm` if known; rows with `observed(i) == false` are skipped (the
+    /// level only diffuses over them, the bias instability decays).
+    pub fn new(t: &[f64], r: &[f64], q: f64, gm: Option<Gm>, observed: impl Fn(usize) -> bool) -> Self {
+        if let Some(gm) = gm {
+            return Self::with_gm(t, r, q, gm, observed);
+        }
         let n = t.len();
         let mut step = vec![Step::Skip; n];
         let mut gain = vec![0.0; n];
@@ -93,13 +124,67 @@ impl Filter {
             log_det += f.ln();
             n_used += 1;
         }
-        Filter { step, gain, inv_sqrt_f, log_det, n_used }
+        Filter { step, gain, inv_sqrt_f, log_det, n_used, gain_gm: Vec::new(), phi: Vec::new() }
+    }
+
+    /// [`Filter::new`] with the bias instability a second state beside the level. The first
+    /// observed row sets the level (diffuse) with the bias at its stationary prior, so the two
+    /// start correlated: covariance `[σ², −σ²; −σ², σ² + r]` of (bias, level).
+    fn with_gm(t: &[f64], r: &[f64], q: f64, gm: Gm, observed: impl Fn(usize) -> bool) -> Self {
+        let n = t.len();
+        let mut step = vec![Step::Skip; n];
+        let mut gain = vec![0.0; n];
+        let mut gain_gm = vec![0.0; n];
+        let mut phi = vec![0.0; n];
+        let mut inv_sqrt_f = vec![0.0; n];
+        let s2 = gm.var_g2;
+        // Covariance [a b; b c] of (bias instability, level).
+        let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
+        let (mut last_t, mut init, mut log_det, mut n_used) = (0.0, false, 0.0, 0usize);
+        for i in 0..n {
+            if !observed(i) {
+                continue;
+            }
+            if !init {
+                init = true;
+                (a, b, c) = (s2, -s2, s2 + r[i]);
+                last_t = t[i];
+                step[i] = Step::Init;
+                continue;
+            }
+            let dt = (t[i] - last_t).max(0.0);
+            let ph = (-dt / gm.tau_s).exp();
+            let (pa, pb, pc) = (ph * ph * a + s2 * (1.0 - ph * ph), ph * b, c + q * dt);
+            let f = pa + 2.0 * pb + pc + r[i];
+            let (kg, kl) = ((pa + pb) / f, (pb + pc) / f);
+            (a, b, c) = (pa - (pa + pb) * kg, pb - (pa + pb) * kl, pc - (pb + pc) * kl);
+            last_t = t[i];
+            step[i] = Step::Update;
+            gain[i] = kl;
+            gain_gm[i] = kg;
+            phi[i] = ph;
+            inv_sqrt_f[i] = 1.0 / f.sqrt();
+            log_det += f.ln();
+            n_used += 1;
+        }
+        Filter { step, gain, inv_sqrt_f, log_det, n_used, gain_gm, phi }
+    }
+
+    /// Filter states a column carries: 1 (the level), 2 with a bias instability. The `level`
+    /// of [`Filter::whiten_rows`] holds this many values a column.
+    pub fn states(&self) -> usize {
+        if self.phi.is_empty() { 1 } else { 2 }
     }
 
     /// The standardized innovations of column `x` into `out` (0 where not updated). Values
     /// below [`TINY`] in magnitude, of the innovations and of the filter's level, are taken
     /// as 0 ([`flush`]).
     pub fn whiten(&self, x: &[f64], out: &mut [f64]) {
+        if self.states() > 1 {
+            let n = x.len().min(out.len());
+            self.whiten_rows(&[x], 0..n, &mut [0.0; 2], out, n);
+            return;
+        }
         let mut mu = 0.0;
         for i in 0..x.len().min(out.len()) {
             match self.step[i] {
@@ -117,8 +202,9 @@ impl Filter {
         }
     }
 
-    /// [`Filter::whiten`] of every column of `xs`, rows `rows` only, continuing from the levels
-    /// `level` (one per column, updated): column `c`'s values go to `out[c·stride ..]`.
+    /// [`Filter::whiten`] of every column of `xs`, rows `rows` only, continuing from the states
+    /// `level` ([`Filter::states`] per column, updated: the levels, then the bias
+    /// instabilities): column `c`'s values go to `out[c·stride ..]`.
     /// Called on consecutive ranges from row 0, it gives the values of one whitening of all
     /// rows. The columns are interleaved row by row: each column's recursion is a chain of
     /// dependent operations, and interleaving lets the chains of different columns overlap.
@@ -130,8 +216,35 @@ impl Filter {
         out: &mut [f64],
         stride: usize,
     ) {
-        let m = xs.len().min(level.len());
+        let m = xs.len().min(level.len() / self.states());
         let start = rows.start;
+        if self.states() > 1 {
+            let (level, bias) = level.split_at_mut(m);
+            for i in rows {
+                let o = i - start;
+                match self.step[i] {
+                    Step::Skip => (0..m).for_each(|c| out[c * stride + o] = 0.0),
+                    Step::Init => {
+                        for c in 0..m {
+                            level[c] = flush(xs[c][i]);
+                            bias[c] = 0.0;
+                            out[c * stride + o] = 0.0;
+                        }
+                    }
+                    Step::Update => {
+                        let (g, s, kg, ph) = (self.gain[i], self.inv_sqrt_f[i], self.gain_gm[i], self.phi[i]);
+                        for c in 0..m {
+                            let b = bias[c] * ph;
+                            let v = xs[c][i] - level[c] - b;
+                            out[c * stride + o] = flush(v * s);
+                            level[c] = flush_level(level[c] + g * v);
+                            bias[c] = flush_level(b + kg * v);
+                        }
+                    }
+                }
+            }
+            return;
+        }
         // Four columns at a time: enough independent chains to overlap, few enough streams of
         // memory for the prefetcher.
         for c0 in (0..m).step_by(4) {
@@ -204,8 +317,15 @@ pub fn smooth_level(t: &[f64], r: &[f64], q: f64, x: &[f64]) -> Vec<f64> {
 /// The restricted form counts what the regressors absorb, so `q` is not biased low by a rich
 /// model (the plain profile likelihood is, by the variance the regressors take).
 /// Returns `(ll, sse, n_used, β)`.
-pub fn profile_ll(t: &[f64], r: &[f64], q: f64, y: &[f64], xs: &[&[f64]]) -> (f64, f64, usize, Vec<f64>) {
-    let (gram, log_det, n_used) = whitened_gram(t, r, q, y, xs);
+pub fn profile_ll(
+    t: &[f64],
+    r: &[f64],
+    q: f64,
+    gm: Option<Gm>,
+    y: &[f64],
+    xs: &[&[f64]],
+) -> (f64, f64, usize, Vec<f64>) {
+    let (gram, log_det, n_used) = whitened_gram(t, r, q, gm, y, xs);
     let (sse, beta, log_det_x, p) = ls_from_gram(&gram, xs.len());
     let n = n_used.max(1) as f64;
     let m = (n - p as f64).max(1.0);
@@ -220,8 +340,8 @@ pub fn profile_ll(t: &[f64], r: &[f64], q: f64, y: &[f64], xs: &[&[f64]]) -> (f6
 /// rows; storing them cost more than the arithmetic). The blocks are
 /// [`GRAM_BLOCK`](super::stats::GRAM_BLOCK) rows, as in [`gram_blocked`](super::stats::gram_blocked),
 /// so the sums are the same as whitening first and multiplying after.
-fn whitened_gram(t: &[f64], r: &[f64], q: f64, y: &[f64], xs: &[&[f64]]) -> (Vec<f64>, f64, usize) {
-    use super::stats::{GRAM_BLOCK, dot};
+fn whitened_gram(t: &[f64], r: &[f64], q: f64, gm: Option<Gm>, y: &[f64], xs: &[&[f64]]) -> (Vec<f64>, f64, usize) {
+    use super::stats::GRAM_BLOCK;
     let cols: Vec<&[f64]> = xs.iter().copied().chain(std::iter::once(y)).collect();
     let m = cols.len();
     let n = cols.iter().map(|c| c.len()).min().unwrap_or(0).min(t.len()).min(r.len());
@@ -229,6 +349,19 @@ fn whitened_gram(t: &[f64], r: &[f64], q: f64, y: &[f64], xs: &[&[f64]]) -> (Vec
     let (mut log_det, mut n_used) = (0.0, 0usize);
     if n == 0 {
         return (g, log_det, n_used);
+    }
+    if gm.is_some() {
+        // Two states a column: the filter's gains computed once, then the same blocks.
+        let f = Filter::new(&t[..n], &r[..n], q, gm, |_| true);
+        let mut state = vec![0.0; 2 * m];
+        let mut w = vec![0.0; m * GRAM_BLOCK];
+        for c0 in (0..n).step_by(GRAM_BLOCK) {
+            let c1 = (c0 + GRAM_BLOCK).min(n);
+            f.whiten_rows(&cols, c0..c1, &mut state, &mut w, GRAM_BLOCK);
+            add_products(&mut g, &w, m, c1 - c0);
+        }
+        symmetrise(&mut g, m);
+        return (g, f.log_det, f.n_used);
     }
     // The first row sets the level (diffuse start) and gives no innovation.
     let mut mu: Vec<f64> = cols.iter().map(|c| flush(c[0])).collect();
@@ -264,20 +397,32 @@ fn whitened_gram(t: &[f64], r: &[f64], q: f64, y: &[f64], xs: &[&[f64]]) -> (Vec
                 mu[c] = flush_level(mu[c] + g * v);
             }
         }
-        for a in 0..m {
-            let wa = &w[a * GRAM_BLOCK..a * GRAM_BLOCK + len];
-            for b in a..m {
-                g[a * m + b] += dot(wa, &w[b * GRAM_BLOCK..b * GRAM_BLOCK + len]);
-            }
-        }
+        add_products(&mut g, &w, m, len);
         c0 = c1;
     }
+    symmetrise(&mut g, m);
+    (g, log_det, n_used)
+}
+
+/// Adds the products of the `m` whitened columns in `w` (each [`GRAM_BLOCK`](super::stats::GRAM_BLOCK)
+/// long, `len` rows used) to the upper triangle of the Gram matrix `g` (`m × m`).
+fn add_products(g: &mut [f64], w: &[f64], m: usize, len: usize) {
+    use super::stats::{GRAM_BLOCK, dot};
+    for a in 0..m {
+        let wa = &w[a * GRAM_BLOCK..a * GRAM_BLOCK + len];
+        for b in a..m {
+            g[a * m + b] += dot(wa, &w[b * GRAM_BLOCK..b * GRAM_BLOCK + len]);
+        }
+    }
+}
+
+/// Copies the upper triangle of `g` (`m × m`) to the lower.
+fn symmetrise(g: &mut [f64], m: usize) {
     for a in 0..m {
         for b in 0..a {
             g[a * m + b] = g[b * m + a];
         }
     }
-    (g, log_det, n_used)
 }
 
 /// Least squares of `y` on the columns `xs` (already whitened): residual sum of squares and
@@ -352,14 +497,14 @@ fn ls_from_gram(raw: &[f64], p: usize) -> (f64, Vec<f64>, f64, usize) {
 /// the model: a scan one point a decade relative to the median white variance per second
 /// (1e-9 … 10, and 0), the best point refined by steps of ½ and ¼ decade, and a parabola
 /// through the last three (16 likelihood evaluations).
-pub fn estimate_q(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> f64 {
-    estimate_q_ll(t, r, y, xs).0
+pub fn estimate_q(t: &[f64], r: &[f64], gm: Option<Gm>, y: &[f64], xs: &[&[f64]]) -> f64 {
+    estimate_q_ll(t, r, gm, y, xs).0
 }
 
 /// [`estimate_q`] and the restricted log-likelihood at the estimate.
-fn estimate_q_ll(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> (f64, f64) {
+fn estimate_q_ll(t: &[f64], r: &[f64], gm: Option<Gm>, y: &[f64], xs: &[&[f64]]) -> (f64, f64) {
     let rmed = super::stats::median(r).max(1e-300);
-    let ll = |lq: f64| profile_ll(t, r, rmed * 10f64.powf(lq), y, xs).0;
+    let ll = |lq: f64| profile_ll(t, r, rmed * 10f64.powf(lq), gm, y, xs).0;
     let (mut best_lq, mut best_ll) = (f64::NAN, f64::NEG_INFINITY);
     for k in -9..=1 {
         let v = ll(k as f64);
@@ -367,7 +512,7 @@ fn estimate_q_ll(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> (f64, f64) {
             (best_lq, best_ll) = (k as f64, v);
         }
     }
-    let ll0 = profile_ll(t, r, 0.0, y, xs).0;
+    let ll0 = profile_ll(t, r, 0.0, gm, y, xs).0;
     if ll0 >= best_ll {
         return (0.0, ll0);
     }
@@ -399,10 +544,10 @@ fn estimate_q_ll(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> (f64, f64) {
 /// estimate is often far below the truth, or 0), and a mechanism tested against too small a
 /// drift is named for what is drift; against the upper end it is named only when the data
 /// exclude the drift as its explanation.
-pub fn q_upper(t: &[f64], r: &[f64], y: &[f64], xs: &[&[f64]]) -> f64 {
+pub fn q_upper(t: &[f64], r: &[f64], gm: Option<Gm>, y: &[f64], xs: &[&[f64]]) -> f64 {
     let rmed = super::stats::median(r).max(1e-300);
-    let (q_hat, ll_max) = estimate_q_ll(t, r, y, xs);
-    let ll = |q: f64| profile_ll(t, r, q, y, xs).0;
+    let (q_hat, ll_max) = estimate_q_ll(t, r, gm, y, xs);
+    let ll = |q: f64| profile_ll(t, r, q, gm, y, xs).0;
     // Walk up in quarter decades from the estimate (or from 1e-9·rmed when it is 0).
     let mut lq = if q_hat > 0.0 { (q_hat / rmed).log10() } else { -9.0 };
     let (mut prev_lq, mut prev_drop) = (lq, if q_hat > 0.0 { 0.0 } else { ll_max - ll(rmed * 1e-9) });
@@ -485,9 +630,42 @@ mod tests {
             })
             .collect();
         let r = vec![sw * sw; n];
-        let qh = estimate_q(&t, &r, &y, &[]);
+        let qh = estimate_q(&t, &r, None, &y, &[]);
         assert!(qh > q / 2.0 && qh < q * 2.0, "{qh}");
-        let f = Filter::new(&t, &r, qh, |_| true);
+        let f = Filter::new(&t, &r, qh, None, |_| true);
+        let w = f.whitened(&y);
+        let m = w.len() as f64;
+        let var = super::super::stats::dot(&w, &w) / m;
+        let lag1 = super::super::stats::dot(&w[1..], &w[..n - 1]) / m / var;
+        assert!((var - 1.0).abs() < 0.05, "{var}");
+        assert!(lag1.abs() < 0.03, "{lag1}");
+    }
+
+    #[test]
+    fn a_bias_instability_given_whitens_to_white_and_is_not_taken_for_a_random_walk() {
+        // White noise, a Gauss–Markov bias (σ 1e-5, τ 200 s) and a weak random walk, one row a
+        // second for 5.6 h: with the bias instability in the model the innovations are white
+        // and the random walk estimate stays near its own intensity; without it the random walk
+        // takes the bias instability's short-scale share 2σ²/τ = 1e-12.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let nrm = Normal::new(0.0, 1.0).unwrap();
+        let n = 20_000;
+        let (sw, q, gm): (f64, f64, Gm) = (1e-5, 1e-14, Gm { var_g2: 1e-10, tau_s: 200.0 });
+        let phi = (-1.0 / gm.tau_s).exp();
+        let t: Vec<f64> = (0..n).map(|i| i as f64).collect();
+        let (mut lvl, mut b) = (0.0, gm.var_g2.sqrt() * nrm.sample(&mut rng));
+        let y: Vec<f64> = (0..n)
+            .map(|_| {
+                lvl += q.sqrt() * nrm.sample(&mut rng);
+                b = phi * b + (gm.var_g2 * (1.0 - phi * phi)).sqrt() * nrm.sample(&mut rng);
+                lvl + b + sw * nrm.sample(&mut rng)
+            })
+            .collect();
+        let r = vec![sw * sw; n];
+        let (with, without) = (estimate_q(&t, &r, Some(gm), &y, &[]), estimate_q(&t, &r, None, &y, &[]));
+        assert!(with < 5.0 * q, "with the bias instability: q {with:e}");
+        assert!(without > 0.3 * gm.short_q(), "without it: q {without:e}");
+        let f = Filter::new(&t, &r, with, Some(gm), |_| true);
         let w = f.whitened(&y);
         let m = w.len() as f64;
         let var = super::super::stats::dot(&w, &w) / m;
@@ -507,7 +685,7 @@ mod tests {
         let r = vec![1e-10; n];
         let x: Vec<f64> = t.iter().map(|v| (-v / 100.0).exp()).collect();
         let y: Vec<f64> = (0..n).map(|i| 1e-5 * (((i * 7919) % 101) as f64 / 50.0 - 1.0) + 3e-4 * x[i]).collect();
-        let f = Filter::new(&t, &r, 1e-14, |_| true);
+        let f = Filter::new(&t, &r, 1e-14, None, |_| true);
         let (wx, wy) = (f.whitened(&x), f.whitened(&y));
         assert!(x.iter().any(|v| v.is_subnormal()), "the column reaches the subnormal range");
         let sub = wx.iter().filter(|v| v.is_subnormal()).count();
@@ -532,21 +710,24 @@ mod tests {
         let n = 1000;
         let t: Vec<f64> = (0..n).map(|i| i as f64 * 0.5).collect();
         let r: Vec<f64> = (0..n).map(|i| 1e-8 * (1.0 + 0.3 * (i as f64 * 0.02).cos())).collect();
-        let f = Filter::new(&t, &r, 1e-9, |i| i >= 3 && !(400..410).contains(&i));
-        let cols: Vec<Vec<f64>> =
-            (0..5).map(|c| t.iter().map(|v| (v * 0.01 * (c + 1) as f64).sin() + c as f64).collect()).collect();
-        let xs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
-        let stride = 300;
-        let (mut level, mut out) = (vec![0.0; 5], vec![0.0; 5 * stride]);
-        let mut blocks = vec![vec![0.0; n]; 5];
-        for (a, b) in [(0, 7), (7, 300), (300, 404), (404, 700), (700, 1000)] {
-            f.whiten_rows(&xs, a..b, &mut level, &mut out, stride);
-            for c in 0..5 {
-                blocks[c][a..b].copy_from_slice(&out[c * stride..c * stride + b - a]);
+        // With a bias instability too (two states a column).
+        for gm in [None, Some(Gm { var_g2: 1e-8, tau_s: 40.0 })] {
+            let f = Filter::new(&t, &r, 1e-9, gm, |i| i >= 3 && !(400..410).contains(&i));
+            let cols: Vec<Vec<f64>> =
+                (0..5).map(|c| t.iter().map(|v| (v * 0.01 * (c + 1) as f64).sin() + c as f64).collect()).collect();
+            let xs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
+            let stride = 300;
+            let (mut level, mut out) = (vec![0.0; 5 * f.states()], vec![0.0; 5 * stride]);
+            let mut blocks = vec![vec![0.0; n]; 5];
+            for (a, b) in [(0, 7), (7, 300), (300, 404), (404, 700), (700, 1000)] {
+                f.whiten_rows(&xs, a..b, &mut level, &mut out, stride);
+                for c in 0..5 {
+                    blocks[c][a..b].copy_from_slice(&out[c * stride..c * stride + b - a]);
+                }
             }
-        }
-        for c in 0..5 {
-            assert_eq!(blocks[c], f.whitened(&cols[c]), "column {c}");
+            for c in 0..5 {
+                assert_eq!(blocks[c], f.whitened(&cols[c]), "{gm:?}: column {c}");
+            }
         }
     }
 
@@ -561,9 +742,10 @@ mod tests {
         let x2: Vec<f64> = t.iter().map(|v| (v * 0.003).cos() * 1e-3).collect();
         let x3: Vec<f64> = x1.iter().map(|v| -2.0 * v).collect();
         let y: Vec<f64> = (0..n).map(|i| 2e-4 * x1[i] + 0.3 * x2[i] + 1e-4 * ((i * 7919) % 13) as f64).collect();
-        for q in [0.0, 1e-10, 1e-6] {
-            let (ll, sse, n_used, beta) = profile_ll(&t, &r, q, &y, &[&x1, &x2, &x3]);
-            let f = Filter::new(&t, &r, q, |_| true);
+        let gm = Gm { var_g2: 1e-8, tau_s: 40.0 };
+        for (q, gm) in [(0.0, None), (1e-10, None), (1e-6, None), (1e-10, Some(gm)), (0.0, Some(gm))] {
+            let (ll, sse, n_used, beta) = profile_ll(&t, &r, q, gm, &y, &[&x1, &x2, &x3]);
+            let f = Filter::new(&t, &r, q, gm, |_| true);
             let (sse_ref, beta_ref, log_det_x, p) =
                 ls_fit(&f.whitened(&y), &[f.whitened(&x1), f.whitened(&x2), f.whitened(&x3)]);
             let m = f.n_used as f64 - p as f64;

@@ -668,6 +668,7 @@ pub fn white_density(p: &Prepared) -> [f64; 3] {
 /// those of the fit.
 pub fn context_on<'p>(d: &Diagnosis, p: &'p Prepared, axis: usize) -> Context<'p> {
     let mut ctx = Context::new(p, axis);
+    ctx.gm = d.axes[axis].gm;
     ctx.s = d.sensitivity[axis].clone();
     ctx.s_now = (0..p.t.len()).map(|k| ctx.s.eval(p.temp_s[k], &p.f[k])).collect();
     ctx
@@ -710,6 +711,7 @@ fn carried<'p>(d: &Diagnosis, cp: &'p Prepared, axis: usize) -> (Context<'p>, Ax
     let on_design = AxisFit {
         axis,
         q: fit.q,
+        gm: fit.gm,
         inflation: fit.inflation,
         terms,
         ambiguous: Vec::new(),

@@ -73,7 +73,7 @@ impl<'c, 'p> Refit<'c, 'p> {
     /// the autocorrelation inflation (the deviance's unit,
     /// [`super::fit::AxisFit::deviance_scale`]).
     pub fn new(ctx: &'c Context<'p>, q: f64, scale: f64, eta: &[f64], shared: &[Vec<f64>]) -> Self {
-        let filt = Filter::new(&ctx.p.t, &ctx.p.r_white[ctx.axis], q, |_| true);
+        let filt = Filter::new(&ctx.p.t, &ctx.p.r_white[ctx.axis], q, ctx.gm, |_| true);
         let part = PartialLs::new(&filt, eta, shared);
         Refit { ctx, filt, part, scale: scale.max(1e-300) }
     }

@@ -31,7 +31,7 @@
 //! every model carries, then fits their sizes with the final model: [`fit_sizes`]), so neither
 //! the random walk nor a thermal term takes a step's share.
 
-use super::noise::{Filter, Step, estimate_q};
+use super::noise::{Filter, Gm, Step, estimate_q};
 use super::stats::{chi2_sf, chol_solve, dot, median};
 
 /// At most this many steps per accelerometer.
@@ -160,8 +160,8 @@ fn gls(f: &Filter, y: &[f64], cols: &[&[f64]]) -> (Vec<f64>, Vec<f64>, Vec<f64>)
 fn scan_with(t: &[f64], r: &[f64], y: &[f64], cols: &[&[f64]], rows: &[usize], q: Option<f64>) -> (Vec<f64>, Vec<f64>) {
     let hs: Vec<Vec<f64>> = rows.iter().map(|&k| heaviside(y.len(), k)).collect();
     let all: Vec<&[f64]> = cols.iter().copied().chain(hs.iter().map(Vec::as_slice)).collect();
-    let q = q.unwrap_or_else(|| estimate_q(t, r, y, &all));
-    let f = Filter::new(t, r, q, |_| true);
+    let q = q.unwrap_or_else(|| estimate_q(t, r, None, y, &all));
+    let f = Filter::new(t, r, q, None, |_| true);
     let (beta, _, w) = gls(&f, y, &all);
     let z = scan(&f, &w);
     let s = robust_scale(&f, &z);
@@ -287,16 +287,23 @@ pub fn locate(
 }
 
 /// Sizes and standard errors of the steps at `found` (rows with their statistics), fitted
-/// jointly with the model columns `cols` under the noise model at random-walk intensity `q`
-/// (the selection's): GLS, the standard errors scaled by the residual's variance per degree of
+/// jointly with the model columns `cols` under the selection's noise model (random-walk
+/// intensity `q`, the bias instability `gm` where known): GLS, the standard errors scaled by the residual's variance per degree of
 /// freedom and its autocorrelation inflation.
-pub fn fit_sizes(t: &[f64], r: &[f64], y: &[f64], cols: &[&[f64]], q: f64, found: &[(usize, f64)]) -> Vec<BiasStep> {
+pub fn fit_sizes(
+    t: &[f64],
+    r: &[f64],
+    y: &[f64],
+    cols: &[&[f64]],
+    (q, gm): (f64, Option<Gm>),
+    found: &[(usize, f64)],
+) -> Vec<BiasStep> {
     if found.is_empty() {
         return Vec::new();
     }
     let hs: Vec<Vec<f64>> = found.iter().map(|&(k, _)| heaviside(y.len(), k)).collect();
     let all: Vec<&[f64]> = cols.iter().copied().chain(hs.iter().map(Vec::as_slice)).collect();
-    let f = Filter::new(t, r, q, |_| true);
+    let f = Filter::new(t, r, q, gm, |_| true);
     let (beta, se, w) = gls(&f, y, &all);
     let dof = (f.n_used as f64 - all.len() as f64).max(1.0);
     let used: Vec<bool> = f.step.iter().map(|s| *s == Step::Update).collect();
@@ -431,7 +438,7 @@ mod tests {
         let t: Vec<f64> = (0..n).map(|i| i as f64 * 0.5).collect();
         let r: Vec<f64> = (0..n).map(|i| 1e-6 * (1.0 + 0.3 * ((i * 7) % 5) as f64)).collect();
         let y: Vec<f64> = (0..n).map(|i| 1e-3 * (((i * 7919) % 31) as f64 / 31.0 - 0.5)).collect();
-        let f = Filter::new(&t, &r, 1e-8, |_| true);
+        let f = Filter::new(&t, &r, 1e-8, None, |_| true);
         let w = f.whitened(&y);
         let z = scan(&f, &w);
         for k in [1, 17, 100, 199] {
