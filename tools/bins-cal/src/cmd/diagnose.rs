@@ -268,6 +268,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     let rw_from = if r.random_walk_source == "given" { "given" } else { "estimated with the whole library in" };
+    let beside = r.bias_instability_mg_tau_s.map_or(String::new(), |(mg, tau_s)| {
+        format!(" beside a bias instability of {mg:.4} mg, τ = {tau_s:.0} s (given)")
+    });
     for ax in ["x", "y", "z"] {
         let g = |m: &std::collections::BTreeMap<String, f64>| m.get(ax).copied().unwrap_or(f64::NAN);
         let scale = r.unexplained_scale_s.get(ax).map_or(String::new(), |s| format!(" at {s:.0} s averaging"));
@@ -284,7 +287,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .get(ax)
             .map_or("not measurable".to_string(), |v| format!("{v:.3} mg/√h"));
         println!(
-            "   drift {:.4} mg RMS (not subtracted); random walk tested against {:.3} mg/√h ({rw_from}), the sensor's own at τ ≤ 60 s: {sensor}",
+            "   drift {:.4} mg RMS (not subtracted); random walk tested against {:.3} mg/√h ({rw_from}){beside}, the sensor's own at τ ≤ 60 s: {sensor}",
             g(&r.drift_rms_mg),
             g(&r.random_walk_mg_per_sqrt_h),
         );

@@ -299,6 +299,11 @@ pub struct Report {
     /// Where that random walk comes from: `given` (`--random-walk`) or `estimated` (restricted
     /// maximum likelihood with the richest model in).
     pub random_walk_source: String,
+    /// The bias instability given (`--bias-instability`, `--bias-tau`): its standard deviation
+    /// \[mg\] and correlation time \[s\], a state of the noise model beside the random walk;
+    /// absent when none was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bias_instability_mg_tau_s: Option<(f64, f64)>,
     /// The sensor's own random walk [mg/√h]: from the Hadamard variance of what the model
     /// leaves in the static segments, at averaging times up to a minute
     /// ([`short_tau_q`]); absent when no segment is long enough.
@@ -400,7 +405,8 @@ pub fn noise_floor(p: &Prepared) -> ([f64; 3], Vec<AllanPoint>) {
 /// terms (the residual less each axis's prediction, in the same static segments) and the noise
 /// model's line, `σ²(m) = σ_w²/m + q·τ₀(2m² + 1)/(6m)`: the white floor `σ_w` of a row and the
 /// random walk `q` \[g²/s\] the mechanisms were tested against
-/// ([`crate::allan::twin::rw_avar`], the exact Allan variance of a sampled random walk).
+/// ([`crate::allan::twin::rw_avar`], the exact Allan variance of a sampled random walk), plus
+/// the given bias instability's ([`crate::allan::twin::gm_avar`]) where there is one.
 pub fn allan_curves(p: &Prepared, floor: &[f64; 3], before: Vec<AllanPoint>, axes: &[AxisFit]) -> Vec<AllanPoint> {
     let runs = p.static_runs();
     let ms = curve_sizes(&runs);
@@ -411,8 +417,9 @@ pub fn allan_curves(p: &Prepared, floor: &[f64; 3], before: Vec<AllanPoint>, axe
         let segs: Vec<&[f64]> = runs.iter().map(|&(a, b)| &e[a..b]).collect();
         for (m, a, _) in allan_dev(&segs, &ms) {
             let tau_s = m as f64 * p.dt;
+            let gm = fit.gm.map_or(0.0, |g| g.var_g2 * crate::allan::twin::gm_avar(m as f64, p.dt, g.tau_s));
             let model =
-                (floor[fit.axis].powi(2) / m as f64 + fit.q * crate::allan::twin::rw_avar(m as f64, p.dt)).sqrt();
+                (floor[fit.axis].powi(2) / m as f64 + fit.q * crate::allan::twin::rw_avar(m as f64, p.dt) + gm).sqrt();
             if let Some(pt) = out.iter_mut().find(|pt| (pt.tau_s - tau_s).abs() <= 1e-9 * tau_s) {
                 pt.after_mg.insert(ax.into(), a * 1e3);
                 pt.model_mg.insert(ax.into(), model * 1e3);
@@ -1063,6 +1070,7 @@ pub fn build(
         allan: allan_curves(p, &floor.0, floor.1, axes),
         random_walk_mg_per_sqrt_h: per_axis(|i| (axes[i].q * 3600.0).sqrt() * 1e3),
         random_walk_source: if input.opt.random_walk_mg_per_sqrt_h.is_some() { "given" } else { "estimated" }.into(),
+        bias_instability_mg_tau_s: input.opt.bias_instability,
         sensor_random_walk_mg_per_sqrt_h: sensor_rw,
         drift_rms_mg: per_axis(|i| axes[i].drift_rms * 1e3),
         unexplained_rms_mg: per_axis(|i| left(i).map_or(0.0, |s| s.0 * 1e3)),
