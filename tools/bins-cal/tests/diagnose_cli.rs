@@ -35,19 +35,7 @@ fn command_writes_report_model_and_plots() {
     let dir = tempfile::tempdir().unwrap();
     let (sp, rp) = pair(dir.path(), "lag_plus_asymmetry", 12_000);
     let (rep, plots, model) = (dir.path().join("out.json"), dir.path().join("plots"), dir.path().join("model.toml"));
-    let out = bins_cal()
-        .args(["diagnose", "--sim"])
-        .arg(&sp)
-        .arg("--real")
-        .arg(&rp)
-        .arg("--report")
-        .arg(&rep)
-        .arg("--plots")
-        .arg(&plots)
-        .arg("--model")
-        .arg(&model)
-        .output()
-        .unwrap();
+    let out = diagnose_cmd(&sp, &rp, &rep).arg("--plots").arg(&plots).arg("--model").arg(&model).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{}{}", stdout, String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
@@ -117,16 +105,15 @@ fn command_writes_report_model_and_plots() {
     assert!(terms.iter().any(|t| t["id"].as_str() == Some("sf_asymmetry") && t["axis"].as_str() == Some("y")));
 }
 
+/// `bins-cal diagnose --sim SIM --real REAL --report REP`, for more arguments to be added.
+fn diagnose_cmd(sim: &Path, real: &Path, rep: &Path) -> Command {
+    let mut c = bins_cal();
+    c.args(["diagnose", "--sim"]).arg(sim).arg("--real").arg(real).arg("--report").arg(rep);
+    c
+}
+
 fn run_err(sim: &Path, real: &Path, dir: &Path) -> String {
-    let out = bins_cal()
-        .args(["diagnose", "--sim"])
-        .arg(sim)
-        .arg("--real")
-        .arg(real)
-        .arg("--report")
-        .arg(dir.join("r.json"))
-        .output()
-        .unwrap();
+    let out = diagnose_cmd(sim, real, &dir.join("r.json")).output().unwrap();
     assert!(!out.status.success());
     assert!(!dir.join("r.json").exists(), "no report on failure");
     let err = String::from_utf8_lossy(&out.stderr).to_string();
@@ -359,18 +346,7 @@ fn a_given_bias_instability_is_checked_and_reported() {
     let dir = tempfile::tempdir().unwrap();
     let (sp, rp) = pair(dir.path(), "null_random_walk", 12_000);
     let rep = dir.path().join("r.json");
-    let run = |more: &[&str]| {
-        bins_cal()
-            .args(["diagnose", "--sim"])
-            .arg(&sp)
-            .arg("--real")
-            .arg(&rp)
-            .arg("--report")
-            .arg(&rep)
-            .args(more)
-            .output()
-            .unwrap()
-    };
+    let run = |more: &[&str]| diagnose_cmd(&sp, &rp, &rep).args(more).output().unwrap();
     for (more, flag) in [
         (&["--bias-instability", "0", "--bias-tau", "600"][..], "--bias-instability 0"),
         (&["--bias-instability", "0.02", "--bias-tau=-5"][..], "--bias-tau -5"),

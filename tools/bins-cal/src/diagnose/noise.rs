@@ -615,6 +615,15 @@ mod tests {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
 
+    /// Innovations of unit variance (within 5 %) and no lag-1 correlation (within 0.03).
+    fn assert_white(w: &[f64]) {
+        let m = w.len() as f64;
+        let var = super::super::stats::dot(w, w) / m;
+        let lag1 = super::super::stats::dot(&w[1..], &w[..w.len() - 1]) / m / var;
+        assert!((var - 1.0).abs() < 0.05, "{var}");
+        assert!(lag1.abs() < 0.03, "{lag1}");
+    }
+
     #[test]
     fn whitened_random_walk_plus_white_is_white_and_q_is_recovered() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
@@ -633,12 +642,7 @@ mod tests {
         let qh = estimate_q(&t, &r, None, &y, &[]);
         assert!(qh > q / 2.0 && qh < q * 2.0, "{qh}");
         let f = Filter::new(&t, &r, qh, None, |_| true);
-        let w = f.whitened(&y);
-        let m = w.len() as f64;
-        let var = super::super::stats::dot(&w, &w) / m;
-        let lag1 = super::super::stats::dot(&w[1..], &w[..n - 1]) / m / var;
-        assert!((var - 1.0).abs() < 0.05, "{var}");
-        assert!(lag1.abs() < 0.03, "{lag1}");
+        assert_white(&f.whitened(&y));
     }
 
     #[test]
@@ -666,12 +670,7 @@ mod tests {
         assert!(with < 5.0 * q, "with the bias instability: q {with:e}");
         assert!(without > 0.3 * gm.short_q(), "without it: q {without:e}");
         let f = Filter::new(&t, &r, with, Some(gm), |_| true);
-        let w = f.whitened(&y);
-        let m = w.len() as f64;
-        let var = super::super::stats::dot(&w, &w) / m;
-        let lag1 = super::super::stats::dot(&w[1..], &w[..n - 1]) / m / var;
-        assert!((var - 1.0).abs() < 0.05, "{var}");
-        assert!(lag1.abs() < 0.03, "{lag1}");
+        assert_white(&f.whitened(&y));
     }
 
     #[test]
