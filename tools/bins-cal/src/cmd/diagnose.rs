@@ -33,12 +33,14 @@ pub struct Args {
     model: Option<PathBuf>,
     /// The sensor's random walk [mg/√h] (its specification) to test mechanisms against;
     /// without it, estimated from the data with every mechanism of the library in the model.
+    /// It is the residual's: √2 times the sensor's where SIM is simulated with the same noise.
     #[arg(long, value_name = "MG_PER_SQRT_H")]
     random_walk: Option<f64>,
     /// The sensor's bias instability [mg] (its specification: the standard deviation of a
     /// first-order Gauss–Markov bias, with --bias-tau its correlation time): a second state of
     /// the noise model beside the random walk, so structure at averaging times beyond τ is not
-    /// taken for drift. Without it, white noise and a random walk alone.
+    /// taken for drift. Without it, white noise and a random walk alone. The residual's, as for
+    /// --random-walk.
     #[arg(long, value_name = "MG", requires = "bias_tau")]
     bias_instability: Option<f64>,
     /// The correlation time [s] of --bias-instability.
