@@ -634,7 +634,7 @@ pub const PLAY_MIN_STEPS: f64 = 2.0;
 pub const THERMAL_JOIN_RATIO: f64 = 1.25;
 
 /// A group's members cancel where the largest member's contribution is this many times what
-/// they contribute together ([`cancelling`]).
+/// they contribute together (the report's `cancelling`).
 pub const CANCEL_RATIO: f64 = 10.0;
 
 /// The RMS [g] about its mean of the largest of a group's contributions `parts` (one per
