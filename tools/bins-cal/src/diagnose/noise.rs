@@ -89,85 +89,117 @@ impl Gm {
     }
 }
 
+/// The filter's covariance recursion, one observed row at a time: the same for every column,
+/// so [`Filter`] runs it once and stores its gains. Carried from one block of rows to the next,
+/// it lets a long recording be whitened a block at a time ([`Filter::refill`]).
+#[derive(Clone, Copy, Debug)]
+struct Recursion {
+    q: f64,
+    gm: Option<Gm>,
+    /// Covariance `[a b; b c]` of (bias instability, level); only `c` without one.
+    a: f64,
+    b: f64,
+    c: f64,
+    last_t: f64,
+    init: bool,
+}
+
+/// One row's gains from [`Recursion::update`].
+struct Gains {
+    level: f64,
+    bias: f64,
+    phi: f64,
+    f: f64,
+}
+
+impl Recursion {
+    fn new(q: f64, gm: Option<Gm>) -> Self {
+        Recursion { q, gm, a: 0.0, b: 0.0, c: 0.0, last_t: 0.0, init: false }
+    }
+
+    /// The first observed row, at `t` with white variance `r`: the level is set (diffuse);
+    /// with a bias instability, the bias starts at its stationary prior, so the two start
+    /// correlated: covariance `[σ², −σ²; −σ², σ² + r]` of (bias, level).
+    fn start(&mut self, t: f64, r: f64) {
+        self.init = true;
+        self.last_t = t;
+        match self.gm {
+            Some(gm) => (self.a, self.b, self.c) = (gm.var_g2, -gm.var_g2, gm.var_g2 + r),
+            None => self.c = r,
+        }
+    }
+
+    /// A normal update at `t` with white variance `r`.
+    fn update(&mut self, t: f64, r: f64) -> Gains {
+        let dt = (t - self.last_t).max(0.0);
+        self.last_t = t;
+        let Some(gm) = self.gm else {
+            let pp = self.c + self.q * dt;
+            let f = pp + r;
+            let k = pp / f;
+            self.c = (1.0 - k) * pp;
+            return Gains { level: k, bias: 0.0, phi: 0.0, f };
+        };
+        let s2 = gm.var_g2;
+        let ph = (-dt / gm.tau_s).exp();
+        let (pa, pb, pc) = (ph * ph * self.a + s2 * (1.0 - ph * ph), ph * self.b, self.c + self.q * dt);
+        let f = pa + 2.0 * pb + pc + r;
+        let (kg, kl) = ((pa + pb) / f, (pb + pc) / f);
+        (self.a, self.b, self.c) = (pa - (pa + pb) * kg, pb - (pa + pb) * kl, pc - (pb + pc) * kl);
+        Gains { level: kl, bias: kg, phi: ph, f }
+    }
+}
+
 impl Filter {
     /// Builds the filter for times `t` \[s\], white variances `r`, random-walk intensity `q` and
     /// the bias instability `gm` if known; rows with `observed(i) == false` are skipped (the
     /// level only diffuses over them, the bias instability decays).
     pub fn new(t: &[f64], r: &[f64], q: f64, gm: Option<Gm>, observed: impl Fn(usize) -> bool) -> Self {
-        if let Some(gm) = gm {
-            return Self::with_gm(t, r, q, gm, observed);
-        }
-        let n = t.len();
-        let mut step = vec![Step::Skip; n];
-        let mut gain = vec![0.0; n];
-        let mut inv_sqrt_f = vec![0.0; n];
-        let (mut p, mut last_t, mut init, mut log_det, mut n_used) = (0.0, 0.0, false, 0.0, 0usize);
-        for i in 0..n {
-            if !observed(i) {
-                continue;
-            }
-            if !init {
-                init = true;
-                p = r[i];
-                last_t = t[i];
-                step[i] = Step::Init;
-                continue;
-            }
-            let pp = p + q * (t[i] - last_t).max(0.0);
-            let f = pp + r[i];
-            let k = pp / f;
-            p = (1.0 - k) * pp;
-            last_t = t[i];
-            step[i] = Step::Update;
-            gain[i] = k;
-            inv_sqrt_f[i] = 1.0 / f.sqrt();
-            log_det += f.ln();
-            n_used += 1;
-        }
-        Filter { step, gain, inv_sqrt_f, log_det, n_used, gain_gm: Vec::new(), phi: Vec::new() }
+        let mut f = Self::with_rows(t.len(), gm.is_some());
+        f.refill(&mut Recursion::new(q, gm), t, r, observed);
+        f
     }
 
-    /// [`Filter::new`] with the bias instability a second state beside the level. The first
-    /// observed row sets the level (diffuse) with the bias at its stationary prior, so the two
-    /// start correlated: covariance `[σ², −σ²; −σ², σ² + r]` of (bias, level).
-    fn with_gm(t: &[f64], r: &[f64], q: f64, gm: Gm, observed: impl Fn(usize) -> bool) -> Self {
-        let n = t.len();
-        let mut step = vec![Step::Skip; n];
-        let mut gain = vec![0.0; n];
-        let mut gain_gm = vec![0.0; n];
-        let mut phi = vec![0.0; n];
-        let mut inv_sqrt_f = vec![0.0; n];
-        let s2 = gm.var_g2;
-        // Covariance [a b; b c] of (bias instability, level).
-        let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
-        let (mut last_t, mut init, mut log_det, mut n_used) = (0.0, false, 0.0, 0usize);
-        for i in 0..n {
+    /// A filter of `n` rows, all skipped, with room for a bias instability's gains if `gm`.
+    fn with_rows(n: usize, gm: bool) -> Self {
+        let gm_rows = if gm { n } else { 0 };
+        Filter {
+            step: vec![Step::Skip; n],
+            gain: vec![0.0; n],
+            inv_sqrt_f: vec![0.0; n],
+            log_det: 0.0,
+            n_used: 0,
+            gain_gm: vec![0.0; gm_rows],
+            phi: vec![0.0; gm_rows],
+        }
+    }
+
+    /// Rows `0..t.len()` (at most the filter's length) set from the recursion `rec`, continued
+    /// over `t`, `r`; `log_det` and `n_used` add the updated rows. Called on consecutive blocks
+    /// of a recording with one recursion, the block filters whiten as one filter of all rows.
+    fn refill(&mut self, rec: &mut Recursion, t: &[f64], r: &[f64], observed: impl Fn(usize) -> bool) {
+        let two = self.states() > 1;
+        for i in 0..t.len().min(r.len()).min(self.step.len()) {
+            self.step[i] = Step::Skip;
             if !observed(i) {
                 continue;
             }
-            if !init {
-                init = true;
-                (a, b, c) = (s2, -s2, s2 + r[i]);
-                last_t = t[i];
-                step[i] = Step::Init;
+            if !rec.init {
+                rec.start(t[i], r[i]);
+                self.step[i] = Step::Init;
                 continue;
             }
-            let dt = (t[i] - last_t).max(0.0);
-            let ph = (-dt / gm.tau_s).exp();
-            let (pa, pb, pc) = (ph * ph * a + s2 * (1.0 - ph * ph), ph * b, c + q * dt);
-            let f = pa + 2.0 * pb + pc + r[i];
-            let (kg, kl) = ((pa + pb) / f, (pb + pc) / f);
-            (a, b, c) = (pa - (pa + pb) * kg, pb - (pa + pb) * kl, pc - (pb + pc) * kl);
-            last_t = t[i];
-            step[i] = Step::Update;
-            gain[i] = kl;
-            gain_gm[i] = kg;
-            phi[i] = ph;
-            inv_sqrt_f[i] = 1.0 / f.sqrt();
-            log_det += f.ln();
-            n_used += 1;
+            let g = rec.update(t[i], r[i]);
+            self.step[i] = Step::Update;
+            self.gain[i] = g.level;
+            self.inv_sqrt_f[i] = 1.0 / g.f.sqrt();
+            if two {
+                self.gain_gm[i] = g.bias;
+                self.phi[i] = g.phi;
+            }
+            self.log_det += g.f.ln();
+            self.n_used += 1;
         }
-        Filter { step, gain, inv_sqrt_f, log_det, n_used, gain_gm, phi }
     }
 
     /// Filter states a column carries: 1 (the level), 2 with a bias instability. The `level`
@@ -346,62 +378,23 @@ fn whitened_gram(t: &[f64], r: &[f64], q: f64, gm: Option<Gm>, y: &[f64], xs: &[
     let m = cols.len();
     let n = cols.iter().map(|c| c.len()).min().unwrap_or(0).min(t.len()).min(r.len());
     let mut g = vec![0.0; m * m];
-    let (mut log_det, mut n_used) = (0.0, 0usize);
     if n == 0 {
-        return (g, log_det, n_used);
+        return (g, 0.0, 0);
     }
-    if gm.is_some() {
-        // Two states a column: the filter's gains computed once, then the same blocks.
-        let f = Filter::new(&t[..n], &r[..n], q, gm, |_| true);
-        let mut state = vec![0.0; 2 * m];
-        let mut w = vec![0.0; m * GRAM_BLOCK];
-        for c0 in (0..n).step_by(GRAM_BLOCK) {
-            let c1 = (c0 + GRAM_BLOCK).min(n);
-            f.whiten_rows(&cols, c0..c1, &mut state, &mut w, GRAM_BLOCK);
-            add_products(&mut g, &w, m, c1 - c0);
-        }
-        symmetrise(&mut g, m);
-        return (g, f.log_det, f.n_used);
-    }
-    // The first row sets the level (diffuse start) and gives no innovation.
-    let mut mu: Vec<f64> = cols.iter().map(|c| flush(c[0])).collect();
-    let (mut p, mut last_t) = (r[0], t[0]);
-    let mut gain = [0.0; GRAM_BLOCK];
-    let mut inv_sqrt_f = [0.0; GRAM_BLOCK];
+    // The filter's gains a block at a time: memory bounded by the block, not the recording.
+    let mut f = Filter::with_rows(GRAM_BLOCK, gm.is_some());
+    let mut rec = Recursion::new(q, gm);
+    let mut state = vec![0.0; f.states() * m];
     let mut w = vec![0.0; m * GRAM_BLOCK];
-    let mut c0 = 0;
-    while c0 < n {
+    for c0 in (0..n).step_by(GRAM_BLOCK) {
         let c1 = (c0 + GRAM_BLOCK).min(n);
-        let len = c1 - c0;
-        for i in c0.max(1)..c1 {
-            let pp = p + q * (t[i] - last_t).max(0.0);
-            let f = pp + r[i];
-            let k = pp / f;
-            p = (1.0 - k) * pp;
-            last_t = t[i];
-            gain[i - c0] = k;
-            inv_sqrt_f[i - c0] = 1.0 / f.sqrt();
-            log_det += f.ln();
-            n_used += 1;
-        }
-        if c0 == 0 {
-            (gain[0], inv_sqrt_f[0]) = (0.0, 0.0);
-        }
-        // Row by row across the columns: each column's recursion is a chain of dependent
-        // operations, and interleaving the columns lets them overlap.
-        for k in 0..len {
-            let (g, s) = (gain[k], inv_sqrt_f[k]);
-            for (c, x) in cols.iter().enumerate() {
-                let v = x[c0 + k] - mu[c];
-                w[c * GRAM_BLOCK + k] = flush(v * s);
-                mu[c] = flush_level(mu[c] + g * v);
-            }
-        }
-        add_products(&mut g, &w, m, len);
-        c0 = c1;
+        f.refill(&mut rec, &t[c0..c1], &r[c0..c1], |_| true);
+        let block: Vec<&[f64]> = cols.iter().map(|c| &c[c0..c1]).collect();
+        f.whiten_rows(&block, 0..c1 - c0, &mut state, &mut w, GRAM_BLOCK);
+        add_products(&mut g, &w, m, c1 - c0);
     }
     symmetrise(&mut g, m);
-    (g, log_det, n_used)
+    (g, f.log_det, f.n_used)
 }
 
 /// Adds the products of the `m` whitened columns in `w` (each [`GRAM_BLOCK`](super::stats::GRAM_BLOCK)
