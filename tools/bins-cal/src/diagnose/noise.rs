@@ -70,6 +70,8 @@ pub struct Filter {
     pub gain_gm: Vec<f64>,
     /// With a bias instability: its decay `e^(−Δt/τ)` into each row (empty without).
     pub phi: Vec<f64>,
+    /// Whether a bias instability is modelled (a second state a column).
+    bias_state: bool,
 }
 
 /// A first-order Gauss–Markov bias instability: `b' = −b/τ + w`, stationary variance
@@ -171,6 +173,7 @@ impl Filter {
             n_used: 0,
             gain_gm: vec![0.0; gm_rows],
             phi: vec![0.0; gm_rows],
+            bias_state: gm,
         }
     }
 
@@ -178,7 +181,6 @@ impl Filter {
     /// over `t`, `r`; `log_det` and `n_used` add the updated rows. Called on consecutive blocks
     /// of a recording with one recursion, the block filters whiten as one filter of all rows.
     fn refill(&mut self, rec: &mut Recursion, t: &[f64], r: &[f64], observed: impl Fn(usize) -> bool) {
-        let two = self.states() > 1;
         for i in 0..t.len().min(r.len()).min(self.step.len()) {
             self.step[i] = Step::Skip;
             if !observed(i) {
@@ -193,7 +195,7 @@ impl Filter {
             self.step[i] = Step::Update;
             self.gain[i] = g.level;
             self.inv_sqrt_f[i] = 1.0 / g.f.sqrt();
-            if two {
+            if self.bias_state {
                 self.gain_gm[i] = g.bias;
                 self.phi[i] = g.phi;
             }
@@ -205,7 +207,7 @@ impl Filter {
     /// Filter states a column carries: 1 (the level), 2 with a bias instability. The `level`
     /// of [`Filter::whiten_rows`] holds this many values a column.
     pub fn states(&self) -> usize {
-        if self.phi.is_empty() { 1 } else { 2 }
+        if self.bias_state { 2 } else { 1 }
     }
 
     /// The standardized innovations of column `x` into `out` (0 where not updated). Values
@@ -386,10 +388,12 @@ fn whitened_gram(t: &[f64], r: &[f64], q: f64, gm: Option<Gm>, y: &[f64], xs: &[
     let mut rec = Recursion::new(q, gm);
     let mut state = vec![0.0; f.states() * m];
     let mut w = vec![0.0; m * GRAM_BLOCK];
+    let mut block: Vec<&[f64]> = Vec::with_capacity(m);
     for c0 in (0..n).step_by(GRAM_BLOCK) {
         let c1 = (c0 + GRAM_BLOCK).min(n);
         f.refill(&mut rec, &t[c0..c1], &r[c0..c1], |_| true);
-        let block: Vec<&[f64]> = cols.iter().map(|c| &c[c0..c1]).collect();
+        block.clear();
+        block.extend(cols.iter().map(|c| &c[c0..c1]));
         f.whiten_rows(&block, 0..c1 - c0, &mut state, &mut w, GRAM_BLOCK);
         add_products(&mut g, &w, m, c1 - c0);
     }
