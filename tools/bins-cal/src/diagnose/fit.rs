@@ -1049,11 +1049,13 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
         add(Mech::ThermalHysteresis, d);
     }
     // A term odd in the specific force may be the die's rise after power-on acting through
-    // the scale factor's and cross-sensitivities' tempcos, `(1 − e^(−P/τ))·f_j`.
-    if ODD_IN_F.contains(&term.mech)
-        && let Some(d) = refit.self_heating_through_scale()
-    {
-        add(Mech::SelfHeating, d);
+    // the scale factor's and cross-sensitivities' tempcos, `(1 − e^(−P/τ))·f_j`; or, long
+    // after power-on, the die running steadily warmer than the thermistor through SIM's own
+    // slope, which at steady temperatures is a static scale and cross term.
+    if ODD_IN_F.contains(&term.mech) {
+        for d in [refit.self_heating_through_scale(), refit.self_heating_settled()].into_iter().flatten() {
+            add(Mech::SelfHeating, d);
+        }
     }
     // Beside a lag, any term may be the rest of a second lag stage.
     for (j, other) in fit.terms.iter().enumerate() {
@@ -1097,7 +1099,8 @@ const DIE_RISE_FORMS: [Mech; 5] =
 
 /// The terms odd in the specific force, which the die's rise after power-on may make through
 /// the scale factor's and cross-sensitivities' tempcos
-/// ([`super::separate::Refit::self_heating_through_scale`]).
+/// ([`super::separate::Refit::self_heating_through_scale`]), and a die settled warmer than the
+/// thermistor through SIM's own slope ([`super::separate::Refit::self_heating_settled`]).
 const ODD_IN_F: [Mech; 5] =
     [Mech::ScaleFactor, Mech::CrossAxis, Mech::NonlinearityK3, Mech::ScaleTemp, Mech::CrossCouplingTemp];
 
@@ -1106,9 +1109,12 @@ const ODD_IN_F: [Mech; 5] =
 /// deviance difference on the data with the nuisance and the other terms free (negative: the
 /// rival explains more). For a turn-on term (`warmup`, `self_heating`), each temperature form
 /// the model lacks built from the die's temperature
-/// ([`super::separate::Refit::through_die_rise`]); for a term odd in the specific force where
+/// ([`super::separate::Refit::through_die_rise`]) and each it holds acting through the die's
+/// rise (`∂A/∂T · (1 − e^(−P/τ))`, [`through_self_heating`]); for a term odd in the specific force where
 /// the positions change, the rise through the scale factor's and cross-sensitivities' tempcos
-/// ([`super::separate::Refit::self_heating_through_scale`], named `self_heating`). The
+/// ([`super::separate::Refit::self_heating_through_scale`]) or the die settled warmer
+/// ([`super::separate::Refit::self_heating_settled`]), the better of the two, named
+/// `self_heating`. The
 /// separability of the term's own prediction holds these rivals to a first-order rise (and a
 /// tempco to the thermistor's share of it); the data hold them to nothing but themselves, and
 /// a rival that explains them as well is as much the finding as the term. Pairs in `grouped`
@@ -1119,22 +1125,40 @@ fn die_rise_on_data(ctx: &Context, fit: &AxisFit, grouped: &[(Mech, Mech)]) -> V
     let mut out = Vec::new();
     for (k, term) in fit.terms.iter().enumerate() {
         let turn_on = matches!(term.mech, Mech::Warmup | Mech::SelfHeating);
-        // The rival forms still to ask: not grouped with the term already, not in the model.
-        let forms: Vec<Mech> = if turn_on {
-            DIE_RISE_FORMS.into_iter().filter(|&m| !fit.terms.iter().any(|t| t.mech == m)).collect()
+        // The rivals still to ask, not grouped with the term already: for a turn-on term each
+        // temperature form the model lacks (`None`) and each it holds, acting through the die
+        // (`Some(j)`, term `j`'s fitted contribution).
+        let forms: Vec<(Mech, Option<usize>)> = if turn_on {
+            let lacking =
+                DIE_RISE_FORMS.into_iter().filter(|&m| !fit.terms.iter().any(|t| t.mech == m)).map(|m| (m, None));
+            let held = fit
+                .terms
+                .iter()
+                .enumerate()
+                .filter(|(j, t)| *j != k && t.mech.temperature_form())
+                .map(|(j, t)| (t.mech, Some(j)));
+            lacking.chain(held).collect()
         } else if ODD_IN_F.contains(&term.mech) {
-            vec![Mech::SelfHeating]
+            vec![(Mech::SelfHeating, None)]
         } else {
             Vec::new()
         };
-        let forms: Vec<Mech> = forms.into_iter().filter(|&m| !grouped.contains(&(term.mech, m))).collect();
+        let forms: Vec<(Mech, Option<usize>)> =
+            forms.into_iter().filter(|&(m, _)| !grouped.contains(&(term.mech, m))).collect();
         if forms.is_empty() {
             continue;
         }
         let refit = Refit::new(ctx, fit.q, fit.deviance_scale, y, &shared_with(ctx, fit, k));
         let Some(own) = refit.deviance(&[], &|_| true, &|_| term.columns.clone()) else { continue };
-        let rivals = forms.into_iter().map(|m| {
-            let d = if turn_on { refit.through_die_rise(m) } else { refit.self_heating_through_scale() };
+        let rivals = forms.into_iter().map(|(m, held)| {
+            let d = match held {
+                Some(j) => through_self_heating(ctx, &refit, &fit.terms[j]),
+                None if turn_on => refit.through_die_rise(m),
+                None => [refit.self_heating_through_scale(), refit.self_heating_settled()]
+                    .into_iter()
+                    .flatten()
+                    .reduce(f64::min),
+            };
             (m, d)
         });
         for (m, d) in rivals {

@@ -361,7 +361,8 @@ impl Refit<'_, '_> {
 
     /// The deviance a die that runs steadily warmer than its thermistor cannot absorb: the
     /// library's self-heating settled (`S'(T, f)`, SIM's sensitivity's slope), which long after
-    /// power-on is a temperature function like a tempco SIM lacks. `None` without `power_s`.
+    /// power-on is a temperature function like a tempco SIM lacks, and at steady temperatures
+    /// in several positions a static scale and cross term. `None` without `power_s`.
     pub fn self_heating_settled(&self) -> Option<f64> {
         let ctx = self.ctx;
         ctx.p.power.as_ref()?;
