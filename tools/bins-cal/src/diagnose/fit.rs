@@ -1052,10 +1052,10 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
     // the scale factor's and cross-sensitivities' tempcos, `(1 − e^(−P/τ))·f_j`; or, long
     // after power-on, the die running steadily warmer than the thermistor through SIM's own
     // slope, which at steady temperatures is a static scale and cross term.
-    if ODD_IN_F.contains(&term.mech) {
-        for d in [refit.self_heating_through_scale(), refit.self_heating_settled()].into_iter().flatten() {
-            add(Mech::SelfHeating, d);
-        }
+    if ODD_IN_F.contains(&term.mech)
+        && let Some(d) = refit.self_heating_of_scale_term()
+    {
+        add(Mech::SelfHeating, d);
     }
     // Beside a lag, any term may be the rest of a second lag stage.
     for (j, other) in fit.terms.iter().enumerate() {
@@ -1098,9 +1098,8 @@ const DIE_RISE_FORMS: [Mech; 5] =
     [Mech::BiasTempOrder, Mech::ScaleTemp, Mech::CrossCouplingTemp, Mech::BiasHysteresis, Mech::ThermalHysteresis];
 
 /// The terms odd in the specific force, which the die's rise after power-on may make through
-/// the scale factor's and cross-sensitivities' tempcos
-/// ([`super::separate::Refit::self_heating_through_scale`]), and a die settled warmer than the
-/// thermistor through SIM's own slope ([`super::separate::Refit::self_heating_settled`]).
+/// the scale factor's and cross-sensitivities' tempcos, and a die settled warmer than the
+/// thermistor through SIM's own slope ([`super::separate::Refit::self_heating_of_scale_term`]).
 const ODD_IN_F: [Mech; 5] =
     [Mech::ScaleFactor, Mech::CrossAxis, Mech::NonlinearityK3, Mech::ScaleTemp, Mech::CrossCouplingTemp];
 
@@ -1110,12 +1109,10 @@ const ODD_IN_F: [Mech; 5] =
 /// rival explains more). For a turn-on term (`warmup`, `self_heating`), each temperature form
 /// the model lacks built from the die's temperature
 /// ([`super::separate::Refit::through_die_rise`]) and each it holds acting through the die's
-/// rise (`∂A/∂T · (1 − e^(−P/τ))`, [`through_self_heating`]); for a term odd in the specific force where
-/// the positions change, the rise through the scale factor's and cross-sensitivities' tempcos
-/// ([`super::separate::Refit::self_heating_through_scale`]) or the die settled warmer
-/// ([`super::separate::Refit::self_heating_settled`]), the better of the two, named
-/// `self_heating`. The
-/// separability of the term's own prediction holds these rivals to a first-order rise (and a
+/// rise (`∂A/∂T · (1 − e^(−P/τ))`, [`through_self_heating`]); for a term odd in the specific
+/// force, the rise through the scale factor's and cross-sensitivities' tempcos or the die
+/// settled warmer ([`super::separate::Refit::self_heating_of_scale_term`], named
+/// `self_heating`). The separability of the term's own prediction holds these rivals to a first-order rise (and a
 /// tempco to the thermistor's share of it); the data hold them to nothing but themselves, and
 /// a rival that explains them as well is as much the finding as the term. Pairs in `grouped`
 /// (already one group by their separability) are not refitted.
@@ -1154,10 +1151,7 @@ fn die_rise_on_data(ctx: &Context, fit: &AxisFit, grouped: &[(Mech, Mech)]) -> V
             let d = match held {
                 Some(j) => through_self_heating(ctx, &refit, &fit.terms[j]),
                 None if turn_on => refit.through_die_rise(m),
-                None => [refit.self_heating_through_scale(), refit.self_heating_settled()]
-                    .into_iter()
-                    .flatten()
-                    .reduce(f64::min),
+                None => refit.self_heating_of_scale_term(),
             };
             (m, d)
         });

@@ -426,6 +426,14 @@ impl Refit<'_, '_> {
         self.deviance(&grid, &|th| ctx.offered(Mech::SelfHeating, th), &columns).map(|s| s.deviance)
     }
 
+    /// The self-heating rival of a term odd in the specific force: the smaller deviance of the
+    /// die's rise through the scale factor's and cross-sensitivities' tempcos
+    /// ([`Refit::self_heating_through_scale`]) and of the die settled warmer than the
+    /// thermistor ([`Refit::self_heating_settled`]), which long after power-on is that term.
+    pub fn self_heating_of_scale_term(&self) -> Option<f64> {
+        [self.self_heating_through_scale(), self.self_heating_settled()].into_iter().flatten().reduce(f64::min)
+    }
+
     /// The deviance a thermal play wider than every temperature the recording swept cannot
     /// absorb: the sensor held at each session's starting temperature while the thermistor
     /// moves, `S(T_start, f) − S(T, f)` (the library's play at a width of twice the swept range
