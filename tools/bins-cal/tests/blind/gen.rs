@@ -23,6 +23,13 @@ pub const T_REF_C: f64 = 25.0;
 /// Thermistor white noise [°C].
 pub const THERMISTOR_SIGMA_C: f64 = 0.003;
 
+/// Least displacement \[°C\] of a lag's or a play's temperature from the die's that counts as
+/// the mechanism acting. A play the profile never engages, or a lag of a die that does not
+/// move, displaces the sensing element by the die's residual drift alone (tens of µ°C on a soak
+/// long after power-on); scaled up to a drawn size, that would be a tempco thousands of times
+/// the unit's, so such a member contributes nothing and is not visible.
+pub const MIN_DISPLACEMENT_C: f64 = 1e-3;
+
 /// Mechanism ids the generator can conceal (the library's ids).
 pub const MECH_IDS: [&str; 13] = [
     "thermal_lag",
@@ -803,12 +810,26 @@ fn draw_per_axis(rng: &mut ChaCha8Rng) -> [[f64; 3]; 3] {
     per_axis
 }
 
+/// Least share of a warm-up's size at power-on that must change over the recording for it to
+/// count as acting: a warm-up powered on hours of its time constant before the record starts
+/// shows only a tail of e^(−P/τ) (10⁻¹¹ at P/τ = 25), which scaled up to a drawn size would be
+/// a warm-up of kilo-g at power-on ([`MIN_DISPLACEMENT_C`] is the same bound for a lag or play).
+pub const MIN_WARMUP_SHARE: f64 = 1e-3;
+
+/// Whether `te` moves at least [`MIN_DISPLACEMENT_C`] from `temp` on some row.
+fn displaced(te: &[f64], temp: &[f64]) -> bool {
+    te.iter().zip(temp).any(|(a, b)| (a - b).abs() >= MIN_DISPLACEMENT_C)
+}
+
 /// A mechanism's contribution per accelerometer, in V, before scaling.
 fn contribution(mech: &Mech, x: &Ctx<'_>, per_axis: &[[f64; 3]; 3]) -> Vec<[f64; 3]> {
     let Ctx { unit, t, temp, f, power, d, kd } = *x;
     let n = t.len();
     let mut contrib = vec![[0.0f64; 3]; n];
     let through_temp = |te: &[f64], contrib: &mut [[f64; 3]]| {
+        if !displaced(te, temp) {
+            return;
+        }
         for k in 0..n {
             let a = unit.signals(te[k], &f[k]);
             let b = unit.signals(temp[k], &f[k]);
@@ -837,6 +858,9 @@ fn contribution(mech: &Mech, x: &Ctx<'_>, per_axis: &[[f64; 3]; 3]) -> Vec<[f64;
         }
         Mech::BiasHysteresis { width_c } => {
             let pl = backlash(temp, *width_c);
+            if !displaced(&pl, temp) {
+                return contrib;
+            }
             for k in 0..n {
                 let h = (pl[k] - temp[k]) / (0.5 * width_c);
                 for i in 0..3 {
@@ -845,11 +869,15 @@ fn contribution(mech: &Mech, x: &Ctx<'_>, per_axis: &[[f64; 3]; 3]) -> Vec<[f64;
             }
         }
         Mech::Warmup { tau_s } => {
+            let w: Vec<f64> =
+                power.iter().map(|p| 0.65 * (-p / tau_s).exp() + 0.35 * (-6.0 * p / tau_s).exp()).collect();
+            let (lo, hi) = w.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+            if hi - lo < MIN_WARMUP_SHARE {
+                return contrib;
+            }
             for k in 0..n {
-                let p = power[k];
-                let w = 0.65 * (-p / tau_s).exp() + 0.35 * (-6.0 * p / tau_s).exp();
                 for i in 0..3 {
-                    contrib[k][i] = kd[i] * w;
+                    contrib[k][i] = kd[i] * w[k];
                 }
             }
         }

@@ -1224,7 +1224,7 @@ pub fn user_line(r: &CaseResult) -> String {
         })
         .collect();
     format!(
-        "seed {:>6} {:<28} {:<6} rw {:.1} σ {:>5.0} µg {:>7} rows {:>5.1} Hz | {} | {:<19} eff [{}] amb [{}] false [{}] {:.1}s{}",
+        "seed {:>6} {:<28} {:<6} rw {:.1} σ {:>5.0} µg {:>7} rows {:>5.1} Hz | {} | {:<19} eff [{}] amb [{}] false [{}] after/floor {} {:.1}s{}",
         c.seed,
         c.user.as_ref().map_or_else(|| c.profile.name(), |u| u.name()),
         c.positions.name(),
@@ -1237,6 +1237,7 @@ pub fn user_line(r: &CaseResult) -> String {
         r.effects.join(" "),
         r.ambiguous.join(" "),
         r.false_ids.join(" "),
+        (0..3).map(|i| format!("{:.2}", r.heldout_mg[i].1 / r.floor_mg[i])).collect::<Vec<_>>().join("/"),
         r.secs,
         r.error.as_deref().map(|e| format!(" ERROR {e}")).unwrap_or_default()
     )
