@@ -908,24 +908,29 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
 /// constant, and nothing but SIM's slope tells it from an additive play.
 pub const ONE_ORIENTATION_SPREAD_G: f64 = 0.05;
 
-/// Share of `|gain · S'(T)|` over the engaged rows that must come from rows where the additive
-/// play's gain has the sign of SIM's slope for it to be also a held temperature
-/// ([`held_temperature_play`]); weighting by the product lets rows where the slope crosses zero,
-/// which a play hardly moves, count little.
+/// Share of `|gain · S'(T)|` that must come from rows where the additive play's gain has the
+/// sign of SIM's slope for it to be also a held temperature ([`held_temperature_play`]);
+/// weighting by the product lets rows where the slope crosses zero, which a play hardly moves,
+/// count little.
 pub const HELD_SIGN_SHARE: f64 = 0.9;
 
 /// Whether a fitted additive bias play (`bias_hysteresis`, columns `d`, `d·ΔT` with `d` the
 /// play's offset over its half-width) is also a thermal play: the accelerometer stays in one
-/// orientation ([`ONE_ORIENTATION_SPREAD_G`]) and, over the rows where the play is engaged
-/// (`|d| ≥ 0.5`), its gain `c0 + c1·ΔT` has the sign of SIM's slope `S'(T)` on at least
-/// [`HELD_SIGN_SHARE`] of `Σ|gain·S'(T)|`.
+/// orientation ([`ONE_ORIENTATION_SPREAD_G`]) and its gain `c0 + c1·ΔT` has the sign of SIM's
+/// slope `S'(T)` on at least [`HELD_SIGN_SHARE`] of `Σ|gain·S'(T)|`, either over the rows where
+/// the play is engaged (`|d| ≥ 0.5`) or over the rows where it moves (weighted by `|Δd|`).
 /// A thermal play of width `w` holds the temperature at `T + d·w/2` and gives
 /// `S(T + d·w/2) − S(T) ≈ S'(T)·d·w/2`, exactly `d·(c0 + c1·ΔT)` with a gain of that sign
 /// wherever `S'` is linear in T over the swept range: the
 /// additive form with the same sign *is* a play of a temperature the thermistor does not
 /// follow (a die running warmer, its own slope), and only a second orientation or a range
-/// where the slope bends tells the two apart. An additive play of the other sign (a bias higher
-/// while warming on a rising slope) is not what a held temperature makes.
+/// where the slope bends tells the two apart. The rows where the play moves count on their own
+/// because on a leg that stays engaged `d` is constant, so `d·c0` is an offset and `d·c1·ΔT` a
+/// slope in temperature that takes whatever else is linear in it: a monotone ramp identifies
+/// the gain only where the play engages (seed 73190 of the combined user-profile draw: a play
+/// held on the die, gain crossing zero mid-ramp, 83 % of the engaged rows' weight agreeing and
+/// 98 % of the moving rows'). An additive play of the other sign (a bias higher while warming
+/// on a rising slope) is not what a held temperature makes.
 pub fn held_temperature_play(ctx: &Context, term: &Term) -> bool {
     let p = ctx.p;
     let i = ctx.axis;
@@ -939,17 +944,23 @@ pub fn held_temperature_play(ctx: &Context, term: &Term) -> bool {
         return false;
     }
     let d = &term.columns[0];
-    let (mut engaged, mut agree) = (0.0f64, 0.0f64);
+    // (weight, agreeing weight) over the engaged rows and over the rows where the play moves.
+    let (mut engaged, mut moving) = ((0.0f64, 0.0f64), (0.0f64, 0.0f64));
     for r in 0..n {
-        if d[r].abs() < 0.5 {
-            continue;
-        }
         let gain = term.coef[0] + term.coef[1] * (p.temp_s[r] - super::mech::T0_C);
         let both = gain * ctx.s.deriv(p.temp_s[r], &p.f[r]);
-        engaged += both.abs();
-        agree += both.max(0.0);
+        if d[r].abs() >= 0.5 {
+            engaged.0 += both.abs();
+            engaged.1 += both.max(0.0);
+        }
+        if r > 0 {
+            let step = (d[r] - d[r - 1]).abs();
+            moving.0 += step * both.abs();
+            moving.1 += step * both.max(0.0);
+        }
     }
-    engaged > 0.0 && agree >= HELD_SIGN_SHARE * engaged
+    let agrees = |(w, a): (f64, f64)| w > 0.0 && a >= HELD_SIGN_SHARE * w;
+    agrees(engaged) || agrees(moving)
 }
 
 /// The naming threshold of a term of `df` parameters: the likelihood-ratio statistic whose χ²
