@@ -303,3 +303,26 @@ fn two_thermal_history_groups_on_one_accelerometer_are_one() {
     assert!(y.is_some_and(|g| g.ids.iter().any(|i| i == "warmup")), "y's group lost the warm-up: {y:?}");
     assert_no_definite_false_name(case);
 }
+
+/// A tempco beside a lag, play or self-heating *named* on the same accelerometer is grouped with
+/// it as well, under the same size condition (docs/diagnosis.md, section 4). Single draw 81110:
+/// a thermal play 5.2 °C wide on steps down from 44 °C in six positions; the play was named on
+/// x, y and z, and `scale_temp` beside it on x and y (cutting 0.11 and 0.44 mg against the
+/// play's 0.87 and 2.76 mg), a definite false name.
+#[test]
+fn a_tempco_beside_a_named_thermal_path_term_is_grouped_with_it() {
+    let case = Case::draw_user(81110, false);
+    let r = report_of(&case);
+    assert!(
+        r.effects.iter().all(|e| e.id != "scale_temp"),
+        "{:?}",
+        r.effects.iter().map(|e| &e.id).collect::<Vec<_>>()
+    );
+    let play = r.effects.iter().find(|e| e.id == "thermal_hysteresis").expect("the play is still named");
+    for ax in ["x", "y"] {
+        assert!(play.axes.iter().any(|a| a == ax), "the play is not named on {ax}: {:?}", play.axes);
+        let g = r.ambiguous.iter().find(|g| g.axes.iter().any(|a| a == ax) && g.ids.iter().any(|i| i == "scale_temp"));
+        assert!(g.is_some_and(|g| g.ids.iter().any(|i| i == "thermal_hysteresis")), "{ax}: {:?}", r.ambiguous);
+    }
+    assert_no_definite_false_name(case);
+}

@@ -838,12 +838,13 @@ pub fn build(
         }
     }
     // A scale-factor or cross-coupling tempco beside the unit's thermal path: where this
-    // accelerometer's groups hold a lag, play, self-heating or warm-up, or another accelerometer
-    // shows one that passes this accelerometer's test on its own, a tempco named here may be that
-    // path's part in f_i, f_j acting through a sensitivity fitted on SIM's thermistor. It joins
-    // this accelerometer's thermal-history group, or forms one with those mechanisms, unless it
-    // cuts more of the held-out RMS than the thermal-path terms modelled beside it: then it is a
-    // finding of its own, not the remainder of their shape.
+    // accelerometer names a lag, play or self-heating (the forms through SIM's sensitivity), or
+    // its groups hold a lag, play, self-heating or warm-up, or another accelerometer shows one
+    // that passes this accelerometer's test on its own, a tempco named here may be that path's
+    // part in f_i, f_j acting through a sensitivity fitted on SIM's thermistor. It joins this accelerometer's thermal-history group, or forms one with
+    // those mechanisms (a named one stays named beside it), unless it cuts more of the held-out
+    // RMS than the thermal-path terms modelled beside it: then it is a finding of its own, not
+    // the remainder of their shape.
     for (a, fit) in axes.iter().enumerate() {
         let named_here = |m: Mech| fit.terms.iter().any(|t| t.mech == m);
         let mut path: Vec<(Mech, Option<usize>)> = Vec::new();
@@ -852,6 +853,11 @@ pub fn build(
                 path.push((m, from));
             }
         };
+        fit.terms
+            .iter()
+            .map(|t| t.mech)
+            .filter(|m| m.positive_through_sim() && shown(fit.axis, &[*m]) && !is_folded(fit.axis, *m))
+            .for_each(|m| offer(m, None));
         for l in locals[a].iter().filter(|l| shown(fit.axis, &l.0)) {
             l.1.iter().filter(|m| m.thermal_path()).for_each(|m| offer(*m, None));
         }
