@@ -841,10 +841,11 @@ pub fn build(
     // accelerometer names a lag, play or self-heating (the forms through SIM's sensitivity), or
     // its groups hold a lag, play, self-heating or warm-up, or another accelerometer shows one
     // that passes this accelerometer's test on its own, a tempco named here may be that path's
-    // part in f_i, f_j acting through a sensitivity fitted on SIM's thermistor. It joins this accelerometer's thermal-history group, or forms one with
-    // those mechanisms (a named one stays named beside it), unless it cuts more of the held-out
-    // RMS than the thermal-path terms modelled beside it: then it is a finding of its own, not
-    // the remainder of their shape.
+    // part in f_i, f_j acting through a sensitivity fitted on SIM's thermistor. It joins this
+    // accelerometer's thermal-history group, or forms one with those mechanisms (a named one
+    // stays named beside it), unless it cuts more of the held-out RMS than the thermal-path
+    // terms modelled beside it: then it is a finding of its own, not the remainder of their
+    // shape.
     for (a, fit) in axes.iter().enumerate() {
         let named_here = |m: Mech| fit.terms.iter().any(|t| t.mech == m);
         let mut path: Vec<(Mech, Option<usize>)> = Vec::new();
