@@ -326,3 +326,20 @@ fn a_tempco_beside_a_named_thermal_path_term_is_grouped_with_it() {
     }
     assert_no_definite_false_name(case);
 }
+
+/// A temperature read in steps is taken between its steps (`prep::destep_temperature`,
+/// docs/diagnosis.md, section 3). Combined draw 85138: one ramp read to 1/16 °C at 5 Hz, in
+/// six positions, with a bias tempco of 19.5 σ on z (the fourth power of the die's
+/// temperature). On the staircase a `thermal_lag` of 17 s at 9 times SIM's sensitivity was
+/// named on z beside the tempco, fitting the staircase's sawtooth (±1/32 °C) through the
+/// tempco's slope: a definite false name. Read between the steps, the tempco alone is named
+/// on z.
+#[test]
+fn a_lag_is_not_named_for_the_steps_of_a_coarse_temperature_reading() {
+    let case = Case::draw_user(85138, true);
+    let r = report_of(&case);
+    let named_on_z = |id: &str| r.effects.iter().any(|e| e.id == id && e.axes.iter().any(|a| a == "z"));
+    assert!(named_on_z("bias_temp_order"), "{:?}", r.effects.iter().map(|e| (&e.id, &e.axes)).collect::<Vec<_>>());
+    assert!(!named_on_z("thermal_lag"), "{:?}", r.effects.iter().map(|e| (&e.id, &e.axes)).collect::<Vec<_>>());
+    assert_no_definite_false_name(case);
+}

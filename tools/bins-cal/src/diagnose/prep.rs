@@ -1194,7 +1194,16 @@ impl Builder {
             ((10.0 / dt).round() as usize).clamp(1, 50)
         };
         let smooth = |x: &[f64]| -> Vec<f64> {
-            sessions.iter().flat_map(|r| smooth_temperature(&t[r.clone()], &x[r.clone()], half)).collect()
+            sessions
+                .iter()
+                .flat_map(|r| {
+                    let (t, x) = (&t[r.clone()], &x[r.clone()]);
+                    match destep_temperature(t, x) {
+                        Some(between) => smooth_temperature(t, &between, half),
+                        None => smooth_temperature(t, x, half),
+                    }
+                })
+                .collect()
         };
         let temp_s = smooth(&temp);
         // SIM's own temperature: what SIM's sensitivity is a function of. It is REAL's when SIM
@@ -1329,6 +1338,53 @@ fn line_fit(t: &[f64], x: &[f64], lo: usize, hi: usize, t_at: f64) -> (f64, f64)
     (sse / (m - 2.0).max(1.0), xm + slope * (t_at - tm))
 }
 
+/// Share of consecutive rows with the same reading from which `temp_C` counts as stepped
+/// ([`destep_temperature`]).
+pub const STEPPED_SHARE: f64 = 0.5;
+
+/// A stepped temperature reading (a thermistor read to 1/16 °C, where the reading holds for
+/// most rows between its steps) as the temperature between its steps; `None` where fewer than
+/// [`STEPPED_SHARE`] of consecutive rows hold the same reading.
+///
+/// Where the reading changes between two rows, the temperature crossed the midpoint of the two
+/// readings between them: each change is a point (mid-time, mid-value) known to within the
+/// reading's noise, and the temperature is taken as the line between consecutive such points
+/// (before the first and after the last, the reading itself). A staircase is off by up to half
+/// a step, in a sawtooth whose period is the time between steps; on a slow ramp that period is
+/// longer than the smoothing window of [`smooth_temperature`], and the sawtooth, times a large
+/// temperature coefficient, is structure a short thermal lag of the staircase fits (on the
+/// user-profile draws of docs/diagnosis-blind.md, a lag named beside a large bias tempco read
+/// to 1/16 °C). Where the temperature turns inside one step, or holds between two, the line
+/// is off by less than a step.
+pub fn destep_temperature(t: &[f64], temp: &[f64]) -> Option<Vec<f64>> {
+    let n = temp.len().min(t.len());
+    if n < 3 {
+        return None;
+    }
+    let held = (1..n).filter(|&k| temp[k] == temp[k - 1]).count();
+    if (held as f64) < STEPPED_SHARE * (n - 1) as f64 {
+        return None;
+    }
+    let points: Vec<(f64, f64)> = (1..n)
+        .filter(|&k| temp[k] != temp[k - 1])
+        .map(|k| (0.5 * (t[k - 1] + t[k]), 0.5 * (temp[k - 1] + temp[k])))
+        .collect();
+    let mut out = temp[..n].to_vec();
+    let mut j = 0;
+    for k in 0..n {
+        while j + 1 < points.len() && points[j + 1].0 <= t[k] {
+            j += 1;
+        }
+        if let (Some(&(ta, va)), Some(&(tb, vb))) = (points.get(j), points.get(j + 1))
+            && ta <= t[k]
+            && tb > ta
+        {
+            out[k] = va + (vb - va) * (t[k] - ta) / (tb - ta);
+        }
+    }
+    Some(out)
+}
+
 /// The temperature the thermal regressors are built from: `temp` smoothed over ±`half` rows,
 /// so the thermistor's noise does not enter the regressors (errors in variables), without
 /// rounding the turns of a ramp. A centred average over the window is used where a straight
@@ -1367,7 +1423,40 @@ pub fn smooth_temperature(t: &[f64], temp: &[f64], half: usize) -> Vec<f64> {
 
 #[cfg(test)]
 mod tests {
-    use super::smooth_temperature;
+    use super::{destep_temperature, smooth_temperature};
+
+    #[test]
+    fn a_stepped_reading_is_taken_between_its_steps() {
+        // A case warming toward 20 °C with a 650 s time constant from 0 °C, read to 1/16 °C at
+        // 2 Hz for an hour: late in the hour a step every minute or more, far longer than the
+        // ±10 s smoothing, and the staircase is off by up to half a step.
+        let q = 0.0625;
+        let t: Vec<f64> = (0..7200).map(|k| k as f64 * 0.5).collect();
+        let truth: Vec<f64> = t.iter().map(|&x| 20.0 * (1.0 - (-x / 650.0).exp())).collect();
+        let read: Vec<f64> = truth.iter().map(|v| (v / q).round() * q).collect();
+        // Between the first minute and the last step (before the first step and after the last
+        // the reading is all there is).
+        let last = (1..7200).rfind(|&k| read[k] != read[k - 1]).expect("steps");
+        let worst = |v: &[f64], from: usize| (from..last).map(|k| (v[k] - truth[k]).abs()).fold(0.0, f64::max);
+        let staircase = smooth_temperature(&t, &read, 20);
+        let between = destep_temperature(&t, &read).expect("the reading is stepped");
+        let smoothed = smooth_temperature(&t, &between, 20);
+        assert!(worst(&staircase, 120) > 0.4 * q, "{}", worst(&staircase, 120));
+        // Off by the curvature between steps alone: at most an eighth of a step, where the steps
+        // are minutes apart.
+        assert!(worst(&smoothed, 120) < 0.15 * q, "{}", worst(&smoothed, 120));
+        let rms =
+            |v: &[f64]| ((120..last).map(|k| (v[k] - truth[k]).powi(2)).sum::<f64>() / (last - 120) as f64).sqrt();
+        assert!(rms(&smoothed) < 0.15 * rms(&staircase), "{} vs {}", rms(&smoothed), rms(&staircase));
+        // A reading that changes every row is not stepped, whatever its resolution.
+        let noisy: Vec<f64> = truth.iter().enumerate().map(|(k, v)| v + 1e-3 * ((k % 7) as f64 - 3.0)).collect();
+        assert!(destep_temperature(&t, &noisy).is_none());
+        // A hold at a step's edge, the reading flickering between two levels: the temperature
+        // is the edge.
+        let flicker: Vec<f64> = (0..7200).map(|k| if (k / 3) % 2 == 0 { 10.0 } else { 10.0 + q }).collect();
+        let on_edge = destep_temperature(&t, &flicker).expect("stepped");
+        assert!((10..7190).all(|k| (on_edge[k] - (10.0 + 0.5 * q)).abs() < 1e-12));
+    }
 
     #[test]
     fn smoothing_keeps_a_ramps_turn_and_averages_the_noise_on_a_leg() {
