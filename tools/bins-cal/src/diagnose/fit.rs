@@ -411,6 +411,21 @@ impl RawHeldout {
     }
 }
 
+/// Whether the rows outside fold `k` determine column `c` for predicting that fold: they
+/// hold more than 10⁻⁶ of its energy, and more than 10⁻⁶ of its spread about their mean. A
+/// column they hold (almost) nothing of would get a coefficient of noise over ~0; one they
+/// hold nothing of but a constant is the level, which the fit already has free (a play engaged
+/// through every other fold of a one-way ramp, moving only in this one, came out at 10³ g).
+fn determined_by_training(c: &[f64], fold: &[usize], k: usize) -> bool {
+    let train = || c.iter().zip(fold).filter(move |(_, f)| **f != k).map(|(v, _)| *v);
+    let (sum, count) = train().fold((0.0, 0usize), |(s, m), v| (s + v, m + 1));
+    let mean = sum / count.max(1) as f64;
+    let energy = train().map(|v| v * v).sum::<f64>();
+    let spread = train().map(|v| (v - mean).powi(2)).sum::<f64>();
+    energy > 1e-6 * c.iter().map(|v| v * v).sum::<f64>()
+        && spread > 1e-6 * c.iter().map(|v| (v - mean).powi(2)).sum::<f64>()
+}
+
 /// [`RawHeldout`] of `y` on the columns `refs` (none: the offset alone) under the noise model
 /// (times `t`, white variances `r`, random walk `q`, bias instability `gm` where known).
 ///
@@ -430,27 +445,7 @@ pub fn raw_heldout(
     let mut resid = vec![0.0; n];
     let mut fold_ss = [(0.0, 0usize); FOLDS];
     for (k, fs) in fold_ss.iter_mut().enumerate() {
-        // A column the other folds hold (almost) nothing of, or nothing but a constant, is
-        // not determined by them: it takes no part in predicting this fold. Its coefficient
-        // would be noise over ~0, and a constant is the level the fit already has free (a
-        // play engaged through every other fold of a one-way ramp, moving only in this one,
-        // came out at 10³ g).
-        let held: Vec<&[f64]> = refs
-            .iter()
-            .copied()
-            .filter(|c| {
-                let (all, train) = c
-                    .iter()
-                    .zip(fold)
-                    .fold((0.0, 0.0), |(a, tr), (v, &f)| (a + v * v, if f != k { tr + v * v } else { tr }));
-                let (s, m) =
-                    c.iter().zip(fold).filter(|(_, f)| **f != k).fold((0.0, 0usize), |a, (v, _)| (a.0 + v, a.1 + 1));
-                let mean = s / m.max(1) as f64;
-                let spread = c.iter().zip(fold).filter(|(_, f)| **f != k).map(|(v, _)| (v - mean).powi(2)).sum::<f64>();
-                let all_spread = c.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
-                train > 1e-6 * all && spread > 1e-6 * all_spread
-            })
-            .collect();
+        let held: Vec<&[f64]> = refs.iter().copied().filter(|c| determined_by_training(c, fold, k)).collect();
         let bk = if held.is_empty() {
             Vec::new()
         } else {

@@ -1198,10 +1198,7 @@ impl Builder {
                 .iter()
                 .flat_map(|r| {
                     let (t, x) = (&t[r.clone()], &x[r.clone()]);
-                    match destep_temperature(t, x) {
-                        Some(between) => smooth_temperature(t, &between, half),
-                        None => smooth_temperature(t, x, half),
-                    }
+                    smooth_temperature(t, destep_temperature(t, x).as_deref().unwrap_or(x), half)
                 })
                 .collect()
         };
