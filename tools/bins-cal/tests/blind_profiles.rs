@@ -343,3 +343,32 @@ fn a_lag_is_not_named_for_the_steps_of_a_coarse_temperature_reading() {
     assert!(!named_on_z("thermal_lag"), "{:?}", r.effects.iter().map(|e| (&e.id, &e.axes)).collect::<Vec<_>>());
     assert_no_definite_false_name(case);
 }
+
+/// The same when the rows are reduced to block means: the steps are taken where the rows'
+/// reading changed, not where the block means did (`prep::ReadingSteps`, docs/diagnosis.md,
+/// section 3). Single draw 89181: a reversal read to 1/16 °C at 20 Hz in blocks of 7 rows, one
+/// orientation, a bias tempco of 19.8 σ on x and z. Taken between the block means' own
+/// changes (a straddling block's mean is between two readings, and the reading's noise
+/// spreads a step over several blocks), most of the staircase stayed, and a `thermal_lag` of
+/// 11 s at 0.9 times SIM's sensitivity was named on z: a definite false name. Taken from the
+/// rows' changes, the tempco is in a truthful group on x and z and no lag is named.
+#[test]
+fn a_lag_is_not_named_for_the_steps_of_a_coarse_reading_reduced_to_block_means() {
+    let case = Case::draw_user(89181, false);
+    let r = report_of(&case);
+    assert!(
+        r.notes.iter().any(|n| n.starts_with("reduced to means over blocks")),
+        "the case no longer reads blocks: {:?}",
+        r.notes
+    );
+    assert!(
+        r.effects.iter().all(|e| e.id != "thermal_lag"),
+        "{:?}",
+        r.effects.iter().map(|e| (&e.id, &e.axes)).collect::<Vec<_>>()
+    );
+    for ax in ["x", "z"] {
+        let g = r.ambiguous.iter().find(|g| g.axes.iter().any(|a| a == ax));
+        assert!(g.is_some_and(|g| g.ids.iter().any(|i| i == "bias_temp_order")), "{ax}: {:?}", r.ambiguous);
+    }
+    assert_no_definite_false_name(case);
+}
