@@ -348,3 +348,23 @@ fn a_lag_is_not_named_for_the_steps_of_a_coarse_reading_reduced_to_block_means()
     }
     assert_no_definite_false_name(case);
 }
+
+/// A tempco that cuts more than the thermal-path term beside it stays named only on an
+/// accelerometer the model fits (docs/diagnosis.md, section 4). Combined draw 93142: a
+/// self-heating of 5.2 σ and a thermal play of 3.0 σ on one ramp in six positions, read to
+/// 1/16 °C at 50 Hz. x, left at 2.6× its floor, named the play and a `scale_temp` cutting
+/// 0.014 mg against the play's 0.007: a definite false name, the remainder of a thermal path
+/// the model does not have exactly. The tempco is now in one group with the play.
+#[test]
+fn a_tempco_on_an_accelerometer_the_model_does_not_fit_is_grouped_with_the_play() {
+    let case = Case::draw_user(93142, true);
+    let r = report_of(&case);
+    assert!(
+        r.effects.iter().all(|e| e.id != "scale_temp"),
+        "{:?}",
+        r.effects.iter().map(|e| (&e.id, &e.axes)).collect::<Vec<_>>()
+    );
+    let x = r.ambiguous.iter().find(|g| g.axes.iter().any(|a| a == "x") && g.ids.iter().any(|i| i == "scale_temp"));
+    assert!(x.is_some_and(|g| g.ids.iter().any(|i| i == "thermal_hysteresis")), "x: {:?}", r.ambiguous);
+    assert_no_definite_false_name(case);
+}

@@ -844,8 +844,10 @@ pub fn build(
     // part in f_i, f_j acting through a sensitivity fitted on SIM's thermistor. It joins this
     // accelerometer's thermal-history group, or forms one with those mechanisms (a named one
     // stays named beside it), unless it cuts more of the held-out RMS than the thermal-path
-    // terms modelled beside it: then it is a finding of its own, not the remainder of their
-    // shape.
+    // terms modelled beside it on an accelerometer the model fits (within
+    // `THERMAL_JOIN_RATIO` of its floor): then it is a finding of its own, not the remainder
+    // of their shape. Where the model does not fit, a larger cut is no sign of that: the
+    // path is not modelled exactly, and the tempco takes what the path's terms leave.
     for (a, fit) in axes.iter().enumerate() {
         let named_here = |m: Mech| fit.terms.iter().any(|t| t.mech == m);
         let mut path: Vec<(Mech, Option<usize>)> = Vec::new();
@@ -882,7 +884,8 @@ pub fn build(
         let path_cut: f64 =
             fit.terms.iter().filter(|t| t.mech.thermal_path() && shown(fit.axis, &[t.mech])).map(|t| cut(t.mech)).sum();
         let tempco_cut: f64 = tempcos.iter().map(|m| cut(*m)).sum();
-        if tempcos.is_empty() || (path_cut > 0.0 && tempco_cut > path_cut) {
+        let fits = fit.heldout_rms.1 <= THERMAL_JOIN_RATIO * floor.0[fit.axis];
+        if tempcos.is_empty() || (path_cut > 0.0 && tempco_cut > path_cut && fits) {
             continue;
         }
         let mut members = tempcos.clone();
