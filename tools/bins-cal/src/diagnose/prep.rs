@@ -947,13 +947,8 @@ impl Builder {
             out.pos.push(self.pos[j]);
             out.session_start.push(self.session_start[j]);
             out.weight.push(w);
-            let sum = |v: &[ReadingSteps]| {
-                let mut s = ReadingSteps::default();
-                v[j..e].iter().for_each(|x| s.add(x));
-                s
-            };
-            out.temp_steps.push(sum(&self.temp_steps));
-            out.sim_temp_steps.push(sum(&self.sim_temp_steps));
+            out.temp_steps.push(ReadingSteps::total(&self.temp_steps[j..e]));
+            out.sim_temp_steps.push(ReadingSteps::total(&self.sim_temp_steps[j..e]));
             for a in 0..3 {
                 let m = mean(&self.du[a]);
                 let spread: f64 =
@@ -1234,8 +1229,14 @@ impl Builder {
                 .iter()
                 .flat_map(|r| {
                     let (t, x) = (&t[r.clone()], &x[r.clone()]);
-                    let steps = if blocked { steps[r.clone()].to_vec() } else { ReadingSteps::of_rows(t, x) };
-                    smooth_temperature(t, destep_temperature(t, x, &steps).as_deref().unwrap_or(x), half)
+                    let of_rows;
+                    let steps = if blocked {
+                        &steps[r.clone()]
+                    } else {
+                        of_rows = ReadingSteps::of_rows(t, x);
+                        &of_rows[..]
+                    };
+                    smooth_temperature(t, destep_temperature(t, x, steps).as_deref().unwrap_or(x), half)
                 })
                 .collect()
         };
@@ -1418,6 +1419,13 @@ impl ReadingSteps {
         self.held += other.held;
     }
 
+    /// The steps of consecutive rows or blocks as one block's.
+    pub fn total(steps: &[ReadingSteps]) -> ReadingSteps {
+        let mut s = ReadingSteps::default();
+        steps.iter().for_each(|x| s.add(x));
+        s
+    }
+
     /// The steps of each of a run of rows.
     pub fn of_rows(t_s: &[f64], temp_c: &[f64]) -> Vec<ReadingSteps> {
         (0..t_s.len().min(temp_c.len()))
@@ -1578,13 +1586,8 @@ mod tests {
         let truth: Vec<f64> = (0..blocks).map(|j| mean(&truth_row, j)).collect();
         let read: Vec<f64> = (0..blocks).map(|j| mean(&read_row, j)).collect();
         let row_steps = ReadingSteps::of_rows(&t_row, &read_row);
-        let steps: Vec<ReadingSteps> = (0..blocks)
-            .map(|j| {
-                let mut s = ReadingSteps::default();
-                row_steps[j * b..(j + 1) * b].iter().for_each(|x| s.add(x));
-                s
-            })
-            .collect();
+        let steps: Vec<ReadingSteps> =
+            (0..blocks).map(|j| ReadingSteps::total(&row_steps[j * b..(j + 1) * b])).collect();
         let last = (1..blocks).rfind(|&k| read[k] != read[k - 1]).expect("steps");
         let from = 120 * 20 / b;
         let rms =
