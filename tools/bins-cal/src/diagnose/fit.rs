@@ -328,6 +328,13 @@ pub struct Term {
     pub columns: Vec<Vec<f64>>,
 }
 
+impl Term {
+    /// Whether the term is a warm-up fitted with its fast part ([`Context::member_columns`]).
+    pub fn fast_warmup(&self) -> bool {
+        self.mech == Mech::Warmup && self.coef.len() > 1
+    }
+}
+
 /// The diagnosis of one accelerometer.
 #[derive(Clone, Debug)]
 pub struct AxisFit {
@@ -784,7 +791,7 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
     // was only compensating a grid θ of another.
     let n_used = n.saturating_sub(1).max(2) as f64;
     loop {
-        let mut fit = finish(ctx, &bank, &model, q, &fold);
+        let fit = finish(ctx, &bank, &model, q, &fold, false);
         // A lag, play or self-heating acting through SIM's sensitivity with a negative gain
         // (the temperature reaching the sensor ahead of the thermistor, a die colder than it
         // after power-on) is not that physics: such a term goes first.
@@ -892,6 +899,13 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
                 if fit.terms.iter().any(|t| t.mech == Mech::BiasHysteresis && held_temperature_play(ctx, t)) {
                     join(Mech::BiasHysteresis, Mech::ThermalHysteresis);
                 }
+                // The names, groups and separabilities are decided on the forms the search
+                // holds (a warm-up of one exponential); a named warm-up then takes its fast
+                // part where the data ask for it, and the figures are that model's.
+                let mut fit = match fast_warmup(ctx, &bank, &model, &fold, &fit, alpha) {
+                    Some(with) => with,
+                    None => fit,
+                };
                 fit.trace = trace;
                 fit.passes_alone = passes_alone;
                 fit.ambiguous = amb;
@@ -900,6 +914,36 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
             }
         }
     }
+}
+
+/// The fit `fit` of `model` with its warm-up given the fast part ([`Context::member_columns`]),
+/// where the data ask for it: the second exponential passes the selection's own test (its
+/// likelihood ratio beside the model at p < `alpha` and above BIC's ln n) and lowers the raw
+/// held-out RMS the report prints. `None` without a warm-up or where the fast part fails.
+/// A warm-up is rarely one exponential (the electronics and the package settle at their own
+/// rates); one exponential fitted to two leaves the first minutes after power-on at several
+/// times the noise floor, or takes another term to stand in for the rest.
+fn fast_warmup(
+    ctx: &Context,
+    bank: &Bank,
+    model: &[usize],
+    fold: &[usize],
+    fit: &AxisFit,
+    alpha: f64,
+) -> Option<AxisFit> {
+    if !fit.terms.iter().any(|t| t.mech == Mech::Warmup) {
+        return None;
+    }
+    let with = finish(ctx, bank, model, fit.q, fold, true);
+    if !with.terms.iter().any(Term::fast_warmup) {
+        return None;
+    }
+    let filt = Filter::new(&ctx.p.t, &ctx.p.r_white[ctx.axis], fit.q, ctx.gm, |_| true);
+    let nu = filt.n_used as f64;
+    // The whitened residual sums of squares, from each fit's deviance unit (their ratio).
+    let (sse0, sse1) = (fit.deviance_scale / fit.inflation, with.deviance_scale / with.inflation);
+    let lr = nu * (sse0 / sse1.max(1e-300)).ln() / with.inflation;
+    (chi2_sf(lr, 1.0) < alpha && lr > nu.ln() && with.heldout_rms.1 < fit.heldout_rms.1).then_some(with)
 }
 
 /// Largest spread (standard deviation) of the accelerometer's own gravity component \[g\] at
@@ -1011,6 +1055,15 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
         .filter(|&m| !fit.terms.iter().any(|t| t.mech == m) || second_copy(m))
         .filter_map(|m| refit.mechanism(m).map(|s| (m, s.deviance)))
         .collect();
+    // A warm-up rival also with its fast part, the shape a named warm-up may take
+    // ([`fast_warmup`]): what that shape absorbs, a warm-up may be.
+    if let Some(r) = rivals.iter_mut().find(|r| r.0 == Mech::Warmup) {
+        let grid = ctx.grid(Mech::Warmup);
+        let columns = |tau: f64| ctx.member_columns(Mech::Warmup, tau, true);
+        if let Some(s) = refit.deviance(&grid, &|tau| ctx.offered(Mech::Warmup, tau), &columns) {
+            r.1 = r.1.min(s.deviance);
+        }
+    }
     if matches!(term.mech, Mech::Warmup | Mech::SelfHeating) {
         let mut add = |m: Mech, d: f64| match rivals.iter_mut().find(|r| r.0 == m) {
             Some(r) => r.1 = r.1.min(d),
@@ -1376,7 +1429,7 @@ impl PartialLs {
     }
 }
 
-fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -> AxisFit {
+fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize], fast: bool) -> AxisFit {
     let p = ctx.p;
     let axis = ctx.axis;
     let (t, r, y) = (&p.t, &p.r_white[axis], &p.r[axis]);
@@ -1388,7 +1441,11 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     let mut members: Vec<(Mech, Option<f64>)> =
         model.iter().map(|&c| (bank.cands[c].mech, bank.cands[c].theta)).collect();
     let cols_of = |ms: &[(Mech, Option<f64>)]| -> Vec<Vec<f64>> {
-        ctx.nuisance.iter().cloned().chain(ms.iter().flat_map(|(m, th)| ctx.columns(*m, th.unwrap_or(0.0)))).collect()
+        ctx.nuisance
+            .iter()
+            .cloned()
+            .chain(ms.iter().flat_map(|(m, th)| ctx.member_columns(*m, th.unwrap_or(0.0), fast)))
+            .collect()
     };
     let sse_of = |ms: &[(Mech, Option<f64>)]| -> f64 {
         let cols = cols_of(ms);
@@ -1408,7 +1465,11 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
             // Refined only where the mechanism is offered (a turn-on τ whose signature lives
             // in one held-out fold is not: see `Context::offered`).
             let eval = |lt: f64| {
-                if ctx.offered(m, lt.exp()) { part.sse_plus(&filt, &ctx.columns(m, lt.exp())) } else { f64::INFINITY }
+                if ctx.offered(m, lt.exp()) {
+                    part.sse_plus(&filt, &ctx.member_columns(m, lt.exp(), fast))
+                } else {
+                    f64::INFINITY
+                }
             };
             let (best, _) = super::stats::golden_min(th0.ln() - step, th0.ln() + step, 16, eval);
             if eval(best) <= eval(th0.ln()) {
@@ -1435,7 +1496,7 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
         }
     }
     for (k, (m, th)) in members.iter().enumerate() {
-        let nc = ctx.columns(*m, th.unwrap_or(0.0)).len();
+        let nc = ctx.member_columns(*m, th.unwrap_or(0.0), fast).len();
         let coef = beta[off..off + nc].to_vec();
         let se: Vec<f64> = se_unit[off..off + nc].iter().map(|s| s * (sigma2 * infl).sqrt()).collect();
         let tcols: Vec<Vec<f64>> = cols[off..off + nc].to_vec();
@@ -1461,7 +1522,8 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
             let mut others = members.clone();
             others.remove(k);
             let part = PartialLs::new(&filt, y, &cols_of(&others));
-            let dev = |x: f64| nu * (part.sse_plus(&filt, &ctx.columns(*m, x)) / sse.max(1e-300)).ln() / infl;
+            let dev =
+                |x: f64| nu * (part.sse_plus(&filt, &ctx.member_columns(*m, x, fast)) / sse.max(1e-300)).ln() / infl;
             let bound = |dir: f64| {
                 let mut inside = th;
                 let mut x = th;
@@ -1529,7 +1591,7 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize]) -
     let mut heldout_gain = Vec::new();
     let mut off = ctx.nuisance.len();
     for (m, th) in &members {
-        let nc = ctx.columns(*m, th.unwrap_or(0.0)).len();
+        let nc = ctx.member_columns(*m, th.unwrap_or(0.0), fast).len();
         let without: Vec<&[f64]> = refs[..off].iter().chain(&refs[off + nc..]).copied().collect();
         let hw = raw_heldout(t, r, (q, ctx.gm), y, &without, fold, blocks);
         heldout_gain.push(ha.gain_over(if hb.rms() < hw.rms() { &hb } else { &hw }));

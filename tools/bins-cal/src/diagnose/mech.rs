@@ -35,6 +35,10 @@ pub const TURN_ON_MIN_RANGE: f64 = 0.25;
 /// data left out of its fit, and fitted from the other folds it is not determined at all.
 pub const TURN_ON_MAX_FOLD_SHARE: f64 = 0.98;
 
+/// Ratio of the two time constants of a warm-up fitted with its fast part,
+/// `A·e^(−P/τ) + B·e^(−R·P/τ)` ([`Context::member_columns`]).
+pub const WARMUP_FAST_RATIO: f64 = 4.0;
+
 /// A mechanism.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Mech {
@@ -703,6 +707,21 @@ impl<'a> Context<'a> {
     /// The columns of mechanism `m` at `theta` (ignored for linear mechanisms).
     pub fn columns(&self, m: Mech, theta: f64) -> Vec<Vec<f64>> {
         self.columns_at(m, theta, &self.p.temp_s)
+    }
+
+    /// The columns of a fitted member: [`Context::columns`], and for a warm-up fitted with its
+    /// fast part (`fast`) the second exponential `e^(−R·P/τ)` ([`WARMUP_FAST_RATIO`]) beside
+    /// `e^(−P/τ)`, where `τ/R` is itself offered. The search and the names use one exponential;
+    /// a named warm-up's shape is then given its fast part where the data ask for it
+    /// ([`super::fit::fit_axis`]).
+    pub fn member_columns(&self, m: Mech, theta: f64, fast: bool) -> Vec<Vec<f64>> {
+        let mut cols = self.columns(m, theta);
+        let fast_tau = theta / WARMUP_FAST_RATIO;
+        if fast && m == Mech::Warmup && self.offered(m, fast_tau) {
+            let pw = self.p.power.as_deref().unwrap_or(&[]);
+            cols.push(pw.iter().map(|v| (-v / fast_tau).exp()).collect());
+        }
+        cols
     }
 
     /// [`Context::columns`] with the temperature the thermal and temperature terms are built

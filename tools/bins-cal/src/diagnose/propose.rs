@@ -685,7 +685,7 @@ fn carried<'p>(d: &Diagnosis, cp: &'p Prepared, axis: usize) -> (Context<'p>, Ax
         .terms
         .iter()
         .filter_map(|t| {
-            let columns = ctx.columns(t.mech, t.theta.unwrap_or(0.0));
+            let columns = ctx.member_columns(t.mech, t.theta.unwrap_or(0.0), t.fast_warmup());
             if columns.iter().all(|c| c.iter().all(|v| v.abs() < 1e-15)) {
                 return None;
             }

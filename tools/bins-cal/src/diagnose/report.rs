@@ -476,7 +476,7 @@ pub fn coef_names(m: Mech, s: &Sensitivity, axis: usize) -> Vec<(String, f64)> {
                 vec![("amp_mg".into(), 1e3)]
             }
         }
-        Mech::Warmup => vec![("amp_mg".into(), 1e3)],
+        Mech::Warmup => vec![("amp_mg".into(), 1e3), ("amp_fast_mg".into(), 1e3)],
         Mech::BiasHysteresis => vec![("amp_mg".into(), 1e3), ("amp_mg_per_C".into(), 1e3)],
         Mech::BiasTempOrder => {
             vec![("b1_mg_per_C".into(), 1e3), ("b2_mg_per_C2".into(), 1e3), ("b3_mg_per_C3".into(), 1e3)]
