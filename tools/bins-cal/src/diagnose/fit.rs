@@ -326,12 +326,14 @@ pub struct Term {
     pub contribution: Vec<f64>,
     /// Its columns at every row (raw, per unit coefficient).
     pub columns: Vec<Vec<f64>>,
+    /// For a warm-up fitted with its fast part, the ratio τ/τ_fast ([`Context::member_columns`]).
+    pub fast_ratio: Option<f64>,
 }
 
 impl Term {
     /// Whether the term is a warm-up fitted with its fast part ([`Context::member_columns`]).
     pub fn fast_warmup(&self) -> bool {
-        self.mech == Mech::Warmup && self.coef.len() > 1
+        self.fast_ratio.is_some()
     }
 }
 
@@ -791,7 +793,7 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
     // was only compensating a grid θ of another.
     let n_used = n.saturating_sub(1).max(2) as f64;
     loop {
-        let fit = finish(ctx, &bank, &model, q, &fold, false);
+        let fit = finish(ctx, &bank, &model, q, &fold, None);
         // A lag, play or self-heating acting through SIM's sensitivity with a negative gain
         // (the temperature reaching the sensor ahead of the thermistor, a die colder than it
         // after power-on) is not that physics: such a term goes first.
@@ -934,16 +936,23 @@ fn fast_warmup(
     if !fit.terms.iter().any(|t| t.mech == Mech::Warmup) {
         return None;
     }
-    let with = finish(ctx, bank, model, fit.q, fold, true);
-    if !with.terms.iter().any(Term::fast_warmup) {
-        return None;
-    }
     let filt = Filter::new(&ctx.p.t, &ctx.p.r_white[ctx.axis], fit.q, ctx.gm, |_| true);
     let nu = filt.n_used as f64;
-    // The whitened residual sums of squares, from each fit's deviance unit (their ratio).
-    let (sse0, sse1) = (fit.deviance_scale / fit.inflation, with.deviance_scale / with.inflation);
-    let lr = nu * (sse0 / sse1.max(1e-300)).ln() / with.inflation;
-    (chi2_sf(lr, 1.0) < alpha && lr > nu.ln() && with.heldout_rms.1 < fit.heldout_rms.1).then_some(with)
+    let mut best: Option<AxisFit> = None;
+    for ratio in super::mech::WARMUP_FAST_RATIOS {
+        let with = finish(ctx, bank, model, fit.q, fold, Some(ratio));
+        if !with.terms.iter().any(Term::fast_warmup) {
+            continue;
+        }
+        // The whitened residual sums of squares, from each fit's deviance unit (their ratio).
+        let (sse0, sse1) = (fit.deviance_scale / fit.inflation, with.deviance_scale / with.inflation);
+        let lr = nu * (sse0 / sse1.max(1e-300)).ln() / with.inflation;
+        let passes = chi2_sf(lr, 1.0) < alpha && lr > nu.ln() && with.heldout_rms.1 < fit.heldout_rms.1;
+        if passes && best.as_ref().is_none_or(|b| with.heldout_rms.1 < b.heldout_rms.1) {
+            best = Some(with);
+        }
+    }
+    best
 }
 
 /// Largest spread (standard deviation) of the accelerometer's own gravity component \[g\] at
@@ -1059,9 +1068,11 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
     // ([`fast_warmup`]): what that shape absorbs, a warm-up may be.
     if let Some(r) = rivals.iter_mut().find(|r| r.0 == Mech::Warmup) {
         let grid = ctx.grid(Mech::Warmup);
-        let columns = |tau: f64| ctx.member_columns(Mech::Warmup, tau, true);
-        if let Some(s) = refit.deviance(&grid, &|tau| ctx.offered(Mech::Warmup, tau), &columns) {
-            r.1 = r.1.min(s.deviance);
+        for ratio in super::mech::WARMUP_FAST_RATIOS {
+            let columns = |tau: f64| ctx.member_columns(Mech::Warmup, tau, Some(ratio));
+            if let Some(s) = refit.deviance(&grid, &|tau| ctx.offered(Mech::Warmup, tau), &columns) {
+                r.1 = r.1.min(s.deviance);
+            }
         }
     }
     if matches!(term.mech, Mech::Warmup | Mech::SelfHeating) {
@@ -1429,7 +1440,7 @@ impl PartialLs {
     }
 }
 
-fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize], fast: bool) -> AxisFit {
+fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize], fast: Option<f64>) -> AxisFit {
     let p = ctx.p;
     let axis = ctx.axis;
     let (t, r, y) = (&p.t, &p.r_white[axis], &p.r[axis]);
@@ -1550,7 +1561,19 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize], f
             };
             (bound(-1.0), bound(1.0))
         });
-        terms.push(Term { mech: *m, theta: *th, theta_ci, coef, se, lr_drop, p_drop, contribution, columns: tcols });
+        let fast_ratio = fast.filter(|_| *m == Mech::Warmup && nc > 1);
+        terms.push(Term {
+            mech: *m,
+            theta: *th,
+            theta_ci,
+            coef,
+            se,
+            lr_drop,
+            p_drop,
+            contribution,
+            columns: tcols,
+            fast_ratio,
+        });
         off += nc;
     }
     // Honest figures: the raw residual with one constant offset removed, before and after

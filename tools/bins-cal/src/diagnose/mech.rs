@@ -35,9 +35,10 @@ pub const TURN_ON_MIN_RANGE: f64 = 0.25;
 /// data left out of its fit, and fitted from the other folds it is not determined at all.
 pub const TURN_ON_MAX_FOLD_SHARE: f64 = 0.98;
 
-/// Ratio of the two time constants of a warm-up fitted with its fast part,
-/// `A·e^(−P/τ) + B·e^(−R·P/τ)` ([`Context::member_columns`]).
-pub const WARMUP_FAST_RATIO: f64 = 4.0;
+/// The ratios τ/τ_fast tried for a warm-up fitted with its fast part,
+/// `A·e^(−P/τ) + B·e^(−R·P/τ)` ([`Context::member_columns`]): a fast part from half the main
+/// time constant to a fourteenth of it.
+pub const WARMUP_FAST_RATIOS: [f64; 6] = [2.0, 3.0, 4.0, 6.0, 9.0, 14.0];
 
 /// A mechanism.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -710,14 +711,16 @@ impl<'a> Context<'a> {
     }
 
     /// The columns of a fitted member: [`Context::columns`], and for a warm-up fitted with its
-    /// fast part (`fast`) the second exponential `e^(−R·P/τ)` ([`WARMUP_FAST_RATIO`]) beside
+    /// fast part (`fast`: the ratio R, one of [`WARMUP_FAST_RATIOS`]) the second exponential
+    /// `e^(−R·P/τ)` beside
     /// `e^(−P/τ)`, where `τ/R` is itself offered. The search and the names use one exponential;
     /// a named warm-up's shape is then given its fast part where the data ask for it
     /// ([`super::fit::fit_axis`]).
-    pub fn member_columns(&self, m: Mech, theta: f64, fast: bool) -> Vec<Vec<f64>> {
+    pub fn member_columns(&self, m: Mech, theta: f64, fast: Option<f64>) -> Vec<Vec<f64>> {
         let mut cols = self.columns(m, theta);
-        let fast_tau = theta / WARMUP_FAST_RATIO;
-        if fast && m == Mech::Warmup && self.offered(m, fast_tau) {
+        let Some(ratio) = fast else { return cols };
+        let fast_tau = theta / ratio;
+        if m == Mech::Warmup && self.offered(m, fast_tau) {
             let pw = self.p.power.as_deref().unwrap_or(&[]);
             cols.push(pw.iter().map(|v| (-v / fast_tau).exp()).collect());
         }

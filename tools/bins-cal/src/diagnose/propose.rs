@@ -685,7 +685,7 @@ fn carried<'p>(d: &Diagnosis, cp: &'p Prepared, axis: usize) -> (Context<'p>, Ax
         .terms
         .iter()
         .filter_map(|t| {
-            let columns = ctx.member_columns(t.mech, t.theta.unwrap_or(0.0), t.fast_warmup());
+            let columns = ctx.member_columns(t.mech, t.theta.unwrap_or(0.0), t.fast_ratio);
             if columns.iter().all(|c| c.iter().all(|v| v.abs() < 1e-15)) {
                 return None;
             }
@@ -705,6 +705,7 @@ fn carried<'p>(d: &Diagnosis, cp: &'p Prepared, axis: usize) -> (Context<'p>, Ax
                 p_drop: f64::NAN,
                 contribution,
                 columns,
+                fast_ratio: t.fast_ratio,
             })
         })
         .collect();

@@ -448,6 +448,9 @@ pub fn term_params(
             ci.insert(name.to_string(), [lo, hi]);
         }
     }
+    if let (Some(ratio), Some(th)) = (term.fast_ratio, term.theta) {
+        params.insert("tau_fast_s".to_string(), th / ratio);
+    }
     for ((name, factor), (c, se)) in names.iter().zip(term.coef.iter().zip(&term.se)) {
         params.insert(name.clone(), c * factor);
         ci.insert(name.clone(), [(c - 1.96 * se) * factor, (c + 1.96 * se) * factor]);
