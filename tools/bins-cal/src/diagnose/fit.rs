@@ -360,6 +360,8 @@ pub struct AxisFit {
     pub separability: Vec<(Mech, Vec<(Mech, f64)>)>,
     /// The unit of the deviances: the whitened residual variance times the inflation.
     pub deviance_scale: f64,
+    /// The rows the noise model's whitening used (its updates), what the deviances count.
+    pub n_used: usize,
     /// The forward search.
     pub trace: Vec<StepInfo>,
     /// The mechanisms that pass the selection's test as the first term, against the nuisance
@@ -936,8 +938,7 @@ fn fast_warmup(
     if !fit.terms.iter().any(|t| t.mech == Mech::Warmup) {
         return None;
     }
-    let filt = Filter::new(&ctx.p.t, &ctx.p.r_white[ctx.axis], fit.q, ctx.gm, |_| true);
-    let nu = filt.n_used as f64;
+    let nu = fit.n_used as f64;
     let mut best: Option<AxisFit> = None;
     for ratio in super::mech::WARMUP_FAST_RATIOS {
         let with = finish(ctx, bank, model, fit.q, fold, Some(ratio));
@@ -1629,6 +1630,7 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize], f
         ambiguous: Vec::new(),
         separability: Vec::new(),
         deviance_scale,
+        n_used: filt.n_used,
         trace: Vec::new(),
         passes_alone: Vec::new(),
         drift,

@@ -718,6 +718,7 @@ fn carried<'p>(d: &Diagnosis, cp: &'p Prepared, axis: usize) -> (Context<'p>, Ax
         ambiguous: Vec::new(),
         separability: Vec::new(),
         deviance_scale: fit.deviance_scale,
+        n_used: fit.n_used,
         trace: Vec::new(),
         passes_alone: Vec::new(),
         drift: Vec::new(),
