@@ -373,7 +373,8 @@ fn a_tempco_on_an_accelerometer_the_model_does_not_fit_is_grouped_with_the_play(
 /// docs/diagnosis.md, section 5). Single draw 89096: the generator's warm-up of two exponentials
 /// (0.65 of it at τ = 640 s, 0.35 at τ/6) on y and z, three sessions powered on at their start,
 /// each a ramp, in tilted positions. One exponential left y at 1.50× its floor; with the second
-/// at τ/4 y and z come within 1.1×, the names unchanged (the warm-up exactly, on y and z).
+/// y and z come within 1.1×, the names unchanged (the warm-up exactly, on y and z), and the fast
+/// time constant is reported.
 #[test]
 fn a_named_warmup_takes_its_fast_part() {
     let case = Case::draw_user(89096, false);
@@ -385,6 +386,8 @@ fn a_named_warmup_takes_its_fast_part() {
         let ratio = r.heldout_rms_after_mg[ax] / r.noise_floor_mg[ax];
         assert!(ratio <= 1.1, "{ax} at {ratio:.2}× its floor");
     }
-    assert!(warmup.params["y"].contains_key("amp_fast_mg"), "{:?}", warmup.params["y"]);
+    for key in ["amp_fast_mg", "tau_fast_s"] {
+        assert!(warmup.params["y"].contains_key(key), "{key}: {:?}", warmup.params["y"]);
+    }
     assert_no_definite_false_name(case);
 }
