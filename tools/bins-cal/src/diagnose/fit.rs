@@ -1483,7 +1483,10 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize], f
                     f64::INFINITY
                 }
             };
-            let (best, _) = super::stats::golden_min(th0.ln() - step, th0.ln() + step, 16, eval);
+            // A warm-up given its fast part moves further: the one exponential the search
+            // fitted to two lies between their time constants, below the slow one.
+            let reach = if m == Mech::Warmup && fast.is_some() { 2.0 * step } else { step };
+            let (best, _) = super::stats::golden_min(th0.ln() - reach, th0.ln() + reach, 16, eval);
             if eval(best) <= eval(th0.ln()) {
                 members[k].1 = Some(best.exp());
             }

@@ -712,15 +712,17 @@ impl<'a> Context<'a> {
 
     /// The columns of a fitted member: [`Context::columns`], and for a warm-up fitted with its
     /// fast part (`fast`: the ratio R, one of [`WARMUP_FAST_RATIOS`]) the second exponential
-    /// `e^(−R·P/τ)` beside
-    /// `e^(−P/τ)`, where `τ/R` is itself offered. The search and the names use one exponential;
-    /// a named warm-up's shape is then given its fast part where the data ask for it
-    /// ([`super::fit::fit_axis`]).
+    /// `e^(−R·P/τ)` beside `e^(−P/τ)`, where `τ/R` is at least the turn-on grid's shortest
+    /// time constant (three samples, and 1 s). The fast part is not held to the turn-on rules
+    /// of [`Context::offered`]: beside the slow part it is kept only where it lowers the raw
+    /// held-out RMS, which a column whose signature lives in one held-out fold cannot do. The
+    /// search and the names use one exponential; a named warm-up's shape is then given its
+    /// fast part where the data ask for it ([`super::fit::fit_axis`]).
     pub fn member_columns(&self, m: Mech, theta: f64, fast: Option<f64>) -> Vec<Vec<f64>> {
         let mut cols = self.columns(m, theta);
         let Some(ratio) = fast else { return cols };
         let fast_tau = theta / ratio;
-        if m == Mech::Warmup && self.offered(m, fast_tau) {
+        if m == Mech::Warmup && fast_tau >= (3.0 * self.p.dt).max(1.0) {
             let pw = self.p.power.as_deref().unwrap_or(&[]);
             cols.push(pw.iter().map(|v| (-v / fast_tau).exp()).collect());
         }
