@@ -923,7 +923,9 @@ pub fn fit_axis(ctx: &Context, n_axes_tested: usize, random_walk: Option<f64>) -
 /// The fit `fit` of `model` with its warm-up given the fast part ([`Context::member_columns`]),
 /// where the data ask for it: the second exponential passes the selection's own test (its
 /// likelihood ratio beside the model at p < `alpha` and above BIC's ln n) and lowers the raw
-/// held-out RMS the report prints. `None` without a warm-up or where the fast part fails.
+/// held-out RMS the report prints. The fast part is tried at each ratio of
+/// `mech::WARMUP_FAST_RATIOS`; of the refits that pass, the one with the lowest held-out RMS is
+/// kept. `None` without a warm-up or where no ratio passes.
 /// A warm-up is rarely one exponential (the electronics and the package settle at their own
 /// rates); one exponential fitted to two leaves the first minutes after power-on at several
 /// times the noise floor, or takes another term to stand in for the rest.
