@@ -941,14 +941,15 @@ fn fast_warmup(
         return None;
     }
     let nu = fit.n_used as f64;
+    // The whitened residual sums of squares, from each fit's deviance unit (their ratio).
+    let sse0 = fit.deviance_scale / fit.inflation;
     let mut best: Option<AxisFit> = None;
     for ratio in super::mech::WARMUP_FAST_RATIOS {
         let with = finish(ctx, bank, model, fit.q, fold, Some(ratio));
         if !with.terms.iter().any(Term::fast_warmup) {
             continue;
         }
-        // The whitened residual sums of squares, from each fit's deviance unit (their ratio).
-        let (sse0, sse1) = (fit.deviance_scale / fit.inflation, with.deviance_scale / with.inflation);
+        let sse1 = with.deviance_scale / with.inflation;
         let lr = nu * (sse0 / sse1.max(1e-300)).ln() / with.inflation;
         let passes = chi2_sf(lr, 1.0) < alpha && lr > nu.ln() && with.heldout_rms.1 < fit.heldout_rms.1;
         if passes && best.as_ref().is_none_or(|b| with.heldout_rms.1 < b.heldout_rms.1) {

@@ -685,16 +685,21 @@ impl<'a> Context<'a> {
         (-pmin / theta).exp() - (-pmax / theta).exp() >= TURN_ON_MIN_RANGE && theta >= self.turn_on_min_tau_s
     }
 
+    /// The shortest time constant a lag or turn-on grid holds \[s\]: three samples, and 1 s.
+    fn shortest_tau_s(&self) -> f64 {
+        (3.0 * self.p.dt).max(1.0)
+    }
+
     fn grid_span(&self, m: Mech) -> Vec<f64> {
         let p = self.p;
         let dur = p.t.last().copied().unwrap_or(0.0) - p.t.first().copied().unwrap_or(0.0);
         let (lo, hi) = match m {
-            Mech::ThermalLag => ((3.0 * p.dt).max(1.0), 0.25 * dur),
+            Mech::ThermalLag => (self.shortest_tau_s(), 0.25 * dur),
             Mech::ThermalHysteresis | Mech::BiasHysteresis => (0.02, 0.5 * self.temp_range),
             Mech::Drift => (dur / 30.0, 3.0 * dur),
             Mech::SelfHeating | Mech::Warmup => {
                 let pmax = p.power.as_ref().map_or(0.0, |v| v.iter().fold(0.0, |a: f64, &b| a.max(b)));
-                ((3.0 * p.dt).max(1.0), 0.5 * pmax)
+                (self.shortest_tau_s(), 0.5 * pmax)
             }
             _ => return Vec::new(),
         };
@@ -713,7 +718,7 @@ impl<'a> Context<'a> {
     /// The columns of a fitted member: [`Context::columns`], and for a warm-up fitted with its
     /// fast part (`fast`: the ratio R, one of [`WARMUP_FAST_RATIOS`]) the second exponential
     /// `e^(−R·P/τ)` beside `e^(−P/τ)`, where `τ/R` is at least the turn-on grid's shortest
-    /// time constant (three samples, and 1 s). The fast part is not held to the turn-on rules
+    /// time constant (`shortest_tau_s`: three samples, and 1 s). The fast part is not held to the turn-on rules
     /// of [`Context::offered`]: beside the slow part it is kept only where it lowers the raw
     /// held-out RMS, which a column whose signature lives in one held-out fold cannot do. The
     /// search and the names use one exponential; a named warm-up's shape is then given its
@@ -722,7 +727,7 @@ impl<'a> Context<'a> {
         let mut cols = self.columns(m, theta);
         let Some(ratio) = fast else { return cols };
         let fast_tau = theta / ratio;
-        if m == Mech::Warmup && fast_tau >= (3.0 * self.p.dt).max(1.0) {
+        if m == Mech::Warmup && fast_tau >= self.shortest_tau_s() {
             let pw = self.p.power.as_deref().unwrap_or(&[]);
             cols.push(pw.iter().map(|v| (-v / fast_tau).exp()).collect());
         }
