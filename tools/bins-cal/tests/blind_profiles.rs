@@ -185,13 +185,15 @@ fn report_of(case: &Case) -> bins_cal::diagnose::report::Report {
 /// On an accelerometer the model leaves above its floor, the thermal-history findings are one
 /// group (docs/diagnosis.md, section 4, `report::THERMAL_JOIN_RATIO`). Combined draw 13184: a
 /// self-heating of 14.6 σ on z on one ramp, the thermistor part-way between case and die; the
-/// model leaves z at 1.3× its floor, and a thermal play or an additive one, named beside the
-/// self-heating there, was a definite false name before the rule.
+/// model leaves x and z above 1.25× their floor, and a thermal play or an additive one, named
+/// beside the self-heating there, was a definite false name before the rule. With the die's
+/// rise SIM shows (section 3) the self-heating is named on z alone.
 #[test]
 fn thermal_history_findings_on_an_axis_the_model_does_not_fit_are_one_group() {
     use bins_cal::diagnose::mech::Mech;
     use bins_cal::diagnose::report::THERMAL_JOIN_RATIO;
-    let r = report_of(&Case::draw_user(13184, true));
+    let case = Case::draw_user(13184, true);
+    let r = report_of(&case);
     let thermal = |id: &str| Mech::from_id(id).is_some_and(Mech::thermal_history);
     let mut joined_axes = 0;
     for ax in ["x", "y", "z"] {
@@ -208,14 +210,12 @@ fn thermal_history_findings_on_an_axis_the_model_does_not_fit_are_one_group() {
         joined_axes >= 1,
         "no accelerometer above {THERMAL_JOIN_RATIO}× its floor: the draw no longer shows the rule"
     );
-    let z = r.ambiguous.iter().find(|g| g.axes.iter().any(|a| a == "z")).expect("a group on z");
-    assert!(z.ids.iter().any(|i| i == "self_heating"), "z's group {:?} lost the true self-heating", z.ids);
-    assert!(r.effects.iter().all(|e| !e.axes.iter().any(|a| a == "z")), "an effect on z beside its group");
-    assert!(
-        r.notes.iter().any(|n| n.starts_with("accelerometer z:") && n.contains("modelled together")),
-        "{:?}",
-        r.notes
-    );
+    let on_z = |id: &str| {
+        r.effects.iter().any(|e| e.id == id && e.axes.iter().any(|a| a == "z"))
+            || r.ambiguous.iter().any(|g| g.axes.iter().any(|a| a == "z") && g.ids.iter().any(|i| i == id))
+    };
+    assert!(on_z("self_heating"), "z lost the true self-heating: {:?} {:?}", r.effects, r.ambiguous);
+    assert_no_definite_false_name(case);
 }
 
 /// A static scale term on a soak in six positions may be the die's rise after power-on acting
@@ -274,31 +274,27 @@ fn a_soak_lag_read_coarsely_in_blocks_is_named_without_a_tempco() {
     assert_no_definite_false_name(case);
 }
 
-/// A tempco beside a lag, play or self-heating *named* on the same accelerometer is grouped with
-/// it as well, under the same size condition (docs/diagnosis.md, section 4). Single draw 81110:
-/// a thermal play 5.2 °C wide on steps down from 44 °C in six positions; the play was named on
-/// x, y and z, and `scale_temp` beside it on x and y (cutting 0.11 and 0.44 mg against the
-/// play's 0.87 and 2.76 mg), a definite false name.
+/// A play that acts on the die is named without a tempco beside it once the terms act on the
+/// die's temperature SIM shows (docs/diagnosis.md, section 3). Single draw 81110: a thermal play
+/// 5.2 °C wide on steps down from 44 °C in six positions. At the thermistor's reading the play
+/// was named on x, y and z with `scale_temp` beside it on x and y (cutting 0.11 and 0.44 mg
+/// against the play's 0.87 and 2.76 mg): a definite false name, then a group with the play
+/// (the rule of section 4 for a tempco beside a named thermal-path term). At the die's
+/// temperature the tempco is not found at all.
 #[test]
-fn a_tempco_beside_a_named_thermal_path_term_is_grouped_with_it() {
+fn a_play_on_the_die_is_named_without_a_tempco_beside_it() {
     let case = Case::draw_user(81110, false);
     let r = report_of(&case);
-    assert!(
-        r.effects.iter().all(|e| e.id != "scale_temp"),
-        "{:?}",
-        r.effects.iter().map(|e| &e.id).collect::<Vec<_>>()
-    );
-    let play = r.effects.iter().find(|e| e.id == "thermal_hysteresis").expect("the play is still named");
-    for ax in ["x", "y"] {
-        assert!(play.axes.iter().any(|a| a == ax), "the play is not named on {ax}: {:?}", play.axes);
-        let g = r.ambiguous.iter().find(|g| g.axes.iter().any(|a| a == ax) && g.ids.iter().any(|i| i == "scale_temp"));
-        assert!(g.is_some_and(|g| g.ids.iter().any(|i| i == "thermal_hysteresis")), "{ax}: {:?}", r.ambiguous);
-        assert!(
-            r.notes.iter().any(|n| n.starts_with(&format!("accelerometer {ax}:"))
-                && n.contains("scale_temp in one group with thermal_hysteresis")),
-            "{:?}",
-            r.notes
-        );
+    assert!(r.sim_die_rise.is_some(), "SIM's die rise not found");
+    let ids: Vec<_> = r.effects.iter().map(|e| (&e.id, &e.axes)).collect();
+    let play = r.effects.iter().find(|e| e.id == "thermal_hysteresis").expect("the play is named");
+    for ax in ["x", "y", "z"] {
+        assert!(play.axes.iter().any(|a| a == ax), "the play is not named on {ax}: {ids:?}");
+    }
+    assert!(r.effects.iter().all(|e| e.id != "scale_temp"), "{ids:?}");
+    assert!(r.ambiguous.iter().all(|g| !g.ids.iter().any(|i| i == "scale_temp")), "{:?}", r.ambiguous);
+    for ax in ["x", "y", "z"] {
+        assert!(r.heldout_rms_after_mg[ax] <= 1.25 * r.noise_floor_mg[ax], "{ax} above 1.25× its floor");
     }
     assert_no_definite_false_name(case);
 }
@@ -390,4 +386,75 @@ fn a_named_warmup_takes_its_fast_part() {
         assert!(warmup.params["y"].contains_key(key), "{key}: {:?}", warmup.params["y"]);
     }
     assert_no_definite_false_name(case);
+}
+
+/// The die's rise over the thermistor SIM shows (`mech::die_rise`) against the generator's
+/// own: `(1 − share)·rise` settled, for user profiles of `n` single draws from `seed`, rows
+/// capped near `max_rows`. Returns (seed, sessions' kinds, estimate [°C], truth [°C]).
+fn die_rises(seed: u64, n: u64, max_rows: f64) -> Vec<(u64, String, Option<f64>, f64)> {
+    (seed..seed + n)
+        .map(|s| {
+            let mut c = Case::draw_user(s, false);
+            let u = c.user.clone().expect("a user profile");
+            let total: f64 = u.sessions.iter().map(|s| s.dur_s).sum();
+            c.rate_hz = c.rate_hz.min(max_rows / total);
+            c.rows = (total * c.rate_hz).round() as usize;
+            let (sim, real, _) = blind::generator::generate(&c);
+            let p =
+                bins_cal::diagnose::prep::prepare(&sim, &real, std::path::Path::new("s"), std::path::Path::new("r"))
+                    .expect("prepared");
+            (s, u.name(), p.die_rise.map(|d| d.amp_c), (1.0 - u.thermistor_share) * u.rise_c)
+        })
+        .collect()
+}
+
+#[test]
+fn sim_shows_how_far_its_die_runs_ahead_of_the_thermistor() {
+    // The user-profile generator's SIM is its unit at the die's temperature, recording the
+    // thermistor's reading; the die settles (1 − share)·rise above it after each power-on
+    // (two exponentials, τ and τ/4). Where the rise is found, it is that figure to within a
+    // third; a soak-only profile may leave it undetermined (its polynomial absorbs the rise).
+    let found = die_rises(1, 16, 20_000.0);
+    let mut n_found = 0;
+    for (s, name, est, truth) in &found {
+        println!("user draw {s} {name}: die rise {est:?} °C, generator {truth:.3} °C");
+        if let Some(a) = est {
+            n_found += 1;
+            assert!((a - truth).abs() <= 0.35 * truth + 0.05, "draw {s} {name}: {a:.3} °C against {truth:.3} °C");
+        }
+    }
+    assert!(n_found >= 8, "the rise found on {n_found} of 16 profiles");
+    // SIM driven by the thermistor's own reading has no die of its own.
+    for s in 1..=6u64 {
+        let mut c = Case::draw(s);
+        c.rows = c.rows.min(20_000);
+        let (sim, real, _) = blind::generator::generate(&c);
+        let p = bins_cal::diagnose::prep::prepare(&sim, &real, std::path::Path::new("s"), std::path::Path::new("r"))
+            .expect("prepared");
+        assert!(p.die_rise.is_none(), "draw {s}: a die rise {:?} where SIM reads the thermistor", p.die_rise);
+    }
+}
+
+#[test]
+#[ignore = "200 profiles: run in release with --ignored"]
+fn die_rise_sweep() {
+    let seed = env_num("BLIND_SEED", 1u64);
+    let all = die_rises(seed, 200, 1e9);
+    let mut err: Vec<f64> = Vec::new();
+    for (s, name, est, truth) in &all {
+        println!("user draw {s} {name}: die rise {est:?} °C, generator {truth:.3} °C");
+        if let Some(a) = est {
+            err.push((a - truth).abs() / truth);
+        }
+    }
+    err.sort_by(f64::total_cmp);
+    let q = |f: f64| err.get(((err.len() as f64 - 1.0) * f).round() as usize).copied().unwrap_or(f64::NAN);
+    println!(
+        "found on {} of {}; relative error median {:.3}, 90th percentile {:.3}, worst {:.3}",
+        err.len(),
+        all.len(),
+        q(0.5),
+        q(0.9),
+        q(1.0)
+    );
 }

@@ -34,6 +34,15 @@ pub const BLOCKS: usize = 40;
 /// Folds (block `b` is in fold `b % FOLDS`).
 pub const FOLDS: usize = 5;
 
+/// In the selection's cross-validated deviance, a column whose whitened training rows hold
+/// less than this share of its whitened sum of squares is not determined by them and takes
+/// the fit of all rows. Its coefficient from the training rows alone would carry a variance
+/// above 10³ times the whole fit's: a session's level column whitened under a small random
+/// walk keeps 2·10⁻⁶ of its energy outside the fold it starts in, and a solve on that gave
+/// deviances of ±10⁷ for every candidate (10⁻¹³ at 10⁻⁶: steps located close together in one
+/// fold).
+pub const CV_MIN_TRAINING_SHARE: f64 = 1e-3;
+
 /// A candidate: one mechanism at one grid θ, and its columns in the bank.
 #[derive(Clone, Debug)]
 struct Cand {
@@ -262,12 +271,11 @@ impl Grams {
             // A column the training rows do not determine (a bias step's Heaviside column,
             // whose whitened form lives only just after the step, in the held-out block)
             // takes the fit of all rows, as the held-out figures do. "Not determined" is also a
-            // column the training rows hold almost nothing of (below 10⁻⁶ of all rows' sum of
-            // squares, as in [`raw_heldout`]): its training Gram is the difference of two
-            // nearly equal sums, and a solve that passes on it returns noise over ~0 (seen as
-            // a cross-validated deviance of −10¹³ for every candidate beside steps located
-            // close together in one fold).
-            let determined = idx.iter().all(|&c| self.train[k][c * p + c] > 1e-6 * self.all[c * p + c]);
+            // column the training rows hold almost nothing of ([`CV_MIN_TRAINING_SHARE`] of
+            // all rows' whitened sum of squares): a solve that passes on it returns noise over
+            // ~0.
+            let determined =
+                idx.iter().all(|&c| self.train[k][c * p + c] > CV_MIN_TRAINING_SHARE * self.all[c * p + c]);
             let on_train = if determined { Self::fit(&self.train[k], p, idx) } else { None };
             let (beta, _) = on_train.or_else(|| Self::fit(&self.all, p, idx))?;
             let g = &self.test[k];

@@ -86,6 +86,10 @@ pub struct Prepared {
     /// the sampling (`power_s` going back, no time missing) is not a new session: the
     /// temperature was recorded throughout.
     pub session_starts: Vec<usize>,
+    /// The die's rise over the thermistor after each power-on that SIM shows
+    /// ([`super::mech::die_rise`]); when present it is in `temp_s` and `sim_temp_s`, which are
+    /// then the die's temperature the thermal and temperature terms act on.
+    pub die_rise: Option<super::mech::DieRise>,
     /// Notes for the report.
     pub notes: Vec<String>,
 }
@@ -104,6 +108,27 @@ pub const SESSION_GAP_STEPS: f64 = 20.0;
 pub const POWER_ON_GAP_STEPS: f64 = 10.0;
 
 impl Prepared {
+    /// Finds the die's rise SIM shows ([`super::mech::die_rise`]) and, when there is one, moves
+    /// `temp_s` and `sim_temp_s` to the die's temperature, with a note.
+    fn take_die_rise(&mut self) {
+        let Some(d) = super::mech::die_rise(self) else { return };
+        let Some(power) = self.power.as_deref() else { return };
+        let offset = d.offset_c(power);
+        for (t, o) in self.temp_s.iter_mut().zip(&offset) {
+            *t += o;
+        }
+        for (t, o) in self.sim_temp_s.iter_mut().zip(&offset) {
+            *t += o;
+        }
+        self.notes.push(format!(
+            "SIM's die runs {:+.2} °C over the thermistor once settled after each power-on (τ = {:.0} s): at that temperature SIM's sensitivity leaves {:.0} % of what it leaves at the thermistor's; the temperature and thermal terms act on the die's temperature",
+            d.amp_c,
+            d.tau_s,
+            100.0 * d.sim_left_share
+        ));
+        self.die_rise = Some(d);
+    }
+
     /// The session of each row (index into [`Prepared::session_starts`]).
     pub fn session_of_rows(&self) -> Vec<usize> {
         let mut out = Vec::with_capacity(self.t.len());
@@ -1322,7 +1347,7 @@ impl Builder {
             }
             row_floor = Some(floor_g);
         }
-        Ok(Prepared {
+        let mut p = Prepared {
             n_total,
             skipped,
             line,
@@ -1352,7 +1377,10 @@ impl Builder {
             row_floor,
             session_starts,
             notes,
-        })
+            die_rise: None,
+        };
+        p.take_die_rise();
+        Ok(p)
     }
 }
 

@@ -304,6 +304,11 @@ pub struct Report {
     /// absent when none was given.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bias_instability_mg_tau_s: Option<(f64, f64)>,
+    /// The die's rise over the thermistor after each power-on that SIM shows
+    /// ([`super::mech::die_rise`]): the temperature and thermal terms act on the thermistor's
+    /// reading plus this rise. Absent when SIM shows none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sim_die_rise: Option<super::mech::DieRise>,
     /// The sensor's own random walk [mg/√h]: from the Hadamard variance of what the model
     /// leaves in the static segments, at averaging times up to a minute
     /// ([`short_tau_q`]); absent when no segment is long enough.
@@ -1119,6 +1124,7 @@ pub fn build(
         random_walk_mg_per_sqrt_h: per_axis(|i| (axes[i].q * 3600.0).sqrt() * 1e3),
         random_walk_source: if input.opt.random_walk_mg_per_sqrt_h.is_some() { "given" } else { "estimated" }.into(),
         bias_instability_mg_tau_s: input.opt.bias_instability,
+        sim_die_rise: p.die_rise,
         sensor_random_walk_mg_per_sqrt_h: sensor_rw,
         drift_rms_mg: per_axis(|i| axes[i].drift_rms * 1e3),
         unexplained_rms_mg: per_axis(|i| left(i).map_or(0.0, |s| s.0 * 1e3)),
