@@ -459,6 +459,12 @@ impl DieRise {
     }
 }
 
+/// The temperature of a die that rises `rho` over `temp` after each power-on with time constant
+/// `tau`: `T + ρ·(1 − e^(−P/τ))` at the power-on times `power` [°C].
+pub fn die_temperature(temp: &[f64], power: &[f64], rho: f64, tau: f64) -> Vec<f64> {
+    temp.iter().zip(power).map(|(t, p)| t - rho * (-p / tau).exp_m1()).collect()
+}
+
 /// A die rise is taken when at the die's temperature SIM's sensitivity leaves at most this
 /// share of what it leaves at the thermistor's ([`die_rise`]).
 pub const DIE_RISE_MAX_LEFT: f64 = 0.5;
@@ -500,9 +506,7 @@ pub fn die_rise(p: &Prepared) -> Option<DieRise> {
     if axes.is_empty() {
         return None;
     }
-    let at = |amp: f64, tau: f64| -> Vec<f64> {
-        temp.iter().zip(power).map(|(t, p)| t - amp * (-p / tau).exp_m1()).collect()
-    };
+    let at = |amp: f64, tau: f64| die_temperature(temp, power, amp, tau);
     // Linearised about the temperature `base` (the die at `amp0`): each accelerometer's
     // amplitude `a_i` with its information `E_i / SSE_i` (`E_i` what the column adds beyond the
     // polynomial, per unit amplitude squared), the common amplitude weighted by it, and the
@@ -546,22 +550,13 @@ pub fn die_rise(p: &Prepared) -> Option<DieRise> {
     let scores: Vec<f64> = grid.iter().map(|&t| score(t)).collect();
     let best = (0..grid.len()).filter(|&k| scores[k].is_finite()).min_by(|&a, &b| scores[a].total_cmp(&scores[b]))?;
     // Golden section in ln τ between the best point's neighbours.
-    let (mut a, mut b) = (grid[best.saturating_sub(1)].ln(), grid[(best + 1).min(grid.len() - 1)].ln());
-    let r = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut c, mut d) = (b - r * (b - a), a + r * (b - a));
-    let (mut fc, mut fd) = (score(c.exp()), score(d.exp()));
-    for _ in 0..12 {
-        if fc < fd {
-            (b, d, fd) = (d, c, fc);
-            c = b - r * (b - a);
-            fc = score(c.exp());
-        } else {
-            (a, c, fc) = (c, d, fd);
-            d = a + r * (b - a);
-            fd = score(d.exp());
-        }
-    }
-    let tau = if fc.min(fd) < scores[best] { if fc < fd { c.exp() } else { d.exp() } } else { grid[best] };
+    let (ln_tau, f) = super::stats::golden_min(
+        grid[best.saturating_sub(1)].ln(),
+        grid[(best + 1).min(grid.len() - 1)].ln(),
+        12,
+        |x| score(x.exp()),
+    );
+    let tau = if f < scores[best] { ln_tau.exp() } else { grid[best] };
     // The amplitude, linearised twice (the second time about the die found the first).
     let (amp1, _, own) = linearised(0.0, tau)?;
     let (amp, _, _) = linearised(amp1, tau)?;

@@ -205,7 +205,7 @@ impl<'c, 'p> Refit<'c, 'p> {
         let columns = |rho: f64, th: f64, tau: f64| -> Vec<Vec<f64>> {
             let temp = match &soak {
                 Some(sessions) if rho == 0.0 => soak_temperature(sessions, power, tau),
-                _ => die_temperature(&ctx.p.temp_s, power, rho, tau),
+                _ => super::mech::die_temperature(&ctx.p.temp_s, power, rho, tau),
             };
             let mut cols = ctx.columns_at(rival, th, &temp);
             if rival == Mech::BiasTempOrder {
@@ -288,7 +288,7 @@ impl Refit<'_, '_> {
         let mut best: Option<f64> = None;
         for &rho in rhos {
             let columns = |tau: f64| -> Vec<Vec<f64>> {
-                let temp = die_temperature(&ctx.p.temp_s, power, rho, tau);
+                let temp = super::mech::die_temperature(&ctx.p.temp_s, power, rho, tau);
                 let cols = ctx.columns_at(mech, theta.unwrap_or(0.0), &temp);
                 let mut d: Vec<f64> = contribution.iter().map(|v| -v).collect();
                 for (c, b) in cols.iter().zip(coef) {
@@ -508,12 +508,6 @@ fn soak_temperature(sessions: &[(std::ops::Range<usize>, f64, f64)], power: &[f6
         out.extend(power[r.clone()].iter().map(|pw| t0 - a * (-pw / tau).exp_m1()));
     }
     out
-}
-
-/// The die's temperature when it runs `rho` °C above the thermistor's `temp` once settled,
-/// rising as `1 − e^(−P/τ)` after each power-on (`power`: `power_s`).
-fn die_temperature(temp: &[f64], power: &[f64], rho: f64, tau: f64) -> Vec<f64> {
-    temp.iter().zip(power).map(|(t, p)| t - rho * (-p / tau).exp_m1()).collect()
 }
 
 /// The deviance the rival `rival` (one mechanism, θ searched on its grid where it has one)
