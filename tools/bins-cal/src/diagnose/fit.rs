@@ -1163,13 +1163,14 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
         }
     }
     // Or the rest of that lag's or play's shape: a gain varying with temperature, or its
-    // state carried through the unpowered gaps.
+    // state across the unpowered gaps taken the other way (a lag carried, a play restarted).
     for (j, other) in fit.terms.iter().enumerate() {
         if j == k || !matches!(other.mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis) {
             continue;
         }
-        for d in
-            [refit.gain_with_temperature(other.mech), refit.carried_across_sessions(other.mech)].into_iter().flatten()
+        for d in [refit.gain_with_temperature(other.mech), refit.other_state_across_sessions(other.mech)]
+            .into_iter()
+            .flatten()
         {
             add(other.mech, d);
         }

@@ -604,7 +604,10 @@ pub fn bias_powers(temp: &[f64], orders: &[i32]) -> Vec<Vec<f64>> {
     orders.iter().map(|&e| temp.iter().map(|t| (t - T0_C).powi(e)).collect()).collect()
 }
 
-/// Play (backlash) operator of width `h`, starting at the first temperature.
+/// Play (backlash) operator of width `h`, starting at the first temperature. Over a recording
+/// of several sessions it runs on through the joins: a play is a position, which the unpowered
+/// time does not relax, and the temperature between two sessions is taken to have gone straight
+/// from the last reading to the next (docs/recording-format.md, "Sessions").
 pub fn play(temp: &[f64], h: f64) -> Vec<f64> {
     let mut e = temp.first().copied().unwrap_or(0.0);
     temp.iter()
@@ -615,8 +618,9 @@ pub fn play(temp: &[f64], h: f64) -> Vec<f64> {
         .collect()
 }
 
-/// `f` applied to each session's rows ([`Prepared::sessions`]) and the results joined: a lag or
-/// play starts afresh at each session, its state across the unrecorded time being unknown.
+/// `f` applied to each session's rows ([`Prepared::sessions`]) and the results joined: a lag
+/// starts afresh at each session, the die having settled to the thermistor's temperature over
+/// the unrecorded time.
 pub fn by_session(p: &Prepared, f: impl Fn(std::ops::Range<usize>) -> Vec<f64>) -> Vec<f64> {
     let sessions = p.sessions();
     if sessions.len() == 1 {
@@ -924,11 +928,11 @@ impl<'a> Context<'a> {
                 vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - s_now(r)).collect()]
             }
             Mech::ThermalHysteresis => {
-                let te = by_session(p, |r| play(&temp[r], theta));
+                let te = play(temp, theta);
                 vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - s_now(r)).collect()]
             }
             Mech::BiasHysteresis => {
-                let te = by_session(p, |r| play(&temp[r], theta));
+                let te = play(temp, theta);
                 let d: Vec<f64> = (0..n).map(|r| (te[r] - temp[r]) / (0.5 * theta)).collect();
                 vec![d.clone(), (0..n).map(|r| d[r] * dtc(r)).collect()]
             }

@@ -331,10 +331,13 @@ impl Refit<'_, '_> {
         self.deviance(&grid, &|_| true, &columns).map(|s| s.deviance)
     }
 
-    /// The deviance the fitted lag or play `mech` cannot absorb carried through the unpowered
-    /// gaps instead of restarted at each session (its state across a gap is unknown: the
-    /// library restarts it; a unit's die may keep it), θ on its grid. `None` for one session.
-    pub fn carried_across_sessions(&self, mech: Mech) -> Option<f64> {
+    /// The deviance the fitted lag or play `mech` cannot absorb with the other state across
+    /// the unpowered gaps, θ on its grid: the lag carried through them instead of restarted at
+    /// each session (the library takes the die settled to the thermistor; a unit's die may not
+    /// have), the play restarted at each session's first temperature instead of carried (the
+    /// library takes the temperature to have gone straight between the readings; a chamber
+    /// may have turned back in the gap). `None` for one session.
+    pub fn other_state_across_sessions(&self, mech: Mech) -> Option<f64> {
         let ctx = self.ctx;
         let p = ctx.p;
         if p.sessions().len() < 2 || !matches!(mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis)
@@ -346,7 +349,7 @@ impl Refit<'_, '_> {
         let columns = |th: f64| -> Vec<Vec<f64>> {
             let te = match mech {
                 Mech::ThermalLag => super::mech::lagged(&p.t, &p.temp_s, th),
-                _ => super::mech::play(&p.temp_s, th),
+                _ => super::mech::by_session(p, |r| super::mech::play(&p.temp_s[r], th)),
             };
             match mech {
                 Mech::BiasHysteresis => {
