@@ -1163,7 +1163,7 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
         }
     }
     // Or the rest of that lag's or play's shape: a gain varying with temperature, or its
-    // state across the unpowered gaps taken the other way (a lag carried, a play restarted).
+    // state restarted at each session instead of carried through the unpowered gaps.
     for (j, other) in fit.terms.iter().enumerate() {
         if j == k || !matches!(other.mech, Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis) {
             continue;

@@ -574,7 +574,10 @@ pub fn die_rise(p: &Prepared) -> Option<DieRise> {
 }
 
 /// First-order lag of the temperature with time constant `tau`, exact for an input that is
-/// linear between samples (first-order hold); starts in equilibrium.
+/// linear between samples (first-order hold); starts in equilibrium. Over a recording of
+/// several sessions it runs on through the joins: the unpowered unit's parts go on following
+/// the chamber, taken to have gone straight from the last reading to the next
+/// (docs/recording-format.md, "Sessions").
 pub fn lagged(t: &[f64], temp: &[f64], tau: f64) -> Vec<f64> {
     let mut out = Vec::with_capacity(temp.len());
     let mut x = temp.first().copied().unwrap_or(0.0);
@@ -618,9 +621,10 @@ pub fn play(temp: &[f64], h: f64) -> Vec<f64> {
         .collect()
 }
 
-/// `f` applied to each session's rows ([`Prepared::sessions`]) and the results joined: a lag
-/// starts afresh at each session, the die having settled to the thermistor's temperature over
-/// the unrecorded time.
+/// `f` applied to each session's rows ([`Prepared::sessions`]) and the results joined: a lag or
+/// play started afresh at each session, the rival
+/// ([`super::separate::Refit::other_state_across_sessions`]) of the state the library carries
+/// through the unrecorded time ([`lagged`], [`play`]).
 pub fn by_session(p: &Prepared, f: impl Fn(std::ops::Range<usize>) -> Vec<f64>) -> Vec<f64> {
     let sessions = p.sessions();
     if sessions.len() == 1 {
@@ -924,7 +928,7 @@ impl<'a> Context<'a> {
         };
         match m {
             Mech::ThermalLag => {
-                let te = by_session(p, |r| lagged(&p.t[r.clone()], &temp[r], theta));
+                let te = lagged(&p.t, temp, theta);
                 vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - s_now(r)).collect()]
             }
             Mech::ThermalHysteresis => {

@@ -81,9 +81,9 @@ pub struct Prepared {
     /// The first row (or block) of each session, ascending, starting with 0: a session starts
     /// where the time jumps between consecutive lines of the file with the unit unpowered
     /// ([`SESSION_GAP_S`]; `power_s` going back across a longer step than the sampling's). The
-    /// noise model's level, the thermal terms' lags and the temperature's smoothing restart at
-    /// each: their state across the unrecorded time is unknown, and a lag's die has settled to
-    /// the thermistor. A play runs on through the join ([`super::mech::play`]). A power cycle within
+    /// noise model's level and the temperature's smoothing restart at each: their state across
+    /// the unrecorded time is unknown. A lag or a play runs on through the join
+    /// ([`super::mech::lagged`], [`super::mech::play`]). A power cycle within
     /// the sampling (`power_s` going back, no time missing) is not a new session: the
     /// temperature was recorded throughout.
     pub session_starts: Vec<usize>,
@@ -1146,7 +1146,7 @@ impl Builder {
         drop(session_start);
         if session_starts.len() > 1 {
             notes.push(format!(
-                "{} sessions (the time jumping with the unit unpowered): the noise model's level, the thermal terms' lags and the temperature's smoothing restart at each, a play runs on from its state at the last reading; the figures remove one offset per session",
+                "{} sessions (the time jumping with the unit unpowered): the noise model's level and the temperature's smoothing restart at each, the thermal terms' lags and plays run on from their state at the last reading; the figures remove one offset per session",
                 session_starts.len()
             ));
         }

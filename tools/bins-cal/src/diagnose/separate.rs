@@ -331,12 +331,11 @@ impl Refit<'_, '_> {
         self.deviance(&grid, &|_| true, &columns).map(|s| s.deviance)
     }
 
-    /// The deviance the fitted lag or play `mech` cannot absorb with the other state across
-    /// the unpowered gaps, θ on its grid: the lag carried through them instead of restarted at
-    /// each session (the library takes the die settled to the thermistor; a unit's die may not
-    /// have), the play restarted at each session's first temperature instead of carried (the
-    /// library takes the temperature to have gone straight between the readings; a chamber
-    /// may have turned back in the gap). `None` for one session.
+    /// The deviance the fitted lag or play `mech` cannot absorb restarted at each session's
+    /// first temperature instead of carried through the unpowered gaps, θ on its grid (the
+    /// library takes the temperature to have gone straight between the readings; a unit left to
+    /// settle before its next power-on, or a chamber that turned back in the gap, is not that).
+    /// `None` for one session.
     pub fn other_state_across_sessions(&self, mech: Mech) -> Option<f64> {
         let ctx = self.ctx;
         let p = ctx.p;
@@ -347,10 +346,10 @@ impl Refit<'_, '_> {
         let n = p.t.len();
         let grid = ctx.grid(mech);
         let columns = |th: f64| -> Vec<Vec<f64>> {
-            let te = match mech {
-                Mech::ThermalLag => super::mech::lagged(&p.t, &p.temp_s, th),
-                _ => super::mech::by_session(p, |r| super::mech::play(&p.temp_s[r], th)),
-            };
+            let te = super::mech::by_session(p, |r| match mech {
+                Mech::ThermalLag => super::mech::lagged(&p.t[r.clone()], &p.temp_s[r], th),
+                _ => super::mech::play(&p.temp_s[r], th),
+            });
             match mech {
                 Mech::BiasHysteresis => {
                     let d: Vec<f64> = (0..n).map(|r| (te[r] - p.temp_s[r]) / (0.5 * th)).collect();
@@ -381,7 +380,7 @@ impl Refit<'_, '_> {
     pub fn second_lag_stage(&self, tau_s: f64) -> Option<f64> {
         let ctx = self.ctx;
         let p = ctx.p;
-        let first = super::mech::by_session(p, |r| super::mech::lagged(&p.t[r.clone()], &p.temp_s[r], tau_s));
+        let first = super::mech::lagged(&p.t, &p.temp_s, tau_s);
         let grid = ctx.grid(Mech::ThermalLag);
         self.deviance(&grid, &|_| true, &|th| ctx.columns_at(Mech::ThermalLag, th, &first)).map(|s| s.deviance)
     }
