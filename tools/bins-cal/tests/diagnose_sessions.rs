@@ -28,6 +28,38 @@ fn chamber_c(t_s: f64) -> f64 {
     if ph < 1.0 { -5.0 + 27.0 * ph } else { 22.0 - 27.0 * (ph - 1.0) }
 }
 
+/// The sign of each accelerometer's output to the bias: x and z as mounted, y reversed.
+const MOUNT: [f64; 3] = [1.0, -1.0, 1.0];
+
+/// SIM's row at `t_s` (the unit z up at `temp_c`, the bias through [`MOUNT`]) and REAL's: SIM's
+/// plus `departure_v(i)` and a draw of `noise_v()` on each accelerometer `i`, in axis order.
+fn rows(
+    line: u64,
+    t_s: f64,
+    temp_c: f64,
+    power_s: f64,
+    departure_v: impl Fn(usize) -> f64,
+    noise_v: &mut dyn FnMut() -> f64,
+) -> (Row, Row) {
+    let b = bias(temp_c);
+    let sim = Row {
+        line,
+        t_s,
+        temp_c,
+        f_g: [0.0, 0.0, 1.0].map(Some),
+        vib_kind: Some(VibKind::None),
+        vib_g: [Some(0.0); 3],
+        power_s: Some(power_s),
+        u_v: [MOUNT[0] * b, MOUNT[1] * b, 1.0 + MOUNT[2] * b],
+        ..Row::default()
+    };
+    let mut real = sim.clone();
+    for i in 0..3 {
+        real.u_v[i] += departure_v(i) + noise_v();
+    }
+    (sim, real)
+}
+
 /// `sessions` sessions of `len_s` at 1 Hz, `gap_s` between them; the chamber runs a triangle of
 /// ±0.3 °C/min between −5 and +22 °C (on through the gaps); REAL departs from SIM by
 /// `offset(session)` and, with `lag_tau_s`, by the bias at a temperature lagging the
@@ -67,24 +99,9 @@ fn pair(
                 _ => temp_c,
             };
             lagged = Some(te);
-            let b = bias(temp_c);
-            let lag_extra = bias(te) - b;
-            let f = [0.0, 0.0, 1.0];
-            let row = Row {
-                line,
-                t_s: t,
-                temp_c,
-                f_g: f.map(Some),
-                vib_kind: Some(VibKind::None),
-                vib_g: [Some(0.0); 3],
-                power_s: Some(k as f64),
-                u_v: [b, -b, 1.0 + b],
-                ..Row::default()
-            };
-            let mut r = row.clone();
-            for i in 0..3 {
-                r.u_v[i] += offset(s) + [1.0, -1.0, 1.0][i] * lag_extra + white.sample(&mut rng);
-            }
+            let lag_extra = bias(te) - bias(temp_c);
+            let (row, r) =
+                rows(line, t, temp_c, k as f64, |i| offset(s) + MOUNT[i] * lag_extra, &mut || white.sample(&mut rng));
             sim.push(row);
             real.push(r);
             line += 1;
@@ -188,23 +205,10 @@ fn play_pair(width_c: f64, amp_v: f64, seed: u64) -> (Vec<Row>, Vec<Row>) {
         if into >= len_s {
             continue;
         }
-        let b = bias(temp_c);
         let h = (pl - temp_c) / (0.5 * width_c);
-        let row = Row {
-            line: sim.len() as u64 + 2,
-            t_s: t,
-            temp_c,
-            f_g: [0.0, 0.0, 1.0].map(Some),
-            vib_kind: Some(VibKind::None),
-            vib_g: [Some(0.0); 3],
-            power_s: Some(into as f64 + 60.0 * session as f64),
-            u_v: [b, -b, 1.0 + b],
-            ..Row::default()
-        };
-        let mut r = row.clone();
-        for i in 0..3 {
-            r.u_v[i] += [1.0, -1.0, 1.0][i] * amp_v * h + white.sample(&mut rng);
-        }
+        let power_s = into as f64 + 60.0 * session as f64;
+        let (row, r) =
+            rows(sim.len() as u64 + 2, t, temp_c, power_s, |i| MOUNT[i] * amp_v * h, &mut || white.sample(&mut rng));
         sim.push(row);
         real.push(r);
     }

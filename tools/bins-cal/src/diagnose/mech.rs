@@ -914,6 +914,32 @@ impl<'a> Context<'a> {
         cols
     }
 
+    /// The columns of a lag or play `m` (width or time constant `theta`) whose state, the
+    /// effective temperature `te`, is given beside the temperature `temp` it follows (one value
+    /// a row each): `S(Tₑ, f) − S(T, f)` through SIM's sensitivity for a thermal lag or play
+    /// (docs/diagnosis.md, section 3), and for the additive bias play its displacement
+    /// `d = (Tₑ − T)/(w/2)` and `d·ΔT`. [`Context::columns_at`] gives the state the library
+    /// carries; the rival restarted at each session
+    /// ([`super::separate::Refit::other_state_across_sessions`]) gives its own. Empty for any
+    /// other mechanism.
+    pub fn state_columns(&self, m: Mech, theta: f64, te: &[f64], temp: &[f64]) -> Vec<Vec<f64>> {
+        let p = self.p;
+        let n = p.t.len();
+        let s_now = |r: usize| {
+            if std::ptr::eq(temp, p.temp_s.as_slice()) { self.s_now[r] } else { self.s.eval(temp[r], &p.f[r]) }
+        };
+        match m {
+            Mech::ThermalLag | Mech::ThermalHysteresis => {
+                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - s_now(r)).collect()]
+            }
+            Mech::BiasHysteresis => {
+                let d: Vec<f64> = (0..n).map(|r| (te[r] - temp[r]) / (0.5 * theta)).collect();
+                vec![d.clone(), (0..n).map(|r| d[r] * (temp[r] - T0_C)).collect()]
+            }
+            _ => Vec::new(),
+        }
+    }
+
     /// [`Context::columns`] with the temperature the thermal and temperature terms are built
     /// from given (one value a row; [`Context::columns`] gives the smoothed `temp_C`): a rival
     /// acting on a die warmer than the thermistor ([`super::separate`]).
@@ -923,23 +949,9 @@ impl<'a> Context<'a> {
         let i = self.axis;
         let (j, k) = ((i + 1) % 3, (i + 2) % 3);
         let dtc = |r: usize| temp[r] - T0_C;
-        let s_now = |r: usize| {
-            if std::ptr::eq(temp, p.temp_s.as_slice()) { self.s_now[r] } else { self.s.eval(temp[r], &p.f[r]) }
-        };
         match m {
-            Mech::ThermalLag => {
-                let te = lagged(&p.t, temp, theta);
-                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - s_now(r)).collect()]
-            }
-            Mech::ThermalHysteresis => {
-                let te = play(temp, theta);
-                vec![(0..n).map(|r| self.s.eval(te[r], &p.f[r]) - s_now(r)).collect()]
-            }
-            Mech::BiasHysteresis => {
-                let te = play(temp, theta);
-                let d: Vec<f64> = (0..n).map(|r| (te[r] - temp[r]) / (0.5 * theta)).collect();
-                vec![d.clone(), (0..n).map(|r| d[r] * dtc(r)).collect()]
-            }
+            Mech::ThermalLag => self.state_columns(m, theta, &lagged(&p.t, temp, theta), temp),
+            Mech::ThermalHysteresis | Mech::BiasHysteresis => self.state_columns(m, theta, &play(temp, theta), temp),
             Mech::SelfHeating => {
                 let pw = p.power.as_deref().unwrap_or(&[]);
                 vec![(0..n).map(|r| self.s.deriv(temp[r], &p.f[r]) * -(-pw[r] / theta).exp_m1()).collect()]

@@ -343,20 +343,13 @@ impl Refit<'_, '_> {
         {
             return None;
         }
-        let n = p.t.len();
         let grid = ctx.grid(mech);
         let columns = |th: f64| -> Vec<Vec<f64>> {
             let te = super::mech::by_session(p, |r| match mech {
                 Mech::ThermalLag => super::mech::lagged(&p.t[r.clone()], &p.temp_s[r], th),
                 _ => super::mech::play(&p.temp_s[r], th),
             });
-            match mech {
-                Mech::BiasHysteresis => {
-                    let d: Vec<f64> = (0..n).map(|r| (te[r] - p.temp_s[r]) / (0.5 * th)).collect();
-                    vec![d.clone(), (0..n).map(|r| d[r] * (p.temp_s[r] - super::mech::T0_C)).collect()]
-                }
-                _ => vec![(0..n).map(|r| ctx.s.eval(te[r], &p.f[r]) - ctx.s_now[r]).collect()],
-            }
+            ctx.state_columns(mech, th, &te, &p.temp_s)
         };
         self.deviance(&grid, &|_| true, &columns).map(|s| s.deviance)
     }
