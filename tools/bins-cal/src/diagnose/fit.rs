@@ -1118,6 +1118,14 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
         Some(r) => r.1 = r.1.min(d),
         None => rivals.push((m, d)),
     };
+    // A turn-on term, a play or a temperature form may be a die lag the model lacks, acting
+    // on the die's own heating after each power-on as well as on the case's temperature.
+    if (term.mech.temperature_form() || matches!(term.mech, Mech::Warmup | Mech::SelfHeating))
+        && !fit.terms.iter().any(|t| t.mech == Mech::ThermalLag)
+        && let Some(d) = refit.lag_of_die_rise()
+    {
+        add(Mech::ThermalLag, d);
+    }
     // A temperature form may be the die heating after power-on, acting through a
     // sensitivity SIM does not have, `(1 − e^(−P/τ))·(c0 + c1 ΔT + c2 ΔT²)`; or a die
     // running steadily warmer than the thermistor, through SIM's own (`S'(T)`).

@@ -866,7 +866,7 @@ impl<'a> Context<'a> {
     }
 
     /// The shortest time constant a lag or turn-on grid holds \[s\]: three samples, and 1 s.
-    fn shortest_tau_s(&self) -> f64 {
+    pub fn shortest_tau_s(&self) -> f64 {
         (3.0 * self.p.dt).max(1.0)
     }
 

@@ -331,6 +331,28 @@ impl Refit<'_, '_> {
         self.deviance(&grid, &|_| true, &columns).map(|s| s.deviance)
     }
 
+    /// The deviance a thermal lag of a die that lags its own heating after each power-on as
+    /// well cannot absorb: the lag (τ on its grid) of the die's temperature
+    /// `T + ρ·(1 − e^(−P/τᵣ))`, through SIM's sensitivity, the rise ρ (0.3, 1 and
+    /// [`DIE_RISE_MAX_C`] °C) reached within the turn-on grid's shortest time constant τᵣ: SIM's
+    /// die heats at once, REAL's follows the case and its own heating τ behind. After the only
+    /// power-on that is a transient of the lag's own τ, which a warm-up, a self-heating or a
+    /// play the rise engages takes as well. `None` without `power_s`.
+    pub fn lag_of_die_rise(&self) -> Option<f64> {
+        let ctx = self.ctx;
+        let power = ctx.p.power.as_deref()?;
+        let grid = ctx.grid(Mech::ThermalLag);
+        let rise_tau_s = ctx.shortest_tau_s();
+        [0.3, 1.0, DIE_RISE_MAX_C]
+            .iter()
+            .filter_map(|&rho| {
+                let die = super::mech::die_temperature(&ctx.p.temp_s, power, rho, rise_tau_s);
+                self.deviance(&grid, &|_| true, &|th| ctx.columns_at(Mech::ThermalLag, th, &die))
+            })
+            .map(|s| s.deviance)
+            .min_by(f64::total_cmp)
+    }
+
     /// The deviance the fitted lag or play `mech` cannot absorb restarted at each session's
     /// first temperature instead of carried through the unpowered gaps, θ on its grid (the
     /// library takes the temperature to have gone straight between the readings; a unit left to

@@ -1,0 +1,218 @@
+//! The diagnosis on user profiles made with the project's simulator (`bins_cal::sim`), not by
+//! the blind generator: the paper's unit with a die that self-heats after each power-on and a
+//! thermistor partly on the die, in SIM and REAL alike; REAL with some of a warm-up, a die lag
+//! behind the case (90–240 s) and a thermal play (0.2–0.6 °C) that SIM lacks. The profiles are
+//! the kinds users run: one power-on hot then cooling; two sessions joined with an hour
+//! unpowered between; a die lag alone, powered on cold then heating (sometimes reversing); and
+//! all three mechanisms together (lag 300 s, a play, a warm-up of 900 s) on any of those.
+//!
+//! Each case is scored as the blind draws are (docs/diagnosis-blind.md): every mechanism in
+//! REAL named exactly or inside a group that holds it; a **definite false name** (an effect that
+//! is none of them, or a group that holds none); and every accelerometer's held-out RMS after
+//! against before and against 1.25× its floor.
+//!
+//! ```sh
+//! SIMPROF_SEED=1 SIMPROF_CASES=24 cargo test -p bins-cal --release --test diagnose_sim_profiles -- --ignored --nocapture
+//! ```
+
+use bins_cal::diagnose::diagnose;
+use bins_cal::recording::Row;
+use bins_cal::sim::scenario::ScenarioFile;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::path::Path;
+
+/// The mechanisms REAL may have that SIM lacks, by the diagnosis's ids.
+const WARMUP: &str = "warmup";
+const LAG: &str = "thermal_lag";
+const PLAY: &str = "thermal_hysteresis";
+
+/// One drawn case: REAL's and SIM's scenarios, what REAL has, and the draw as text.
+struct Draw {
+    real: String,
+    sim: String,
+    truth: Vec<&'static str>,
+    text: String,
+}
+
+/// The scenario text of a unit with `warmup_v` (per axis), `die_tau_s` and `play_c`, the
+/// thermal path and noise of `scenarios/three-hour-real.toml`, and `steps`.
+fn scenario(rate_hz: f64, start_c: f64, warmup: ([f64; 3], f64), die_tau_s: f64, play_c: f64, steps: &str) -> String {
+    format!(
+        "description = \"user profile\"\n\
+         [recording]\nrate_Hz = {rate_hz}\npower_on_s = 0.0\n\
+         [unit]\npreset = \"paper\"\nfit = \"poly\"\norder = 2\nwarmup_V = [{:e}, {:e}, {:e}]\nwarmup_tau_s = {}\n\
+         [thermal]\nstart_C = {start_c}\nrate_C_per_min = 1.0\ncase_tau_s = 600.0\ndie_tau_s = {die_tau_s}\n\
+         self_heating_C = 1.5\nthermistor_at = 0.3\nthermistor_tau_s = 20.0\nhysteresis_C = {play_c}\n\
+         [noise]\nwhite_V = 1.0e-5\nrandom_walk_V_per_sqrt_s = 2.0e-8\nbias_instability_V = 3.0e-6\nbias_tau_s = 300.0\n\
+         adc_lsb_V = 1.0e-7\ntemp_noise_C = 0.005\ntemp_resolution_C = 0.01\n{steps}",
+        warmup.0[0], warmup.0[1], warmup.0[2], warmup.1
+    )
+}
+
+/// A move of the chamber to `to_c` at `rate` °C/min from `from_c`, then a hold of `hold_s`.
+fn ramp(from_c: f64, to_c: f64, rate: f64, hold_s: f64) -> String {
+    let move_s = (to_c - from_c).abs() / rate * 60.0;
+    format!("[[step]]\nkind = \"soak\"\nchamber_C = {to_c}\nrate_C_per_min = {rate}\ndwell_s = {}\n", move_s + hold_s)
+}
+
+fn draw(seed: u64) -> Draw {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x513F_0F11);
+    let kind = ["hot then cooling", "two sessions", "lag alone", "all three"][rng.random_range(0..4)];
+    let rate_hz = [1.0, 2.0, 5.0][rng.random_range(0..3)];
+    let rate = rng.random_range(0.2..1.0);
+    let hold_s = if rng.random_bool(0.5) { 0.0 } else { rng.random_range(600.0..2400.0) };
+    let (start_c, steps) = match kind {
+        "lag alone" => {
+            let cold = rng.random_range(-20.0..0.0);
+            let warm = rng.random_range(30.0..50.0);
+            let mut s = ramp(cold, warm, rate, hold_s);
+            if rng.random_bool(0.3) {
+                s += &ramp(warm, warm - rng.random_range(10.0..25.0), rate, 0.0);
+            }
+            (cold, s)
+        }
+        "two sessions" => {
+            let a = rng.random_range(-10.0..50.0);
+            let b = rng.random_range(-10.0..50.0);
+            let c = rng.random_range(-10.0..50.0);
+            let mut s = ramp(a, b, rate, hold_s);
+            s += &format!("[[step]]\nkind = \"power\"\noff_s = 3600.0\nchamber_C = {c}\nrate_C_per_min = 1.0\n");
+            s += &ramp(c, a, rate, 0.0);
+            (a, s)
+        }
+        _ => {
+            let hot = rng.random_range(35.0..60.0);
+            let cool = rng.random_range(-10.0..15.0);
+            (hot, ramp(hot, cool, rate, hold_s))
+        }
+    };
+    let mut truth = Vec::new();
+    let sign = |rng: &mut ChaCha8Rng| if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+    let (mut warmup, mut die_tau_s, mut play_c) = (([0.0; 3], 600.0), 1.0, 0.0);
+    let all = kind == "all three";
+    if all || (kind != "lag alone" && rng.random_bool(0.6)) {
+        let w: [f64; 3] = std::array::from_fn(|_| sign(&mut rng) * rng.random_range(0.5e-4..2.5e-4));
+        warmup = (w, if all { 900.0 } else { rng.random_range(300.0..1200.0) });
+        truth.push(WARMUP);
+    }
+    if all || kind == "lag alone" || rng.random_bool(0.6) {
+        die_tau_s = if all { 300.0 } else { rng.random_range(90.0..240.0) };
+        truth.push(LAG);
+    }
+    if all || (kind != "lag alone" && rng.random_bool(0.6)) {
+        play_c = rng.random_range(0.2..0.6);
+        truth.push(PLAY);
+    }
+    let real = scenario(rate_hz, start_c, warmup, die_tau_s, play_c, &steps);
+    let sim = scenario(rate_hz, start_c, ([0.0; 3], 600.0), 1.0, 0.0, &steps);
+    let text = format!(
+        "{kind:<16} {rate_hz:>3.0} Hz {rate:.2} °C/min start {start_c:>5.1} °C | warm-up {:?} τ {:.0} s, die lag {die_tau_s:.0} s, play {play_c:.2} °C",
+        warmup.0.map(|v| (v * 1e6).round()),
+        warmup.1
+    );
+    Draw { real, sim, truth, text }
+}
+
+fn rows(text: &str, seed: u64) -> Vec<Row> {
+    ScenarioFile::parse(text, Path::new("case.toml")).unwrap().build(Path::new("case.toml")).unwrap().all_rows(seed)
+}
+
+/// The ids named that are none of `truth`: effects of another mechanism, and groups that hold
+/// none of them.
+fn false_names(r: &bins_cal::diagnose::report::Report, truth: &[&str]) -> Vec<String> {
+    let mut out: Vec<String> =
+        r.effects.iter().filter(|e| !truth.contains(&e.id.as_str())).map(|e| e.id.clone()).collect();
+    for g in &r.ambiguous {
+        if !g.ids.iter().any(|i| truth.contains(&i.as_str())) {
+            out.push(g.ids.join("|"));
+        }
+    }
+    out
+}
+
+/// A die lag alone after the only power-on, cold, then one ramp up and a hold (the unit heats
+/// 1.5 °C at power-on; REAL's die follows the case and its own heating 119 s behind, SIM's at
+/// once):
+/// after the power-on the lag is a turn-on transient that a warm-up, a self-heating or a play
+/// the rise engages also makes, so the lag must be inside every group the report gives, and no
+/// accelerometer left worse held-out.
+#[test]
+fn a_die_lag_after_one_cold_power_on_is_inside_its_group() {
+    let steps = ramp(-16.6, 47.0, 0.89, 1990.0);
+    let real = rows(&scenario(2.0, -16.6, ([0.0; 3], 600.0), 119.0, 0.0, &steps), 180);
+    let sim = rows(&scenario(2.0, -16.6, ([0.0; 3], 600.0), 1.0, 0.0, &steps), 181);
+    let r = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).unwrap().report;
+    println!(
+        "effects {:?}, groups {:?}, held-out {:?} → {:?} mg, floor {:?} mg",
+        r.effects.iter().map(|e| (&e.id, &e.axes)).collect::<Vec<_>>(),
+        r.ambiguous.iter().map(|g| (&g.ids, &g.axes)).collect::<Vec<_>>(),
+        r.heldout_rms_before_mg,
+        r.heldout_rms_after_mg,
+        r.noise_floor_mg
+    );
+    assert!(!r.effects.is_empty() || !r.ambiguous.is_empty(), "the lag's structure is found");
+    assert_eq!(false_names(&r, &[LAG]), Vec::<String>::new());
+    for a in ["x", "y", "z"] {
+        assert!(r.heldout_rms_after_mg[a] <= r.heldout_rms_before_mg[a], "{a}");
+    }
+}
+
+#[test]
+#[ignore = "a draw of simulator-made user profiles: minutes; run on demand"]
+fn simulator_user_profiles() {
+    let base: u64 = std::env::var("SIMPROF_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
+    let n: u64 = std::env::var("SIMPROF_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(24);
+    let (mut false_cases, mut members, mut named, mut worse, mut full, mut cases) = (0, 0, 0, 0, 0, 0);
+    for seed in base..base + n {
+        let d = draw(seed);
+        let (sim, real) = (rows(&d.sim, 2 * seed + 1), rows(&d.real, 2 * seed));
+        let r = match diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")) {
+            Ok(x) => x.report,
+            Err(e) => {
+                println!("case {seed}: {e}");
+                continue;
+            }
+        };
+        if std::env::var("SIMPROF_REPORT").is_ok_and(|v| v == "1") {
+            println!("{}\n{}", d.real, serde_json::to_string_pretty(&r).unwrap_or_default());
+        }
+        cases += 1;
+        let false_ids = false_names(&r, &d.truth);
+        let hit: Vec<bool> = d
+            .truth
+            .iter()
+            .map(|m| r.effects.iter().any(|e| e.id == *m) || r.ambiguous.iter().any(|g| g.ids.iter().any(|i| i == m)))
+            .collect();
+        members += d.truth.len();
+        named += hit.iter().filter(|h| **h).count();
+        false_cases += usize::from(!false_ids.is_empty());
+        let ratio: Vec<String> = ["x", "y", "z"]
+            .iter()
+            .map(|a| format!("{:.2}", r.heldout_rms_after_mg[*a] / r.noise_floor_mg[*a]))
+            .collect();
+        let w = ["x", "y", "z"].iter().filter(|a| r.heldout_rms_after_mg[**a] > r.heldout_rms_before_mg[**a]).count();
+        worse += w;
+        let within = ["x", "y", "z"].iter().all(|a| r.heldout_rms_after_mg[*a] <= 1.25 * r.noise_floor_mg[*a]);
+        full += usize::from(within && hit.iter().all(|h| *h));
+        println!(
+            "case {seed:>4} {} | truth {:?} hit {:?} | eff [{}] amb [{}] false {:?} | after/floor {} worse {w} ({} rows)",
+            d.text,
+            d.truth,
+            hit,
+            r.effects.iter().map(|e| format!("{}:{}", e.id, e.axes.join(""))).collect::<Vec<_>>().join(" "),
+            r.ambiguous
+                .iter()
+                .map(|g| format!("{}:{}", g.ids.join("|"), g.axes.join("")))
+                .collect::<Vec<_>>()
+                .join(" "),
+            false_ids,
+            ratio.join("/"),
+            r.rows
+        );
+    }
+    println!(
+        "{cases} cases: definite false name in {false_cases}; members named or inside a group {named}/{members}; axes worse held-out {worse}/{}; every member named and every axis within 1.25x {full}",
+        3 * cases
+    );
+}
