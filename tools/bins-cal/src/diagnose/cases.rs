@@ -655,7 +655,7 @@ pub fn suite() -> Vec<Case> {
         },
         Case {
             name: "warmup_vs_self_heating",
-            description: "the die self-heats by 1.5 °C (τ = 1500 s) after the only power-on, at the record's start, at constant chamber temperature in one position (z up): indistinguishable from a warm-up transient, from a drift in time, and from any temperature coefficient acting through the die's rise (bias, its play, and on each axis the coefficient gravity lets act: the cross-coupling on x and y, the scale factor on z)",
+            description: "the die self-heats by 1.5 °C (τ = 1500 s) after the only power-on, at the record's start, at constant chamber temperature in one position (z up): indistinguishable from a warm-up transient, from a drift in time, and from any temperature coefficient acting through the die's rise (bias, its play, and on each axis the coefficient gravity lets act: the cross-coupling on x and y, the scale factor on z), and on z from a die lag that delays an instant rise of the die by τ",
             plan: plan(vec![pos("TP1", [0.0, 0.0, 1.0], 60.0)], vec![(0.0, 20.0)], vec![0.0]),
             noise: Noise::default(),
             effects: vec![Effect::SelfHeating(1.5, 1500.0)],
@@ -663,7 +663,7 @@ pub fn suite() -> Vec<Case> {
             expected: {
                 let through_die = [BiasHysteresis, BiasTempOrder, Drift, SelfHeating, ThermalHysteresis, Warmup];
                 let mut xy = ambiguous(&[&through_die[..], &[CrossCouplingTemp]].concat(), &[0, 1]);
-                let z = ambiguous(&[&through_die[..], &[ScaleTemp]].concat(), &[2]);
+                let z = ambiguous(&[&through_die[..], &[ScaleTemp, ThermalLag]].concat(), &[2]);
                 xy.ambiguous.extend(z.ambiguous);
                 xy
             },
