@@ -336,8 +336,8 @@ impl Refit<'_, '_> {
     /// `T + ρ·(1 − e^(−P/τᵣ))`, through SIM's sensitivity, the rise ρ (0.3, 1 and
     /// [`DIE_RISE_MAX_C`] °C) reached within the turn-on grid's shortest time constant τᵣ: SIM's
     /// die heats at once, REAL's follows the case and its own heating τ behind. After the only
-    /// power-on that is a transient of the lag's own τ, which a warm-up, a self-heating or a
-    /// play the rise engages takes as well. `None` without `power_s`.
+    /// power-on, that is a transient of the lag's own τ, which a warm-up, a self-heating or a
+    /// play the rise engages makes as well. `None` without `power_s`.
     pub fn lag_of_die_rise(&self) -> Option<f64> {
         let ctx = self.ctx;
         let power = ctx.p.power.as_deref()?;
