@@ -621,6 +621,17 @@ pub fn play(temp: &[f64], h: f64) -> Vec<f64> {
         .collect()
 }
 
+/// The state of a lag or play `m` of time constant or width `theta` over `temp` at the times
+/// `t`: the lagged temperature ([`lagged`]) for a thermal lag, the play's position ([`play`])
+/// for a thermal or an additive bias play; `temp` itself for any other mechanism.
+pub fn state_of(m: Mech, t: &[f64], temp: &[f64], theta: f64) -> Vec<f64> {
+    match m {
+        Mech::ThermalLag => lagged(t, temp, theta),
+        Mech::ThermalHysteresis | Mech::BiasHysteresis => play(temp, theta),
+        _ => temp.to_vec(),
+    }
+}
+
 /// `f` applied to each session's rows ([`Prepared::sessions`]) and the results joined: a lag or
 /// play started afresh at each session, the rival
 /// ([`super::separate::Refit::other_state_across_sessions`]) of the state the library carries
@@ -950,8 +961,9 @@ impl<'a> Context<'a> {
         let (j, k) = ((i + 1) % 3, (i + 2) % 3);
         let dtc = |r: usize| temp[r] - T0_C;
         match m {
-            Mech::ThermalLag => self.state_columns(m, theta, &lagged(&p.t, temp, theta), temp),
-            Mech::ThermalHysteresis | Mech::BiasHysteresis => self.state_columns(m, theta, &play(temp, theta), temp),
+            Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis => {
+                self.state_columns(m, theta, &state_of(m, &p.t, temp, theta), temp)
+            }
             Mech::SelfHeating => {
                 let pw = p.power.as_deref().unwrap_or(&[]);
                 vec![(0..n).map(|r| self.s.deriv(temp[r], &p.f[r]) * -(-pw[r] / theta).exp_m1()).collect()]

@@ -367,10 +367,7 @@ impl Refit<'_, '_> {
         }
         let grid = ctx.grid(mech);
         let columns = |th: f64| -> Vec<Vec<f64>> {
-            let te = super::mech::by_session(p, |r| match mech {
-                Mech::ThermalLag => super::mech::lagged(&p.t[r.clone()], &p.temp_s[r], th),
-                _ => super::mech::play(&p.temp_s[r], th),
-            });
+            let te = super::mech::by_session(p, |r| super::mech::state_of(mech, &p.t[r.clone()], &p.temp_s[r], th));
             ctx.state_columns(mech, th, &te, &p.temp_s)
         };
         self.deviance(&grid, &|_| true, &columns).map(|s| s.deviance)
