@@ -396,6 +396,9 @@ pub struct AxisFit {
     /// model without it, or the offset alone where that is lower, minus the model) and that
     /// cut's fold-to-fold standard error. Never more than "before" minus "after".
     pub heldout_gain: Vec<(f64, f64)>,
+    /// The die's rise at each power-on a thermal lag carries in this fit
+    /// ([`Context::lag_rise_c`]) [°C].
+    pub lag_rise_c: f64,
 }
 
 /// The raw held-out residual of a model: per fold, coefficients (GLS under the noise model)
@@ -1424,6 +1427,15 @@ impl PartialLs {
         }
     }
 
+    /// [`PartialLs::sse_plus`] and [`PartialLs::coef_plus`] from one solve, with the extra
+    /// columns given already whitened by the filter this was built with (one whitening serves
+    /// several fits); `None` when the columns are collinear.
+    pub(crate) fn sse_coef_plus_whitened(&self, we: &[Vec<f64>]) -> Option<(f64, Vec<f64>)> {
+        let (x, b, d) = self.solve_whitened(we)?;
+        let sse = (self.yy - x.iter().zip(&b).map(|(x, b)| x * b).sum::<f64>()).max(0.0);
+        Some((sse, x.iter().zip(&d).map(|(x, d)| x / d).collect()))
+    }
+
     /// The generalised-least-squares coefficients of the fixed columns, then of `extra` (`None`
     /// when they are collinear).
     pub(crate) fn coef_plus(&self, filt: &Filter, extra: &[Vec<f64>]) -> Option<Vec<f64>> {
@@ -1435,6 +1447,11 @@ impl PartialLs {
     /// solved: the scaled solution, right-hand side and the scales.
     fn solve_plus(&self, filt: &Filter, extra: &[Vec<f64>]) -> Option<(Vec<f64>, Vec<f64>, Vec<f64>)> {
         let we: Vec<Vec<f64>> = extra.iter().map(|c| filt.whitened(c)).collect();
+        self.solve_whitened(&we)
+    }
+
+    /// [`PartialLs::solve_plus`] with the extra columns already whitened.
+    fn solve_whitened(&self, we: &[Vec<f64>]) -> Option<(Vec<f64>, Vec<f64>, Vec<f64>)> {
         let (pf, m) = (self.w.len(), self.w.len() + we.len());
         let col = |i: usize| if i < pf { &self.w[i] } else { &we[i - pf] };
         let mut a = vec![0.0; m * m];
@@ -1663,6 +1680,7 @@ fn finish(ctx: &Context, bank: &Bank, model: &[usize], q: f64, fold: &[usize], f
         heldout_rms: (hb.rms(), ha.rms()),
         heldout_resid: (hb.resid, ha.resid),
         heldout_gain,
+        lag_rise_c: ctx.lag_rise_c,
     }
 }
 

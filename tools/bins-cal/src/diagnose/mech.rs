@@ -465,6 +465,88 @@ pub fn die_temperature(temp: &[f64], power: &[f64], rho: f64, tau: f64) -> Vec<f
     temp.iter().zip(power).map(|(t, p)| t - rho * (-p / tau).exp_m1()).collect()
 }
 
+/// The rises tried for the die's rise a thermal lag carries ([`missed_die_rise`]) [°C].
+pub const MISSED_RISE_GRID_C: [f64; 7] = [0.15, 0.3, 0.6, 1.0, 1.5, 2.2, 3.0];
+
+/// The die's rise at each power-on that the thermistor misses, as REAL's thermal lag shows it
+/// (ρ, [°C]), or `None` where there is none to see. SIM's die heats at once after power-on, and
+/// SIM's sensitivity, fitted against SIM's reading, holds that heating; REAL's die starts cold
+/// and reaches it only through its lag, while the thermistor, mostly on the case, reads a part
+/// of it. Behind REAL's reading `T` the die is then `lag_τ(T) − ρ·e^(−P/τ)`: with a thermistor
+/// a share `a` of the way to a die of lag τ₀ that heats by `H`, exactly `τ = (1 − a)·τ₀` and
+/// `ρ = (1 − a)·H` (docs/diagnosis.md, section 3).
+///
+/// ρ is the unit's, one for all accelerometers, and the die it describes is the one SIM's
+/// sensitivity acts on, so the lag's gain is 1: each accelerometer's residual is fitted with its
+/// nuisance, a free warm-up `A·e^(−P/τ_w)` (τ_w on every other point of the turn-on grid, or
+/// none, counted as two parameters by BIC) and the lag at gain 1 for each τ of its grid and each
+/// ρ of [`MISSED_RISE_GRID_C`] (and 0), under the random walk its static runs show at averaging
+/// times up to a minute; ρ minimises the deviance summed over the accelerometers. The warm-up
+/// beside keeps the rise from standing in for a turn-on transient of another time constant or
+/// of sizes SIM's sensitivity does not give (a rise acts on each accelerometer as `ρ·S'(T)`).
+/// Taken when it cuts the deviance of the lag without it by more than a χ²₁ at the
+/// diagnosis's level ([`super::fit::ALPHA`] over mechanisms × accelerometers). `None` without
+/// `power_s`, with no lag possible, where no power-on falls in the record, or where SIM does
+/// not depend on the temperature (a lag's gain is then free).
+pub fn missed_die_rise(p: &Prepared) -> Option<f64> {
+    let power = p.power.as_deref()?;
+    let mut ctxs: Vec<Context> = (0..3).map(|a| Context::new(p, a)).collect();
+    if !ctxs[0].available(Mech::ThermalLag) {
+        return None;
+    }
+    let grid = ctxs[0].grid(Mech::ThermalLag);
+    // A rise is seen only after a power-on in the record.
+    let longest = grid.last().copied()?;
+    if power.iter().all(|pw| (-pw / longest).exp() < 1e-3) {
+        return None;
+    }
+    let rises: Vec<f64> = std::iter::once(0.0).chain(MISSED_RISE_GRID_C).collect();
+    let runs = p.static_runs();
+    let n = p.t.len() as f64;
+    let mut total = vec![0.0; rises.len()];
+    // Only through SIM's own sensitivity is the lag's gain 1.
+    for (axis, ctx) in ctxs.iter_mut().enumerate().filter(|(_, c)| c.s.from_sim) {
+        let segs: Vec<&[f64]> = runs.iter().map(|&(a, b)| &p.r[axis][a..b]).collect();
+        let q = super::noise::short_tau_q(&segs, p.dt).map_or(0.0, |(q, _)| q.max(0.0));
+        let filt = super::noise::Filter::new(&p.t, &p.r_white[axis], q, None, |_| true);
+        // The nuisance with no warm-up, then with one at each τ_w, and what each costs.
+        let beside: Vec<(super::fit::PartialLs, f64, f64)> = std::iter::once(None)
+            .chain(ctx.grid(Mech::Warmup).into_iter().step_by(2).map(Some))
+            .filter_map(|tau_w| {
+                let mut fixed = ctx.nuisance.clone();
+                if let Some(tw) = tau_w {
+                    fixed.push(power.iter().map(|pw| (-pw / tw).exp()).collect());
+                }
+                let part = super::fit::PartialLs::new(&filt, &p.r[axis], &fixed);
+                let (s0, _) = part.sse_coef_plus_whitened(&[])?;
+                Some((part, s0, if tau_w.is_some() { 2.0 * n.ln() } else { 0.0 }))
+            })
+            .collect();
+        for (k, &rho) in rises.iter().enumerate() {
+            ctx.lag_rise_c = rho;
+            let mut best = beside.iter().map(|b| n * b.1.max(1e-300).ln() + b.2).fold(f64::INFINITY, f64::min);
+            for &tau in &grid {
+                // The lag through SIM's sensitivity is one column.
+                let Some(column) = ctx.columns(Mech::ThermalLag, tau).into_iter().next() else { continue };
+                let lag = [filt.whitened(&column)];
+                for (part, s0, penalty) in &beside {
+                    let Some((s_min, coef)) = part.sse_coef_plus_whitened(&lag) else { continue };
+                    let b = coef.last().copied().unwrap_or(0.0);
+                    if b.abs() > 1e-9 {
+                        // At gain 1 what the lag leaves grows from its best as (b − 1)².
+                        let sse = s_min + (b - 1.0).powi(2) * (s0 - s_min).max(0.0) / (b * b);
+                        best = best.min(n * sse.max(1e-300).ln() + penalty);
+                    }
+                }
+            }
+            total[k] += best;
+        }
+    }
+    let k = (0..rises.len()).min_by(|&a, &b| total[a].total_cmp(&total[b]))?;
+    let needed = super::stats::chi2_isf(super::fit::ALPHA / (Mech::ALL.len() * 3) as f64, 1.0);
+    (k > 0 && total[0] - total[k] > needed).then_some(rises[k])
+}
+
 /// A die rise is taken when at the die's temperature SIM's sensitivity leaves at most this
 /// share of what it leaves at the thermistor's ([`die_rise`]).
 pub const DIE_RISE_MAX_LEFT: f64 = 0.5;
@@ -721,6 +803,9 @@ pub struct Context<'a> {
     /// The sensor's bias instability beside the random walk in the noise model, where it is
     /// known ([`super::Options::bias_instability`]); `None`: white + random walk alone.
     pub gm: Option<super::noise::Gm>,
+    /// The die's rise at each power-on that the thermistor misses, as a thermal lag carries it
+    /// ([`missed_die_rise`], [`Prepared::lag_rise_c`]) [°C]; 0: none.
+    pub lag_rise_c: f64,
 }
 
 /// SIM's own calibration forms `b_j(f)·ΔTᵖ` (`b` = 1, f_x, f_y, f_z; p = 1…3; ΔT from the
@@ -814,6 +899,7 @@ impl<'a> Context<'a> {
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v))),
             turn_on_min_tau_s: turn_on_min_tau_s(p),
             gm: None,
+            lag_rise_c: p.lag_rise_c,
         }
     }
 
@@ -951,6 +1037,24 @@ impl<'a> Context<'a> {
         }
     }
 
+    /// The state `te` of a lag or play `m` ([`state_of`]) with, for a thermal lag of time
+    /// constant `theta`, the die's rise at each power-on that the thermistor misses
+    /// ([`Context::lag_rise_c`], ρ): `te − ρ·e^(−P/τ)`. REAL's die, started cold at a power-on,
+    /// reaches the heating SIM's die has at once (and SIM's sensitivity, fitted against SIM's
+    /// reading, holds) only through the lag; the thermistor reads a part of it. `te` as given
+    /// for a play, without `power_s`, or where ρ is 0.
+    pub fn with_missed_rise(&self, m: Mech, theta: f64, mut te: Vec<f64>) -> Vec<f64> {
+        if m == Mech::ThermalLag
+            && self.lag_rise_c > 0.0
+            && let Some(power) = self.p.power.as_deref()
+        {
+            for (x, pw) in te.iter_mut().zip(power) {
+                *x -= self.lag_rise_c * (-pw / theta).exp();
+            }
+        }
+        te
+    }
+
     /// [`Context::columns`] with the temperature the thermal and temperature terms are built
     /// from given (one value a row; [`Context::columns`] gives the smoothed `temp_C`): a rival
     /// acting on a die warmer than the thermistor ([`super::separate`]).
@@ -962,7 +1066,8 @@ impl<'a> Context<'a> {
         let dtc = |r: usize| temp[r] - T0_C;
         match m {
             Mech::ThermalLag | Mech::ThermalHysteresis | Mech::BiasHysteresis => {
-                self.state_columns(m, theta, &state_of(m, &p.t, temp, theta), temp)
+                let te = self.with_missed_rise(m, theta, state_of(m, &p.t, temp, theta));
+                self.state_columns(m, theta, &te, temp)
             }
             Mech::SelfHeating => {
                 let pw = p.power.as_deref().unwrap_or(&[]);

@@ -91,6 +91,10 @@ pub struct Prepared {
     /// ([`super::mech::die_rise`]); when present it is in `temp_s` and `sim_temp_s`, which are
     /// then the die's temperature the thermal and temperature terms act on.
     pub die_rise: Option<super::mech::DieRise>,
+    /// The die's rise at each power-on that the thermistor misses, as REAL's lag shows it
+    /// ([`super::mech::missed_die_rise`]) [°C]; 0 until the diagnosis estimates it, and where
+    /// it finds none.
+    pub lag_rise_c: f64,
     /// Notes for the report.
     pub notes: Vec<String>,
 }
@@ -1379,6 +1383,7 @@ impl Builder {
             session_starts,
             notes,
             die_rise: None,
+            lag_rise_c: 0.0,
         };
         p.take_die_rise();
         Ok(p)

@@ -669,6 +669,7 @@ pub fn white_density(p: &Prepared) -> [f64; 3] {
 pub fn context_on<'p>(d: &Diagnosis, p: &'p Prepared, axis: usize) -> Context<'p> {
     let mut ctx = Context::new(p, axis);
     ctx.gm = d.axes[axis].gm;
+    ctx.lag_rise_c = d.axes[axis].lag_rise_c;
     ctx.s = d.sensitivity[axis].clone();
     ctx.s_now = (0..p.t.len()).map(|k| ctx.s.eval(p.temp_s[k], &p.f[k])).collect();
     ctx
@@ -728,6 +729,7 @@ fn carried<'p>(d: &Diagnosis, cp: &'p Prepared, axis: usize) -> (Context<'p>, Ax
         heldout_rms: (0.0, 0.0),
         heldout_resid: (Vec::new(), Vec::new()),
         heldout_gain: Vec::new(),
+        lag_rise_c: fit.lag_rise_c,
     };
     (ctx, on_design)
 }

@@ -1000,6 +1000,10 @@ pub fn build(
         for fit in axes {
             for t in fit.terms.iter().filter(|t| t.mech == m) {
                 let (mut params, mut ci) = term_params(t, &sens[fit.axis], fit.axis);
+                if m == Mech::ThermalLag && fit.lag_rise_c > 0.0 {
+                    // The die's rise at power-on the lag carries ([`super::mech::missed_die_rise`]).
+                    params.insert("missed_rise_C".into(), fit.lag_rise_c);
+                }
                 let amb = ambiguous_member[fit.axis].contains(&m);
                 let small = immaterial(fit.axis, m);
                 let undetermined: Vec<String> = match (m.theta(), t.theta_ci) {

@@ -368,7 +368,7 @@ impl Refit<'_, '_> {
         let grid = ctx.grid(mech);
         let columns = |th: f64| -> Vec<Vec<f64>> {
             let te = super::mech::by_session(p, |r| super::mech::state_of(mech, &p.t[r.clone()], &p.temp_s[r], th));
-            ctx.state_columns(mech, th, &te, &p.temp_s)
+            ctx.state_columns(mech, th, &ctx.with_missed_rise(mech, th, te), &p.temp_s)
         };
         self.deviance(&grid, &|_| true, &columns).map(|s| s.deviance)
     }
