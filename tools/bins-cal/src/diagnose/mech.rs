@@ -469,7 +469,8 @@ pub fn die_temperature(temp: &[f64], power: &[f64], rho: f64, tau: f64) -> Vec<f
 pub const MISSED_RISE_GRID_C: [f64; 7] = [0.15, 0.3, 0.6, 1.0, 1.5, 2.2, 3.0];
 
 /// The die's rise at each power-on that the thermistor misses, as REAL's thermal lag shows it
-/// (ρ, [°C]), or `None` where there is none to see. SIM's die heats at once after power-on, and
+/// (ρ, [°C]), or `None` where there is none to see; `ctxs` are the accelerometers' contexts
+/// (their [`Context::lag_rise_c`] is left at 0). SIM's die heats at once after power-on, and
 /// SIM's sensitivity, fitted against SIM's reading, holds that heating; REAL's die starts cold
 /// and reaches it only through its lag, while the thermistor, mostly on the case, reads a part
 /// of it. Behind REAL's reading `T` the die is then `lag_τ(T) − ρ·e^(−P/τ)`: with a thermistor
@@ -488,10 +489,9 @@ pub const MISSED_RISE_GRID_C: [f64; 7] = [0.15, 0.3, 0.6, 1.0, 1.5, 2.2, 3.0];
 /// diagnosis's level ([`super::fit::ALPHA`] over mechanisms × accelerometers). `None` without
 /// `power_s`, with no lag possible, where no power-on falls in the record, or where SIM does
 /// not depend on the temperature (a lag's gain is then free).
-pub fn missed_die_rise(p: &Prepared) -> Option<f64> {
+pub fn missed_die_rise(p: &Prepared, ctxs: &mut [Context]) -> Option<f64> {
     let power = p.power.as_deref()?;
-    let mut ctxs: Vec<Context> = (0..3).map(|a| Context::new(p, a)).collect();
-    if !ctxs[0].available(Mech::ThermalLag) {
+    if !ctxs.first()?.available(Mech::ThermalLag) {
         return None;
     }
     let grid = ctxs[0].grid(Mech::ThermalLag);
@@ -541,6 +541,9 @@ pub fn missed_die_rise(p: &Prepared) -> Option<f64> {
             }
             total[k] += best;
         }
+    }
+    for ctx in ctxs.iter_mut() {
+        ctx.lag_rise_c = 0.0;
     }
     let k = (0..rises.len()).min_by(|&a, &b| total[a].total_cmp(&total[b]))?;
     let needed = super::stats::chi2_isf(super::fit::ALPHA / (Mech::ALL.len() * 3) as f64, 1.0);

@@ -190,25 +190,25 @@ fn diagnose_prepared(
         });
         qs.push(q);
     }
-    if let Some(rho) = mech::missed_die_rise(&p) {
-        p.lag_rise_c = rho;
-    }
+    let mut ctxs: Vec<mech::Context> = (0..3).map(|axis| mech::Context::new(&p, axis)).collect();
+    let rise_c = mech::missed_die_rise(&p, &mut ctxs).unwrap_or(0.0);
     let mut axes = Vec::new();
     let mut sensitivity = Vec::new();
     let mut nuisance = Vec::new();
     let mut bias_steps = Vec::new();
     let mut with_rise = Vec::new();
-    for (axis, q) in qs.into_iter().enumerate() {
-        let mut ctx = mech::Context::new(&p, axis);
+    for (axis, (q, mut ctx)) in qs.into_iter().zip(ctxs).enumerate() {
         ctx.gm = gm;
+        ctx.lag_rise_c = rise_c;
+        let n_sim = ctx.nuisance.len();
         let (mut fit, mut found) = fit_with_steps(&mut ctx, q);
         // The rise is the unit's, but a lag without it is kept on an accelerometer whose
         // held-out rows it predicts at least as well (a turn-on transient of its own there).
-        if ctx.lag_rise_c > 0.0 {
-            let mut plain = mech::Context::new(&p, axis);
-            plain.gm = gm;
-            plain.lag_rise_c = 0.0;
-            let (plain_fit, plain_found) = fit_with_steps(&mut plain, q);
+        if rise_c > 0.0 {
+            // The same context without the rise (and without the first fit's bias steps).
+            ctx.nuisance.truncate(n_sim);
+            ctx.lag_rise_c = 0.0;
+            let (plain_fit, plain_found) = fit_with_steps(&mut ctx, q);
             if plain_fit.heldout_rms.1 <= fit.heldout_rms.1 {
                 (fit, found) = (plain_fit, plain_found);
             } else {
@@ -220,10 +220,14 @@ fn diagnose_prepared(
         sensitivity.push(ctx.s.clone());
         nuisance.push(ctx.nuisance_names.clone());
     }
+    // The rise is the unit's: the prepared pair carries it for every context built later.
+    p.lag_rise_c = rise_c;
     if !with_rise.is_empty() {
+        let elsewhere =
+            if with_rise.len() < 3 { " (elsewhere the lag without it predicts the held-out rows as well)" } else { "" };
         p.notes.push(format!(
-            "REAL's die misses {:.2} °C of its heating at each power-on that SIM's die has at once: a thermal lag acts on `lag(T) − ρ·e^(−P/τ)` on accelerometer {} (elsewhere the lag without it predicts the held-out rows as well)",
-            p.lag_rise_c,
+            "REAL's die misses {:.2} °C of its heating at each power-on that SIM's die has at once: a thermal lag acts on `lag(T) − ρ·e^(−P/τ)` on accelerometer {}{elsewhere}",
+            rise_c,
             with_rise.join(", ")
         ));
     }
