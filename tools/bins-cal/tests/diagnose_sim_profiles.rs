@@ -14,8 +14,12 @@
 //! ```sh
 //! SIMPROF_SEED=1 SIMPROF_CASES=24 cargo test -p bins-cal --release --test diagnose_sim_profiles -- --ignored --nocapture
 //! ```
+//!
+//! With `SIMPROF_SPEC=1` the draw gives the diagnosis the noise as a datasheet would (the
+//! residual's random walk and bias instability) instead of estimating a random walk from
+//! each record.
 
-use bins_cal::diagnose::diagnose;
+use bins_cal::diagnose::{Options, diagnose, diagnose_with};
 use bins_cal::recording::Row;
 use bins_cal::sim::scenario::ScenarioFile;
 use rand::{Rng, SeedableRng};
@@ -26,6 +30,14 @@ use std::path::Path;
 const WARMUP: &str = "warmup";
 const LAG: &str = "thermal_lag";
 const PLAY: &str = "thermal_hysteresis";
+
+/// The residual's random walk [mg/√h] of the scenarios' noise (`random_walk_V_per_sqrt_s`
+/// 2·10⁻⁸ at 1 V/g, in SIM and REAL: √2 · 0.0012).
+const SPEC_RANDOM_WALK_MG_PER_SQRT_H: f64 = 0.0017;
+
+/// The residual's bias instability [mg] and its correlation time [s] of the scenarios' noise
+/// (`bias_instability_V` 3·10⁻⁶ at 1 V/g, `bias_tau_s` 300, in SIM and REAL: √2 · 0.003 mg).
+const SPEC_BIAS_INSTABILITY: (f64, f64) = (0.00424, 300.0);
 
 /// One drawn case: REAL's and SIM's scenarios, what REAL has, and the draw as text.
 struct Draw {
@@ -188,11 +200,22 @@ fn a_warm_up_after_one_cold_power_on_is_no_missed_rise() {
 fn simulator_user_profiles() {
     let base: u64 = std::env::var("SIMPROF_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
     let n: u64 = std::env::var("SIMPROF_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(24);
+    // SIMPROF_SPEC=1: the noise as a datasheet gives it (the residual's, √2 times the unit's
+    // random walk and bias instability at the nominal 1 V/g), not estimated from the record.
+    let options = if std::env::var("SIMPROF_SPEC").is_ok_and(|v| v == "1") {
+        Options {
+            random_walk_mg_per_sqrt_h: Some(SPEC_RANDOM_WALK_MG_PER_SQRT_H),
+            bias_instability: Some(SPEC_BIAS_INSTABILITY),
+            ..Options::default()
+        }
+    } else {
+        Options::default()
+    };
     let (mut false_cases, mut members, mut named, mut worse, mut full, mut cases) = (0, 0, 0, 0, 0, 0);
     for seed in base..base + n {
         let d = draw(seed);
         let (sim, real) = (rows(&d.sim, 2 * seed + 1), rows(&d.real, 2 * seed));
-        let (r, rise_c) = match diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")) {
+        let (r, rise_c) = match diagnose_with(&sim, &real, Path::new("sim.csv"), Path::new("real.csv"), &options) {
             Ok(x) => (x.report, x.prepared.lag_rise_c),
             Err(e) => {
                 println!("case {seed}: {e}");
