@@ -515,6 +515,18 @@ fn folds(m: Mech) -> Option<Mech> {
     }
 }
 
+/// Structure left after the model is within what the random walk the mechanisms were tested
+/// against could make when its size is at most this many times the walk's wander `√(q·T)` over
+/// the longest session `T`: a smooth structure of RMS `s` over `T` is a drift of range about
+/// `√12·s`, which that random walk makes with a likelihood ratio of about `12·s²/(q·T)`; at
+/// twice the wander that is 48, beyond the 20–30 the selection asks of a mechanism, so below it
+/// the random walk can hide a mechanism of that size (the report then says so).
+pub const RANDOM_WALK_HIDES: f64 = 2.0;
+
+/// The report says what the estimated random walk hides ([`RANDOM_WALK_HIDES`]) only on an
+/// accelerometer left above this many times its noise floor held-out.
+pub const LEFT_ABOVE_FLOOR: f64 = 1.25;
+
 /// The verdict on one accelerometer from the structure above the noise (its size at the
 /// scale where it stands out most, [`structure`]) before and after the model, and whether a
 /// term is named: one story per axis ("at the noise" never beside a named term or structure).
@@ -1107,6 +1119,28 @@ pub fn build(
     let named = |i: usize| !axes[i].terms.is_empty();
     let scales: Vec<Vec<ScalePoint>> = axes.iter().map(|f| axis_scales(p, f)).collect();
     let left = |i: usize| structure(&scales[i], true);
+    // Structure left on an accelerometer above its floor that the random walk estimated from
+    // this very record could make: the sensor's own noise figures are the sharper test of it.
+    if input.opt.random_walk_mg_per_sqrt_h.is_none() && input.opt.bias_instability.is_none() {
+        let span_s = p.sessions().iter().map(|r| p.t[r.end - 1] - p.t[r.start]).fold(0.0, f64::max);
+        for (i, fit) in axes.iter().enumerate() {
+            let wander = (fit.q * span_s).sqrt();
+            if let Some((size, tau)) = left(i)
+                && size <= RANDOM_WALK_HIDES * wander
+                && fit.heldout_rms.1 > LEFT_ABOVE_FLOOR * floor.0[i]
+            {
+                notes.push(format!(
+                    "accelerometer {}: {:.4} mg of structure is left at {:.0} s, within what the random walk estimated from this record ({:.4} mg/√h) wanders over it (±{:.4} mg in {:.0} min): what is left cannot be told from that random walk here, and one record cannot tell that random walk from a bias instability of the same short-time slope, which stays within ±σ: the sensor's own noise (`--random-walk`, `--bias-instability` with `--bias-tau`: its datasheet, or `bins-cal allan` of a quiet recording of the unit) is the sharper test",
+                    AXES[i],
+                    size * 1e3,
+                    tau,
+                    (fit.q * 3600.0).sqrt() * 1e3,
+                    wander * 1e3,
+                    span_s / 60.0
+                ));
+            }
+        }
+    }
     for (i, names) in input.nuisance.iter().enumerate() {
         if !names.is_empty() {
             notes.push(format!(
