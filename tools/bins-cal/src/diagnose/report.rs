@@ -1122,7 +1122,8 @@ pub fn build(
     // Structure left on an accelerometer above its floor that the random walk estimated from
     // this very record could make: the sensor's own noise figures are the sharper test of it.
     if input.opt.random_walk_mg_per_sqrt_h.is_none() && input.opt.bias_instability.is_none() {
-        let span_s = p.sessions().iter().map(|r| p.t[r.end - 1] - p.t[r.start]).fold(0.0, f64::max);
+        let span_s =
+            p.sessions().iter().filter(|r| !r.is_empty()).map(|r| p.t[r.end - 1] - p.t[r.start]).fold(0.0, f64::max);
         for (i, fit) in axes.iter().enumerate() {
             let wander = (fit.q * span_s).sqrt();
             if let Some((size, tau)) = left(i)
