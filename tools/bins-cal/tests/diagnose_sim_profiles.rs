@@ -39,6 +39,15 @@ const SPEC_RANDOM_WALK_MG_PER_SQRT_H: f64 = 0.0017;
 /// (`bias_instability_V` 3·10⁻⁶ at 1 V/g, `bias_tau_s` 300, in SIM and REAL: √2 · 0.003 mg).
 const SPEC_BIAS_INSTABILITY: (f64, f64) = (0.00424, 300.0);
 
+/// The diagnosis's options with the residual's noise as a datasheet gives it.
+fn datasheet_noise() -> Options {
+    Options {
+        random_walk_mg_per_sqrt_h: Some(SPEC_RANDOM_WALK_MG_PER_SQRT_H),
+        bias_instability: Some(SPEC_BIAS_INSTABILITY),
+        ..Options::default()
+    }
+}
+
 /// One drawn case: REAL's and SIM's scenarios, what REAL has, and the draw as text.
 struct Draw {
     real: String,
@@ -224,12 +233,7 @@ fn structure_the_estimated_random_walk_hides_is_said_and_the_datasheet_noise_nam
     assert!(ratio(&d, "x") > 1.25, "x is left above its floor against the estimated random walk");
     assert_eq!(hidden_by_random_walk(&d), "x");
     assert_eq!(false_names(&d, &[WARMUP, LAG, PLAY]), Vec::<String>::new());
-    let spec = Options {
-        random_walk_mg_per_sqrt_h: Some(SPEC_RANDOM_WALK_MG_PER_SQRT_H),
-        bias_instability: Some(SPEC_BIAS_INSTABILITY),
-        ..Options::default()
-    };
-    let g = diagnose_with(&sim, &real, Path::new("sim.csv"), Path::new("real.csv"), &spec).unwrap().report;
+    let g = diagnose_with(&sim, &real, Path::new("sim.csv"), Path::new("real.csv"), &datasheet_noise()).unwrap().report;
     println!("datasheet: x {:.2}× its floor, notes on {:?}", ratio(&g, "x"), hidden_by_random_walk(&g));
     assert!(ratio(&g, "x") <= 1.25);
     assert!(hidden_by_random_walk(&g).is_empty());
@@ -243,15 +247,8 @@ fn simulator_user_profiles() {
     let n: u64 = std::env::var("SIMPROF_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(24);
     // SIMPROF_SPEC=1: the noise as a datasheet gives it (the residual's, √2 times the unit's
     // random walk and bias instability at the nominal 1 V/g), not estimated from the record.
-    let options = if std::env::var("SIMPROF_SPEC").is_ok_and(|v| v == "1") {
-        Options {
-            random_walk_mg_per_sqrt_h: Some(SPEC_RANDOM_WALK_MG_PER_SQRT_H),
-            bias_instability: Some(SPEC_BIAS_INSTABILITY),
-            ..Options::default()
-        }
-    } else {
-        Options::default()
-    };
+    let options =
+        if std::env::var("SIMPROF_SPEC").is_ok_and(|v| v == "1") { datasheet_noise() } else { Options::default() };
     let (mut false_cases, mut members, mut named, mut worse, mut full, mut cases) = (0, 0, 0, 0, 0, 0);
     for seed in base..base + n {
         let d = draw(seed);

@@ -523,10 +523,6 @@ fn folds(m: Mech) -> Option<Mech> {
 /// the random walk can hide a mechanism of that size (the report then says so).
 pub const RANDOM_WALK_HIDES: f64 = 2.0;
 
-/// The report says what the estimated random walk hides ([`RANDOM_WALK_HIDES`]) only on an
-/// accelerometer left above this many times its noise floor held-out.
-pub const LEFT_ABOVE_FLOOR: f64 = 1.25;
-
 /// The verdict on one accelerometer from the structure above the noise (its size at the
 /// scale where it stands out most, [`structure`]) before and after the model, and whether a
 /// term is named: one story per axis ("at the noise" never beside a named term or structure).
@@ -1119,8 +1115,9 @@ pub fn build(
     let named = |i: usize| !axes[i].terms.is_empty();
     let scales: Vec<Vec<ScalePoint>> = axes.iter().map(|f| axis_scales(p, f)).collect();
     let left = |i: usize| structure(&scales[i], true);
-    // Structure left on an accelerometer above its floor that the random walk estimated from
-    // this very record could make: the sensor's own noise figures are the sharper test of it.
+    // Structure left on an accelerometer the model does not fit (above `THERMAL_JOIN_RATIO` of
+    // its floor) that the random walk estimated from this very record could make: the sensor's
+    // own noise figures are the sharper test of it.
     if input.opt.random_walk_mg_per_sqrt_h.is_none() && input.opt.bias_instability.is_none() {
         let span_s =
             p.sessions().iter().filter(|r| !r.is_empty()).map(|r| p.t[r.end - 1] - p.t[r.start]).fold(0.0, f64::max);
@@ -1128,7 +1125,7 @@ pub fn build(
             let wander = (fit.q * span_s).sqrt();
             if let Some((size, tau)) = left(i)
                 && size <= RANDOM_WALK_HIDES * wander
-                && fit.heldout_rms.1 > LEFT_ABOVE_FLOOR * floor.0[i]
+                && fit.heldout_rms.1 > THERMAL_JOIN_RATIO * floor.0[i]
             {
                 notes.push(format!(
                     "accelerometer {}: {:.4} mg of structure is left at {:.0} s, within what the random walk estimated from this record ({:.4} mg/√h) wanders over it (±{:.4} mg in {:.0} min): what is left cannot be told from that random walk here, and one record cannot tell that random walk from a bias instability of the same short-time slope, which stays within ±σ: the sensor's own noise (`--random-walk`, `--bias-instability` with `--bias-tau`: its datasheet, or `bins-cal allan` of a quiet recording of the unit) is the sharper test",
