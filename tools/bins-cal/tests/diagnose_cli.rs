@@ -337,6 +337,45 @@ fn recipe_with_random_walk_zero_names_only_what_the_data_has() {
     }
 }
 
+/// `--noise` is refused beside `--random-walk` or `--bias-instability`, and a file that is
+/// missing, not a scenario, or without noise on an accelerometer is named in one line with
+/// nothing written.
+#[test]
+fn a_noise_file_is_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sp, rp) = pair(dir.path(), "null_random_walk", 2_000);
+    let rep = dir.path().join("r.json");
+    let noise = dir.path().join("noise.toml");
+    let quiet = |noise_table: &str| {
+        format!(
+            "description = \"quiet\"\n[recording]\nrate_Hz = 10.0\n[unit]\npreset = \"paper\"\n[thermal]\nstart_C = 20.0\n[noise]\n{noise_table}\n[[step]]\nkind = \"soak\"\nchamber_C = 20.0\ndwell_s = 100.0\n"
+        )
+    };
+    let n = noise.to_str().unwrap();
+    for (table, more, says) in [
+        (None, &["--noise", n][..], "noise.toml"),
+        (Some("white_V = 1e-5"), &["--noise", n, "--random-walk", "0.1"][..], "--random-walk"),
+        (
+            Some("white_V = 1e-5"),
+            &["--noise", n, "--bias-instability", "0.1", "--bias-tau", "60"][..],
+            "--bias-instability",
+        ),
+        (Some("white_V = [1e-5, 0.0, 1e-5]"), &["--noise", n][..], "noise.white_V[1]"),
+        (Some("white = 1e-5"), &["--noise", n][..], "white"),
+    ] {
+        match table {
+            Some(t) => std::fs::write(&noise, quiet(t)).unwrap(),
+            None => {
+                let _ = std::fs::remove_file(&noise);
+            }
+        }
+        let out = diagnose_cmd(&sp, &rp, &rep).args(more).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(says), "{more:?}: {err}");
+        assert!(!rep.exists(), "{more:?}: no report on failure");
+    }
+}
+
 /// `--bias-instability` and `--bias-tau` go together and must be positive (one-line errors
 /// naming the option, nothing written); given, the report carries them, the printed noise line
 /// names them, and on the suite's random-walk null (a 20 µg, 600 s Gauss–Markov bias and a
@@ -362,7 +401,10 @@ fn a_given_bias_instability_is_checked_and_reported() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(stdout.contains("beside a bias instability of 0.0200 mg, τ = 600 s (given)"), "{stdout}");
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
-    assert_eq!(v["bias_instability_mg_tau_s"], serde_json::json!([0.02, 600.0]));
+    for ax in ["x", "y", "z"] {
+        let (mg, tau_s) = (&v["bias_instability_mg_tau_s"][ax][0], &v["bias_instability_mg_tau_s"][ax][1]);
+        assert!((mg.as_f64().unwrap() - 0.02).abs() < 1e-12 && tau_s.as_f64() == Some(600.0), "{ax}: {mg} {tau_s}");
+    }
     let named = v["effects"].as_array().unwrap().len() + v["ambiguous"].as_array().unwrap().len();
     assert_eq!(named, 0, "the null names nothing with its own noise specification: {stdout}");
 }

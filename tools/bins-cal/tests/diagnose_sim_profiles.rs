@@ -17,8 +17,10 @@
 //!
 //! With `SIMPROF_SPEC=1` the draw gives the diagnosis the noise as a datasheet would (the
 //! residual's random walk and bias instability) instead of estimating a random walk from
-//! each record.
+//! each record; with `SIMPROF_SPEC=allan`, the noise `bins-cal allan --noise-toml` fits to a
+//! quiet recording of the unit at the case's rate (`--noise`), as a user would get it.
 
+use bins_cal::diagnose::noise::SensorNoise;
 use bins_cal::diagnose::{Options, diagnose, diagnose_with};
 use bins_cal::recording::Row;
 use bins_cal::sim::scenario::ScenarioFile;
@@ -50,6 +52,7 @@ fn datasheet_noise() -> Options {
 
 /// One drawn case: REAL's and SIM's scenarios, what REAL has, and the draw as text.
 struct Draw {
+    rate_hz: f64,
     real: String,
     sim: String,
     truth: Vec<&'static str>,
@@ -132,7 +135,7 @@ fn draw(seed: u64) -> Draw {
         warmup.0.map(|v| (v * 1e6).round()),
         warmup.1
     );
-    Draw { real, sim, truth, text }
+    Draw { rate_hz, real, sim, truth, text }
 }
 
 fn rows(text: &str, seed: u64) -> Vec<Row> {
@@ -240,19 +243,144 @@ fn structure_the_estimated_random_walk_hides_is_said_and_the_datasheet_noise_nam
     assert_eq!(false_names(&g, &[WARMUP, LAG, PLAY]), Vec::<String>::new());
 }
 
+/// Runs `bins-cal` with `args`; its standard output (a failure stops the test with its errors).
+fn bins_cal(args: &[&std::ffi::OsStr]) -> String {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_bins-cal")).args(args).output().unwrap();
+    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// What a user does for the unit's own noise: a quiet recording of the scenarios' unit (four
+/// hours still at 20 °C at `rate_hz`, seed 7) into `dir`, and `bins-cal allan --noise-toml` of
+/// it; the noise file's path.
+fn noise_of_quiet_recording(dir: &Path, rate_hz: f64) -> std::path::PathBuf {
+    let quiet = "[[step]]\nkind = \"soak\"\nchamber_C = 20.0\ndwell_s = 14400.0\n";
+    let (toml, csv) = (dir.join(format!("quiet-{rate_hz}.toml")), dir.join(format!("quiet-{rate_hz}.csv")));
+    let noise = dir.join(format!("noise-{rate_hz}.toml"));
+    std::fs::write(&toml, scenario(rate_hz, 20.0, ([0.0; 3], 600.0), 1.0, 0.0, quiet)).unwrap();
+    bins_cal(&["simulate".as_ref(), toml.as_os_str(), "-o".as_ref(), csv.as_os_str(), "--seed".as_ref(), "7".as_ref()]);
+    let channels = "ux_V,uy_V,uz_V".as_ref();
+    bins_cal(&[
+        "allan".as_ref(),
+        csv.as_os_str(),
+        "--channels".as_ref(),
+        channels,
+        "--noise-toml".as_ref(),
+        noise.as_os_str(),
+    ]);
+    noise
+}
+
+/// The same profile as a user closes that loop: a quiet recording of the unit (four hours at
+/// 20 °C, the same noise), `bins-cal allan --noise-toml` of it, and `diagnose --noise` with
+/// that file. The noise the Allan fit finds (its own estimate, not the scenario's numbers) is
+/// scaled to the residual by the white levels (√2: SIM and REAL each carry it), and the
+/// diagnosis does what the datasheet's figures make it do: x within 1.25× its floor, no
+/// random-walk note, nothing false.
+#[test]
+fn the_noise_allan_fits_to_a_quiet_recording_is_the_sharper_test() {
+    let dir = tempfile::tempdir().unwrap();
+    let at = |f: &str| dir.path().join(f);
+    let steps = ramp(36.06686322252364, 0.09217644616732201, 0.4349426358105502, 0.0);
+    let warmup = ([-1.507211821021167e-4, 2.291112629215959e-4, 2.4855474768553974e-4], 900.0);
+    for (name, text, seed) in [
+        ("real", scenario(2.0, 36.06686322252364, warmup, 300.0, 0.38132435543953314, &steps), "158"),
+        ("sim", scenario(2.0, 36.06686322252364, ([0.0; 3], 600.0), 1.0, 0.0, &steps), "159"),
+    ] {
+        let (toml, csv) = (at(&format!("{name}.toml")), at(&format!("{name}.csv")));
+        std::fs::write(&toml, text).unwrap();
+        bins_cal(&[
+            "simulate".as_ref(),
+            toml.as_os_str(),
+            "-o".as_ref(),
+            csv.as_os_str(),
+            "--seed".as_ref(),
+            seed.as_ref(),
+        ]);
+    }
+    let (noise, report) = (noise_of_quiet_recording(dir.path(), 2.0), at("report.json"));
+    let (s, r) = (at("sim.csv"), at("real.csv"));
+    let args: [&std::ffi::OsStr; 9] = [
+        "diagnose".as_ref(),
+        "--sim".as_ref(),
+        s.as_os_str(),
+        "--real".as_ref(),
+        r.as_os_str(),
+        "--report".as_ref(),
+        report.as_os_str(),
+        "--noise".as_ref(),
+        noise.as_os_str(),
+    ];
+    let stdout = bins_cal(&args);
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let ratio = |a: &str| v["heldout_rms_after_mg"][a].as_f64().unwrap() / v["noise_floor_mg"][a].as_f64().unwrap();
+    println!("x {:.2}×, y {:.2}×, z {:.2}× their floors\n{stdout}", ratio("x"), ratio("y"), ratio("z"));
+    assert!(ratio("x") <= 1.25, "x {:.2}× its floor", ratio("x"));
+    assert_eq!(v["random_walk_source"], noise.display().to_string());
+    let notes: Vec<&str> = v["notes"].as_array().unwrap().iter().filter_map(|n| n.as_str()).collect();
+    assert!(!notes.iter().any(|n| n.contains("random walk estimated from this record")), "{notes:?}");
+    // The white levels' ratio over the scale factor: √2, both recordings noisy.
+    let scaled = notes.iter().find(|n| n.contains("scaled to the residual")).expect("the scaling is said");
+    let ratios: Vec<f64> = scaled
+        .split("white levels: ")
+        .nth(1)
+        .and_then(|t| t.split(" times").next())
+        .map(|t| t.split(" / ").map(|x| x.parse().unwrap()).collect())
+        .unwrap();
+    assert!(ratios.len() == 3 && ratios.iter().all(|k| (k / 2f64.sqrt() - 1.0).abs() < 0.05), "{ratios:?}");
+    assert!(!notes.iter().any(|n| n.contains("neither near 1 nor near √2")), "{notes:?}");
+    // A file whose white noise on y is a hundredth of the unit's: the scaling is said not to fit.
+    let text = std::fs::read_to_string(&noise).unwrap();
+    let white = text.lines().find(|l| l.starts_with("white_V")).unwrap();
+    std::fs::write(&noise, text.replace(white, "white_V = [1e-5, 1e-7, 1e-5]")).unwrap();
+    bins_cal(&args);
+    let w: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let odd: Vec<&str> = w["notes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|n| n.as_str())
+        .filter(|n| n.contains("neither near 1 nor near √2"))
+        .collect();
+    assert!(odd.len() == 1 && odd[0].starts_with("accelerometer y:"), "{odd:?}");
+    let truth = [WARMUP, LAG, PLAY];
+    for e in v["effects"].as_array().unwrap() {
+        assert!(truth.contains(&e["id"].as_str().unwrap()), "false effect {e}");
+    }
+    for g in v["ambiguous"].as_array().unwrap() {
+        assert!(g["ids"].as_array().unwrap().iter().any(|i| truth.contains(&i.as_str().unwrap())), "false group {g}");
+    }
+}
+
 #[test]
 #[ignore = "a draw of simulator-made user profiles: minutes; run on demand"]
 fn simulator_user_profiles() {
     let base: u64 = std::env::var("SIMPROF_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
     let n: u64 = std::env::var("SIMPROF_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(24);
     // SIMPROF_SPEC=1: the noise as a datasheet gives it (the residual's, √2 times the unit's
-    // random walk and bias instability at the nominal 1 V/g), not estimated from the record.
-    let options =
-        if std::env::var("SIMPROF_SPEC").is_ok_and(|v| v == "1") { datasheet_noise() } else { Options::default() };
+    // random walk and bias instability at the nominal 1 V/g), not estimated from the record;
+    // SIMPROF_SPEC=allan: the noise `bins-cal allan --noise-toml` fits to a quiet recording of
+    // the unit at the case's rate (`--noise`).
+    let spec = std::env::var("SIMPROF_SPEC").unwrap_or_default();
+    let quiet_dir = tempfile::tempdir().unwrap();
+    let mut allan_noise: Vec<(f64, SensorNoise)> = Vec::new();
+    let mut options_for = |rate_hz: f64| match spec.as_str() {
+        "1" => datasheet_noise(),
+        "allan" => {
+            if !allan_noise.iter().any(|(r, _)| *r == rate_hz) {
+                let file = noise_of_quiet_recording(quiet_dir.path(), rate_hz);
+                allan_noise.push((rate_hz, SensorNoise::read(&file).unwrap()));
+            }
+            let noise = allan_noise.iter().find(|(r, _)| *r == rate_hz).map(|(_, n)| n.clone());
+            Options { sensor_noise: noise, ..Options::default() }
+        }
+        _ => Options::default(),
+    };
     let (mut false_cases, mut members, mut named, mut worse, mut full, mut cases) = (0, 0, 0, 0, 0, 0);
     for seed in base..base + n {
         let d = draw(seed);
         let (sim, real) = (rows(&d.sim, 2 * seed + 1), rows(&d.real, 2 * seed));
+        let options = options_for(d.rate_hz);
         let (r, rise_c) = match diagnose_with(&sim, &real, Path::new("sim.csv"), Path::new("real.csv"), &options) {
             Ok(x) => (x.report, x.prepared.lag_rise_c),
             Err(e) => {

@@ -3,6 +3,7 @@
 //! method is in `docs/diagnosis.md`.
 
 use anyhow::{Context, anyhow};
+use bins_cal::diagnose::noise::SensorNoise;
 use bins_cal::diagnose::{DiagnoseError, Options, diagnose_against_calibration, diagnose_files, plot, propose};
 use bins_cal::fsio;
 use std::path::PathBuf;
@@ -46,6 +47,12 @@ pub struct Args {
     /// The correlation time [s] of --bias-instability.
     #[arg(long, value_name = "SECONDS", requires = "bias_instability")]
     bias_tau: Option<f64>,
+    /// The sensor's noise per accelerometer instead of --random-walk and --bias-instability: a
+    /// scenario whose [noise] table holds it, as `bins-cal allan --noise-toml` fits it to a
+    /// quiet recording of the unit (or SIM's own scenario). Scaled to the residual by the ratio
+    /// of their white levels, which holds the scale factor and the √2 of two noisy recordings.
+    #[arg(long, value_name = "NOISE.toml", conflicts_with_all = ["random_walk", "bias_instability"])]
+    noise: Option<PathBuf>,
     /// Reduce the rows to means over blocks of at most this many seconds before the search;
     /// the noise floor and the held-out figures stay per row of the recording. 0: every row.
     /// Without it: blocks of the length the data allow (a third of a second at 100 Hz), every
@@ -82,16 +89,18 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let inputs: Vec<&PathBuf> =
         [args.sim.as_ref(), args.calib.as_ref(), Some(&args.real)].into_iter().flatten().collect();
-    let inputs: Vec<&PathBuf> = inputs.into_iter().chain(args.twin.as_ref()).collect();
+    let inputs: Vec<&PathBuf> = inputs.into_iter().chain(args.twin.as_ref()).chain(args.noise.as_ref()).collect();
     let next_png = args.propose.as_ref().map(|p| p.with_extension("png"));
     let named_outputs =
         || [Some(&args.report), args.model.as_ref(), args.propose.as_ref(), next_png.as_ref()].into_iter().flatten();
     fsio::refuse_overwriting_inputs(inputs.iter(), named_outputs())?;
     let twin = args.twin.as_deref().map(propose::Twin::read).transpose().map_err(|e| anyhow!("{e}"))?;
+    let sensor_noise = args.noise.as_deref().map(SensorNoise::read).transpose().map_err(|e| anyhow!("{e}"))?;
     let t0 = std::time::Instant::now();
     let opt = Options {
         random_walk_mg_per_sqrt_h: args.random_walk,
         bias_instability: args.bias_instability.zip(args.bias_tau),
+        sensor_noise,
         progress: true,
         block_s: args.block_s,
     };
@@ -269,11 +278,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             s.z
         );
     }
-    let rw_from = if r.random_walk_source == "given" { "given" } else { "estimated with the whole library in" };
-    let beside = r.bias_instability_mg_tau_s.map_or(String::new(), |(mg, tau_s)| {
-        format!(" beside a bias instability of {mg:.4} mg, τ = {tau_s:.0} s (given)")
-    });
+    let rw_from = match r.random_walk_source.as_str() {
+        "given" => "given".to_string(),
+        "estimated" => "estimated with the whole library in".to_string(),
+        file => format!("from {file}"),
+    };
     for ax in ["x", "y", "z"] {
+        let beside = r.bias_instability_mg_tau_s.get(ax).map_or(String::new(), |(mg, tau_s)| {
+            format!(" beside a bias instability of {mg:.4} mg, τ = {tau_s:.0} s (given)")
+        });
         let g = |m: &std::collections::BTreeMap<String, f64>| m.get(ax).copied().unwrap_or(f64::NAN);
         let scale = r.unexplained_scale_s.get(ax).map_or(String::new(), |s| format!(" at {s:.0} s averaging"));
         println!(

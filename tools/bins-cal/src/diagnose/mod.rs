@@ -75,6 +75,10 @@ pub struct Options {
     /// correlation time \[s\] of a first-order Gauss–Markov bias, a second state of the noise
     /// model beside the random walk ([`noise::Gm`]); `None`: white + random walk alone.
     pub bias_instability: Option<(f64, f64)>,
+    /// The sensor's noise per accelerometer from a scenario's `[noise]` table (`--noise`:
+    /// what `bins-cal allan --noise-toml` fits to a quiet recording of the unit), scaled to
+    /// the residual by its white level ([`noise::SensorNoise`]); instead of the two above.
+    pub sensor_noise: Option<noise::SensorNoise>,
     /// A progress bar on stderr while the recordings are read (drawn on a terminal only).
     pub progress: bool,
     /// Reduce the rows to means over blocks of at most this many seconds before the search
@@ -97,6 +101,12 @@ pub const BLOCK_WITHIN_RATIO: f64 = 1.1;
 /// The fewest rows a default block holds: below, the rows are kept whole.
 pub const BLOCK_MIN_ROWS: usize = 4;
 
+/// The range of the `--noise` file's scaling to the residual, in units of the scale factor,
+/// outside which the report says the residual's white noise is not the file's: 1 where SIM is
+/// noiseless, √2 where SIM and REAL each carry the noise ([`noise::SensorNoise`]), with room
+/// for the white level's estimate.
+pub const NOISE_RATIO_PLAUSIBLE: (f64, f64) = (0.7, 2.0);
+
 /// The most blocks the default reduction makes of a record: a longer record gets longer blocks
 /// (its span over this many), so the search's time and memory are bounded by the model, not by
 /// the file (about 1.2 KB a block in the selection: 120 MB; a day at 100 Hz in 1 s blocks).
@@ -106,6 +116,12 @@ impl Options {
     /// The random-walk intensity [g²/s] of [`Options::random_walk_mg_per_sqrt_h`].
     pub fn random_walk_g2_per_s(&self) -> Option<f64> {
         self.random_walk_mg_per_sqrt_h.map(|rw| (rw * 1e-3).powi(2) / 3600.0)
+    }
+
+    /// Whether the sensor's noise is given ([`Options::random_walk_mg_per_sqrt_h`],
+    /// [`Options::bias_instability`] or [`Options::sensor_noise`]) rather than estimated.
+    pub fn noise_given(&self) -> bool {
+        self.random_walk_mg_per_sqrt_h.is_some() || self.bias_instability.is_some() || self.sensor_noise.is_some()
     }
 
     /// The noise model's bias instability of [`Options::bias_instability`].
@@ -147,6 +163,12 @@ fn check_options(opt: &Options) -> Result<(), DiagnoseError> {
             return Err(DiagnoseError(format!("--bias-tau {tau}: must be a finite value > 0 s")));
         }
     }
+    if opt.sensor_noise.is_some() && (opt.random_walk_mg_per_sqrt_h.is_some() || opt.bias_instability.is_some()) {
+        return Err(DiagnoseError(
+            "--noise gives the random walk and the bias instability: not with --random-walk or --bias-instability"
+                .into(),
+        ));
+    }
     if let Some(b) = opt.block_s
         && !(b.is_finite() && b >= 0.0)
     {
@@ -168,11 +190,20 @@ fn diagnose_prepared(
     // (where no mechanism of a chamber test moves), that level is used and the report says so.
     // A given bias instability wanders like a random walk of 2σ²/τ there, so it counts.
     let runs = p.static_runs();
-    let gm = opt.gm();
-    let short_gm = gm.map_or(0.0, |g| g.short_q());
     let mut qs = Vec::new();
+    let mut gms = Vec::new();
+    let mut g_per_v = Vec::new();
     for axis in 0..3 {
-        let q = opt.random_walk_g2_per_s().map(|q| {
+        let (given_q, gm) = match &opt.sensor_noise {
+            Some(n) => {
+                let a = n.for_axis(axis, white_density(&p, &runs, axis), p.dt);
+                g_per_v.push(a.g_per_v);
+                (Some(a.q), a.gm)
+            }
+            None => (opt.random_walk_g2_per_s(), opt.gm()),
+        };
+        let short_gm = gm.map_or(0.0, |g| g.short_q());
+        let q = given_q.map(|q| {
             let segs: Vec<&[f64]> = runs.iter().map(|&(a, b)| &p.r[axis][a..b]).collect();
             match noise::short_tau_q(&segs, p.dt) {
                 Some((seen, _)) if seen > q + short_gm => {
@@ -189,6 +220,26 @@ fn diagnose_prepared(
             }
         });
         qs.push(q);
+        gms.push(gm);
+    }
+    if let Some(n) = &opt.sensor_noise {
+        let ratio: Vec<String> = g_per_v.iter().zip(&p.k_diag).map(|(k, kd)| format!("{:.3}", k * kd)).collect();
+        p.notes.push(format!(
+            "the sensor's noise is taken from {} and scaled to the residual by the ratio of their white levels: {} times the scale factor's g per volt on x, y, z (√2 = 1.414 where SIM carries the same noise as REAL, 1 where SIM has none or the calibration predicts it); a Gauss–Markov bias faster than a row is in that white level, two slower ones are taken as one",
+            n.file.display(),
+            ratio.join(" / ")
+        ));
+        for (axis, (k, kd)) in g_per_v.iter().zip(&p.k_diag).enumerate() {
+            let (lo, hi) = NOISE_RATIO_PLAUSIBLE;
+            if !(lo..=hi).contains(&(k * kd)) {
+                p.notes.push(format!(
+                    "accelerometer {}: that ratio, {:.3}, is neither near 1 nor near √2: the residual's white noise is not {}'s (another unit, logger or rate, or vibration in the static rows), and its random walk and bias instability, scaled by it, are not this residual's either",
+                    prep::AXES[axis],
+                    k * kd,
+                    n.file.display()
+                ));
+            }
+        }
     }
     let mut ctxs: Vec<mech::Context> = (0..3).map(|axis| mech::Context::new(&p, axis)).collect();
     let rise_c = mech::missed_die_rise(&p, &mut ctxs).unwrap_or(0.0);
@@ -197,7 +248,7 @@ fn diagnose_prepared(
     let mut nuisance = Vec::new();
     let mut bias_steps = Vec::new();
     let mut with_rise = Vec::new();
-    for (axis, (q, mut ctx)) in qs.into_iter().zip(ctxs).enumerate() {
+    for (axis, ((q, gm), mut ctx)) in qs.into_iter().zip(gms).zip(ctxs).enumerate() {
         ctx.gm = gm;
         ctx.lag_rise_c = rise_c;
         let n_sim = ctx.nuisance.len();
@@ -255,6 +306,20 @@ fn diagnose_prepared(
         }
     }
     Ok(Diagnosis { prepared: p, sensitivity, axes, report })
+}
+
+/// The residual's white-noise density on accelerometer `axis` \[g²·s\]: the median of its
+/// per-row white variance over the static rows `runs` (all rows where there are none), times
+/// the row period (a block's mean has the variance of its rows over their number, and lasts
+/// their number of rows).
+fn white_density(p: &prep::Prepared, runs: &[(usize, usize)], axis: usize) -> f64 {
+    let w = &p.r_white[axis];
+    let mut v: Vec<f64> = runs.iter().flat_map(|&(a, b)| w[a..b].iter().copied()).filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        v = w.iter().copied().filter(|x| x.is_finite()).collect();
+    }
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0) * p.dt
 }
 
 /// Selection and fit of one accelerometer with its bias steps ([`steps`]): the selection, the

@@ -89,6 +89,89 @@ impl Gm {
     pub fn short_q(&self) -> f64 {
         2.0 * self.var_g2 / self.tau_s
     }
+
+    /// One Gauss–Markov bias for the sum of two (the filter holds one): the variance of the
+    /// sum (`σ₁² + σ₂²`, what it stays within beyond both times) and the short-time slope of
+    /// the sum (`2σ₁²/τ₁ + 2σ₂²/τ₂`, how it wanders below both), so
+    /// `τ = (σ₁² + σ₂²)/(σ₁²/τ₁ + σ₂²/τ₂)`. Over any time it wanders at least as far as the
+    /// sum (its increment's variance `2σ²(1 − e^(−t/τ))` against the sum's, by Jensen's
+    /// inequality: `1 − e^(−x)` is concave), so a test against it is the more cautious one.
+    pub fn merged(a: Gm, b: Gm) -> Gm {
+        let var_g2 = a.var_g2 + b.var_g2;
+        Gm { var_g2, tau_s: var_g2 / (a.var_g2 / a.tau_s + b.var_g2 / b.tau_s) }
+    }
+}
+
+/// The sensor's noise as a scenario's `[noise]` table gives it, per accelerometer in volts at
+/// the scenario's rate: what `bins-cal allan --noise-toml` fits to a quiet recording of the
+/// unit (white noise, a random walk, up to two Gauss–Markov biases, the ADC's step), or the
+/// table SIM was simulated with.
+///
+/// The residual is REAL − SIM in g: the file's volts become the residual's through the ratio
+/// of the white-noise densities, the residual's (its per-row white variance times the row
+/// period) over the file's (its model's Allan variance at one sample times the sample
+/// period). That ratio holds the scale factor and the √2 of two recordings that each carry the
+/// noise (1 where SIM is noiseless, or predicted by `--calib`), without the diagnosis being
+/// told either; it assumes the residual's white noise is the sensor's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SensorNoise {
+    /// The file it was read from.
+    pub file: std::path::PathBuf,
+    /// The file's sample period \[s\].
+    pub tau0_s: f64,
+    /// Per accelerometer, in volts.
+    pub axes: [crate::allan::twin::TwinNoise; 3],
+}
+
+/// [`SensorNoise`] of one accelerometer in the residual's units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AxisNoise {
+    /// Random-walk intensity \[g²/s\].
+    pub q: f64,
+    /// The Gauss–Markov bias (the two merged where both are slower than a row), if any.
+    pub gm: Option<Gm>,
+    /// The residual's g per volt of the file: the square root of the density ratio.
+    pub g_per_v: f64,
+}
+
+impl SensorNoise {
+    /// Reads the `[noise]` table and the rate of a scenario file (errors name the file and the
+    /// key). Every accelerometer needs white noise or an ADC step (the residual's level is
+    /// matched to it).
+    pub fn read(path: &std::path::Path) -> Result<Self, super::DiagnoseError> {
+        use crate::sim::scenario::ScenarioFile;
+        let err = |e: crate::sim::scenario::ScenarioError| super::DiagnoseError(format!("--noise {e}"));
+        let sim = ScenarioFile::read(path).map_err(err)?.build(path).map_err(err)?;
+        let n = &sim.noise;
+        let axes = std::array::from_fn(|i| crate::allan::twin::TwinNoise {
+            white: n.white_v[i],
+            random_walk: n.random_walk_v_per_sqrt_s[i],
+            gm: [(n.bias_instability_v[i], n.bias_tau_s[i]), (n.bias_instability2_v[i], n.bias_tau2_s[i])],
+            adc_step: n.adc_lsb_v,
+        });
+        let noise = SensorNoise { file: path.to_path_buf(), tau0_s: 1.0 / sim.rate_hz, axes };
+        for (i, a) in noise.axes.iter().enumerate() {
+            if !(a.avar(1.0, noise.tau0_s) > 0.0) {
+                return Err(super::DiagnoseError(format!(
+                    "--noise {}: noise.white_V[{i}]: the accelerometer has no noise at one sample (white, Gauss–Markov or ADC step); its random walk is scaled to the residual by that level",
+                    path.display()
+                )));
+            }
+        }
+        Ok(noise)
+    }
+
+    /// The noise of accelerometer `axis` in a residual of white-noise density
+    /// `white_g2_s` \[g²·s\] (per-row variance × row period) whose rows are `row_s` apart: a
+    /// Gauss–Markov bias faster than a row is white there (in the residual's white level
+    /// already) and is left out.
+    pub fn for_axis(&self, axis: usize, white_g2_s: f64, row_s: f64) -> AxisNoise {
+        let a = &self.axes[axis];
+        let k2 = white_g2_s / (a.avar(1.0, self.tau0_s) * self.tau0_s);
+        let gms =
+            a.gm.iter().filter(|&&(s, t)| s > 0.0 && t >= row_s).map(|&(s, t)| Gm { var_g2: k2 * s * s, tau_s: t });
+        AxisNoise { q: k2 * a.random_walk * a.random_walk, gm: gms.reduce(Gm::merged), g_per_v: k2.sqrt() }
+    }
 }
 
 /// The filter's covariance recursion, one observed row at a time: the same for every column,
@@ -765,6 +848,77 @@ mod tests {
         let yy: f64 = y.iter().map(|v| v * v).sum();
         assert!(sse < 1e-12 * yy, "{sse}");
         assert!((b[0] - 3.0).abs() < 1e-10 && (b[1] + 0.5).abs() < 1e-10 && b[2] == 0.0);
+    }
+
+    /// Two Gauss–Markov biases taken as one keep the sum's variance and short-time slope, and
+    /// the one wanders at least as far as the sum over every time (the caution the test needs).
+    #[test]
+    fn two_gauss_markov_biases_merge_into_one_that_wanders_at_least_as_far() {
+        let (a, b) = (Gm { var_g2: 4e-12, tau_s: 30.0 }, Gm { var_g2: 9e-12, tau_s: 2000.0 });
+        let m = Gm::merged(a, b);
+        assert!((m.var_g2 - 13e-12).abs() < 1e-24);
+        assert!((m.short_q() - (a.short_q() + b.short_q())).abs() < 1e-12 * m.short_q());
+        assert!(m.tau_s > a.tau_s && m.tau_s < b.tau_s, "{}", m.tau_s);
+        // The variance of the bias's change over t: 2σ²(1 − e^(−t/τ)).
+        let wander = |g: Gm, t: f64| -2.0 * g.var_g2 * (-t / g.tau_s).exp_m1();
+        for t in [0.1, 1.0, 10.0, 60.0, 300.0, 1000.0, 5000.0, 1e5] {
+            let sum = wander(a, t) + wander(b, t);
+            assert!(wander(m, t) >= sum * (1.0 - 1e-12), "t = {t} s: {} < {sum}", wander(m, t));
+        }
+    }
+
+    /// A noise file's volts become the residual's g through the ratio of the white densities:
+    /// the unit at 1 V/g logged at 10 Hz, the residual at 1 Hz of two recordings that each
+    /// carry the noise (twice the density): the random walk's and the bias's variances double;
+    /// a bias faster than the residual's row is left out, two slower ones become one.
+    #[test]
+    fn a_noise_file_is_scaled_to_the_residual_by_the_white_densities() {
+        use crate::allan::twin::TwinNoise;
+        let slow = TwinNoise { white: 1e-5, random_walk: 2e-8, gm: [(3e-6, 300.0), (0.0, 0.0)], adc_step: 0.0 };
+        let fast = TwinNoise { gm: [(3e-6, 300.0), (2e-6, 0.5)], ..slow };
+        let two = TwinNoise { gm: [(3e-6, 300.0), (2e-6, 40.0)], ..slow };
+        let n = SensorNoise { file: "n.toml".into(), tau0_s: 0.1, axes: [slow, fast, two] };
+        // The file's density: white² × τ₀ (its random walk and slow bias add < 10⁻⁴ at one sample).
+        let density_g2_s = 2.0 * 1e-10 * 0.1;
+        let x = n.for_axis(0, density_g2_s, 1.0);
+        assert!((x.g_per_v - 2f64.sqrt()).abs() < 1e-4 * 2f64.sqrt(), "{}", x.g_per_v);
+        assert!((x.q / (2.0 * 4e-16) - 1.0).abs() < 2e-4, "{}", x.q);
+        let gm = x.gm.unwrap();
+        assert!((gm.var_g2 / (2.0 * 9e-12) - 1.0).abs() < 2e-4 && gm.tau_s == 300.0, "{gm:?}");
+        // The 0.5 s bias is white at 1 s rows: only the 300 s one is kept.
+        let y = n.for_axis(1, density_g2_s, 1.0);
+        assert_eq!(y.gm.unwrap().tau_s, 300.0);
+        // Both slower than a row: one bias with both variances.
+        let z = n.for_axis(2, density_g2_s, 1.0);
+        let k2 = z.g_per_v * z.g_per_v;
+        assert!((z.gm.unwrap().var_g2 - k2 * (9e-12 + 4e-12)).abs() < 1e-9 * k2 * 13e-12);
+        assert!(z.gm.unwrap().tau_s > 40.0 && z.gm.unwrap().tau_s < 300.0);
+    }
+
+    /// `--noise` reads a scenario's `[noise]` table and rate; a file without noise at one sample
+    /// on an accelerometer, or not a scenario, is refused with the file and the key named.
+    #[test]
+    fn a_noise_file_is_read_and_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let scenario = |noise: &str| {
+            format!(
+                "description = \"quiet\"\n[recording]\nrate_Hz = 10.0\n[unit]\npreset = \"paper\"\n[thermal]\nstart_C = 20.0\n\
+                 [noise]\n{noise}\n[[step]]\nkind = \"soak\"\nchamber_C = 20.0\ndwell_s = 100.0\n"
+            )
+        };
+        let path = dir.path().join("n.toml");
+        std::fs::write(&path, scenario("white_V = [1e-5, 2e-5, 3e-5]\nbias_instability_V = 3e-6\nbias_tau_s = 300.0"))
+            .unwrap();
+        let n = SensorNoise::read(&path).unwrap();
+        assert_eq!(n.tau0_s, 0.1);
+        assert_eq!(n.axes[1].white, 2e-5);
+        assert_eq!(n.axes[2].gm[0], (3e-6, 300.0));
+        std::fs::write(&path, scenario("white_V = [1e-5, 0.0, 3e-5]")).unwrap();
+        let e = SensorNoise::read(&path).unwrap_err().0;
+        assert!(e.contains("n.toml") && e.contains("noise.white_V[1]"), "{e}");
+        std::fs::write(&path, scenario("white_V = 1e-5\nbias_tau_s = 300.0\nwhite_v = 1.0")).unwrap();
+        let e = SensorNoise::read(&path).unwrap_err().0;
+        assert!(e.contains("n.toml") && e.contains("white_v"), "{e}");
     }
 }
 

@@ -296,14 +296,15 @@ pub struct Report {
     pub allan: Vec<AllanPoint>,
     /// Random-walk intensity the mechanisms were tested against, as drift per √hour [mg/√h].
     pub random_walk_mg_per_sqrt_h: PerAxis<f64>,
-    /// Where that random walk comes from: `given` (`--random-walk`) or `estimated` (restricted
-    /// maximum likelihood with the richest model in).
+    /// Where that random walk comes from: `given` (`--random-walk`), the noise file's path
+    /// (`--noise`, scaled to the residual: [`super::noise::SensorNoise`]) or `estimated`
+    /// (restricted maximum likelihood with the richest model in).
     pub random_walk_source: String,
-    /// The bias instability given (`--bias-instability`, `--bias-tau`): its standard deviation
-    /// \[mg\] and correlation time \[s\], a state of the noise model beside the random walk;
-    /// absent when none was given.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub bias_instability_mg_tau_s: Option<(f64, f64)>,
+    /// The bias instability given (`--bias-instability` with `--bias-tau`, or `--noise`), per
+    /// accelerometer: its standard deviation \[mg\] and correlation time \[s\], a state of the
+    /// noise model beside the random walk; absent where none was given.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub bias_instability_mg_tau_s: PerAxis<(f64, f64)>,
     /// The die's rise over the thermistor after each power-on that SIM shows
     /// ([`super::mech::die_rise`]): the temperature and thermal terms act on the thermistor's
     /// reading plus this rise. Absent when SIM shows none.
@@ -1118,7 +1119,7 @@ pub fn build(
     // Structure left on an accelerometer the model does not fit (above `THERMAL_JOIN_RATIO` of
     // its floor) that the random walk estimated from this very record could make: the sensor's
     // own noise figures are the sharper test of it.
-    if input.opt.random_walk_mg_per_sqrt_h.is_none() && input.opt.bias_instability.is_none() {
+    if !input.opt.noise_given() {
         let span_s =
             p.sessions().iter().filter(|r| !r.is_empty()).map(|r| p.t[r.end - 1] - p.t[r.start]).fold(0.0, f64::max);
         for (i, fit) in axes.iter().enumerate() {
@@ -1128,7 +1129,7 @@ pub fn build(
                 && fit.heldout_rms.1 > THERMAL_JOIN_RATIO * floor.0[i]
             {
                 notes.push(format!(
-                    "accelerometer {}: {:.4} mg of structure is left at {:.0} s, within what the random walk estimated from this record ({:.4} mg/√h) wanders over it (±{:.4} mg in {:.0} min): what is left cannot be told from that random walk here, and one record cannot tell that random walk from a bias instability of the same short-time slope, which stays within ±σ: the sensor's own noise (`--random-walk`, `--bias-instability` with `--bias-tau`: its datasheet, or `bins-cal allan` of a quiet recording of the unit) is the sharper test",
+                    "accelerometer {}: {:.4} mg of structure is left at {:.0} s, within what the random walk estimated from this record ({:.4} mg/√h) wanders over it (±{:.4} mg in {:.0} min): what is left cannot be told from that random walk here, and one record cannot tell that random walk from a bias instability of the same short-time slope, which stays within ±σ: the sensor's own noise (`--noise` with what `bins-cal allan --noise-toml` fits to a quiet recording of the unit, or its datasheet's `--random-walk`, `--bias-instability` with `--bias-tau`) is the sharper test",
                     AXES[i],
                     size * 1e3,
                     tau,
@@ -1158,8 +1159,14 @@ pub fn build(
         noise_floor_mg: per_axis(|i| floor.0[i] * 1e3),
         allan: allan_curves(p, &floor.0, floor.1, axes),
         random_walk_mg_per_sqrt_h: per_axis(|i| (axes[i].q * 3600.0).sqrt() * 1e3),
-        random_walk_source: if input.opt.random_walk_mg_per_sqrt_h.is_some() { "given" } else { "estimated" }.into(),
-        bias_instability_mg_tau_s: input.opt.bias_instability,
+        random_walk_source: match (&input.opt.sensor_noise, input.opt.random_walk_mg_per_sqrt_h) {
+            (Some(n), _) => n.file.display().to_string(),
+            (None, Some(_)) => "given".into(),
+            (None, None) => "estimated".into(),
+        },
+        bias_instability_mg_tau_s: (0..3)
+            .filter_map(|i| axes[i].gm.map(|g| (AXES[i].to_string(), (g.var_g2.sqrt() * 1e3, g.tau_s))))
+            .collect(),
         sim_die_rise: p.die_rise,
         sensor_random_walk_mg_per_sqrt_h: sensor_rw,
         drift_rms_mg: per_axis(|i| axes[i].drift_rms * 1e3),
