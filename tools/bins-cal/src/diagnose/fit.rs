@@ -1163,6 +1163,18 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
             add(Mech::ThermalLag, d);
         }
     }
+    // Beside a lag, a turn-on term may be the die's rise the lag misses at each power-on,
+    // at another size than the unit's one estimate.
+    if matches!(term.mech, Mech::Warmup | Mech::SelfHeating) {
+        for (j, other) in fit.terms.iter().enumerate() {
+            if j != k
+                && other.mech == Mech::ThermalLag
+                && let Some(d) = other.theta.and_then(|th| refit.lag_rise_resized(th, &other.coef, &other.contribution))
+            {
+                add(Mech::ThermalLag, d);
+            }
+        }
+    }
     // Beside a lag or a play, any term may be that lag or play acting on the die's own
     // rise after each power-on, which the thermistor sees only in part.
     for (j, other) in fit.terms.iter().enumerate() {

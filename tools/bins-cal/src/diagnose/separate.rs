@@ -307,6 +307,37 @@ impl Refit<'_, '_> {
         best
     }
 
+    /// The deviance a fitted thermal lag (at `theta`, coefficients `coef`, contributing
+    /// `contribution`) cannot absorb with the die's rise it misses at each power-on at another
+    /// size ([`Context::with_missed_rise`]: the state `te − ρ·e^(−P/θ)`, ρ one estimate for the
+    /// unit from a grid, or none): the rival column is the lag's contribution with `ρ + 1 °C`
+    /// less its contribution, its size free. A turn-on term beside the lag at about the lag's
+    /// time constant is that rise resized as much as a term of its own. `None` without
+    /// `power_s` or where no power-on is within the lag's reach.
+    pub fn lag_rise_resized(&self, theta: f64, coef: &[f64], contribution: &[f64]) -> Option<f64> {
+        let ctx = self.ctx;
+        let power = ctx.p.power.as_deref()?;
+        let temp = &ctx.p.temp_s;
+        let te = ctx.with_missed_rise(
+            Mech::ThermalLag,
+            theta,
+            super::mech::state_of(Mech::ThermalLag, &ctx.p.t, temp, theta),
+        );
+        let te: Vec<f64> = te.iter().zip(power).map(|(x, pw)| x - (-pw / theta).exp()).collect();
+        let cols = ctx.state_columns(Mech::ThermalLag, theta, &te, temp);
+        let mut d: Vec<f64> = contribution.iter().map(|v| -v).collect();
+        for (c, b) in cols.iter().zip(coef) {
+            for (x, v) in d.iter_mut().zip(c) {
+                *x += b * v;
+            }
+        }
+        let size = contribution.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if !(d.iter().fold(0.0f64, |m, v| m.max(v.abs())) > 1e-9 * size) {
+            return None;
+        }
+        self.deviance(&[], &|_| true, &|_| vec![d.clone()]).map(|s| s.deviance)
+    }
+
     /// The deviance a richer form of the fitted lag or play `mech` cannot absorb: its columns
     /// at θ times `(1, ΔT, ΔT²)` (a gain that varies with temperature, as a sensitivity's slope
     /// at a die running warmer than the thermistor does), θ on its grid. Beside a lag or a play,
