@@ -7,7 +7,8 @@
 //! (the first observed row sets it), so a constant offset between SIM and REAL is always part
 //! of the null.
 //!
-//! Where the sensor's bias instability is known (a specification, [`Gm`]), it is a second
+//! Where the sensor's bias instability is known (a specification, [`Gm`], or the noise
+//! `bins-cal allan --noise-toml` fits to a quiet recording, [`SensorNoise`]), it is a second
 //! state beside the level: a first-order Gauss–Markov bias of variance `σ²` and correlation
 //! time `τ`. Below `τ` it wanders like a random walk of intensity `2σ²/τ`; beyond it stays
 //! within `σ`, so structure at the hour scale is not taken for drift the way a random walk
