@@ -226,10 +226,8 @@ fn a_warm_up_after_one_cold_power_on_is_no_missed_rise() {
 /// takes x to within 1.25× its floor and the report has no such line.
 #[test]
 fn structure_the_estimated_random_walk_hides_is_said_and_the_datasheet_noise_names_it() {
-    let steps = ramp(36.06686322252364, 0.09217644616732201, 0.4349426358105502, 0.0);
-    let warmup = ([-1.507211821021167e-4, 2.291112629215959e-4, 2.4855474768553974e-4], 900.0);
-    let real = rows(&scenario(2.0, 36.06686322252364, warmup, 300.0, 0.38132435543953314, &steps), 158);
-    let sim = rows(&scenario(2.0, 36.06686322252364, ([0.0; 3], 600.0), 1.0, 0.0, &steps), 159);
+    let case = draw(79);
+    let (sim, real) = (rows(&case.sim, 159), rows(&case.real, 158));
     let ratio = |r: &bins_cal::diagnose::report::Report, a: &str| r.heldout_rms_after_mg[a] / r.noise_floor_mg[a];
     let d = diagnose(&sim, &real, Path::new("sim.csv"), Path::new("real.csv")).unwrap().report;
     println!("estimated: x {:.2}× its floor, notes on {:?}", ratio(&d, "x"), hidden_by_random_walk(&d));
@@ -290,7 +288,7 @@ fn noise_of_quiet_recording(dir: &Path, rate_hz: f64) -> std::path::PathBuf {
     noise
 }
 
-/// The same profile as a user closes that loop: a quiet recording of the unit (four hours at
+/// Case 79 (above) as a user closes that loop: a quiet recording of the unit (four hours at
 /// 20 °C, the same noise), `bins-cal allan --noise-toml` of it, and `diagnose --noise` with
 /// that file. The noise the Allan fit finds (its own estimate, not the scenario's numbers) is
 /// scaled to the residual by the white levels (√2: SIM and REAL each carry it), and the
@@ -300,12 +298,8 @@ fn noise_of_quiet_recording(dir: &Path, rate_hz: f64) -> std::path::PathBuf {
 fn the_noise_allan_fits_to_a_quiet_recording_is_the_sharper_test() {
     let dir = tempfile::tempdir().unwrap();
     let at = |f: &str| dir.path().join(f);
-    let steps = ramp(36.06686322252364, 0.09217644616732201, 0.4349426358105502, 0.0);
-    let warmup = ([-1.507211821021167e-4, 2.291112629215959e-4, 2.4855474768553974e-4], 900.0);
-    for (name, text, seed) in [
-        ("real", scenario(2.0, 36.06686322252364, warmup, 300.0, 0.38132435543953314, &steps), "158"),
-        ("sim", scenario(2.0, 36.06686322252364, ([0.0; 3], 600.0), 1.0, 0.0, &steps), "159"),
-    ] {
+    let case = draw(79);
+    for (name, text, seed) in [("real", &case.real, "158"), ("sim", &case.sim, "159")] {
         let (toml, csv) = (at(&format!("{name}.toml")), at(&format!("{name}.csv")));
         std::fs::write(&toml, text).unwrap();
         bins_cal(&[

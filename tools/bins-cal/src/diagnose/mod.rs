@@ -318,8 +318,7 @@ fn white_density(p: &prep::Prepared, runs: &[(usize, usize)], axis: usize) -> f6
     if v.is_empty() {
         v = w.iter().copied().filter(|x| x.is_finite()).collect();
     }
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(0.0) * p.dt
+    if v.is_empty() { 0.0 } else { stats::median(&v) * p.dt }
 }
 
 /// Selection and fit of one accelerometer with its bias steps ([`steps`]): the selection, the

@@ -41,6 +41,18 @@ pub struct Separation {
     pub rival_theta: Option<f64>,
 }
 
+/// A fitted term's contribution changed: its columns built otherwise (`cols`, at another
+/// temperature or state) at its coefficients `coef`, less its `contribution` \[g\].
+fn change_of(cols: &[Vec<f64>], coef: &[f64], contribution: &[f64]) -> Vec<f64> {
+    let mut d: Vec<f64> = contribution.iter().map(|v| -v).collect();
+    for (c, b) in cols.iter().zip(coef) {
+        for (x, v) in d.iter_mut().zip(c) {
+            *x += b * v;
+        }
+    }
+    d
+}
+
 /// The prediction of `members` on the design `ctx` \[g\].
 pub fn predict(ctx: &Context, members: &[Fitted]) -> Vec<f64> {
     let n = ctx.p.t.len();
@@ -289,14 +301,7 @@ impl Refit<'_, '_> {
         for &rho in rhos {
             let columns = |tau: f64| -> Vec<Vec<f64>> {
                 let temp = super::mech::die_temperature(&ctx.p.temp_s, power, rho, tau);
-                let cols = ctx.columns_at(mech, theta.unwrap_or(0.0), &temp);
-                let mut d: Vec<f64> = contribution.iter().map(|v| -v).collect();
-                for (c, b) in cols.iter().zip(coef) {
-                    for (x, v) in d.iter_mut().zip(c) {
-                        *x += b * v;
-                    }
-                }
-                vec![d]
+                vec![change_of(&ctx.columns_at(mech, theta.unwrap_or(0.0), &temp), coef, contribution)]
             };
             if let Some(s) = self.deviance(&grid, &|th| ctx.offered(Mech::Warmup, th), &columns)
                 && best.is_none_or(|b| s.deviance < b)
@@ -324,13 +329,7 @@ impl Refit<'_, '_> {
             super::mech::state_of(Mech::ThermalLag, &ctx.p.t, temp, theta),
         );
         let te: Vec<f64> = te.iter().zip(power).map(|(x, pw)| x - (-pw / theta).exp()).collect();
-        let cols = ctx.state_columns(Mech::ThermalLag, theta, &te, temp);
-        let mut d: Vec<f64> = contribution.iter().map(|v| -v).collect();
-        for (c, b) in cols.iter().zip(coef) {
-            for (x, v) in d.iter_mut().zip(c) {
-                *x += b * v;
-            }
-        }
+        let d = change_of(&ctx.state_columns(Mech::ThermalLag, theta, &te, temp), coef, contribution);
         let size = contribution.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         if !(d.iter().fold(0.0f64, |m, v| m.max(v.abs())) > 1e-9 * size) {
             return None;
