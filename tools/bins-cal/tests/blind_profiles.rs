@@ -94,6 +94,19 @@ fn user_profile_cases_are_drawn_and_scored() {
 }
 
 #[test]
+fn a_tempco_the_record_holds_constant_is_given_no_size() {
+    // Combined draw 101031: a soak at 60.8 °C powered on an hour before the record, in one
+    // orientation. The die moves by its residual drift alone (µ°C), so a bias tempco scaled
+    // to 16 σ there would be a curve of kilo-g: it contributes nothing and is not visible
+    // (`MIN_VARIATION_SHARE`). Single draw 101056 (a soak in several tilted positions) keeps
+    // its cross-coupling tempco: at a steady temperature it varies with the positions.
+    let (_, _, held) = blind::generator::generate(&Case::draw_user(101031, true));
+    assert_eq!(held.members[0], [0.0; 3], "the soak's tempco was given a size");
+    let (_, _, moved) = blind::generator::generate(&Case::draw_user(101056, false));
+    assert!(moved.members[0][0] > 5.0, "the tilted soak's cross-coupling tempco lost its size: {:?}", moved.members);
+}
+
+#[test]
 fn a_turn_on_group_holds_the_play_that_acts_through_the_die_rise() {
     // Combined draw 37010: one ramp from power-on, a thermal play of 2.8 σ (on the die) beside a
     // k2 nonlinearity. z's power-on transient was a group of turn-on and additive-play names

@@ -816,6 +816,14 @@ fn draw_per_axis(rng: &mut ChaCha8Rng) -> [[f64; 3]; 3] {
 /// a warm-up of kilo-g at power-on ([`MIN_DISPLACEMENT_C`] is the same bound for a lag or play).
 pub const MIN_WARMUP_SHARE: f64 = 1e-3;
 
+/// Least RMS variation of a member's contribution on a user profile, as a share of its largest
+/// level, for it to be scaled to its drawn size. A tempco on a soak long after power-on varies
+/// with the die's residual drift alone (a bias curve 35 °C from its anchor moving by 10⁻⁸ of
+/// its level over µ°C); scaled to 16 σ its level would be kilo-g, so it contributes nothing, as
+/// a warm-up seen below [`MIN_WARMUP_SHARE`] does. A term that varies with the rig's positions
+/// (a cross-coupling tempco at a steady temperature, a cross-axis term) is not affected.
+pub const MIN_VARIATION_SHARE: f64 = 1e-3;
+
 /// Whether `te` moves at least [`MIN_DISPLACEMENT_C`] from `temp` on some row.
 fn displaced(te: &[f64], temp: &[f64]) -> bool {
     te.iter().zip(temp).any(|(a, b)| (a - b).abs() >= MIN_DISPLACEMENT_C)
@@ -1384,12 +1392,13 @@ fn generate_user(c: &Case, u: &UserPlan) -> (Vec<Row>, Vec<Row>, Truth) {
         let pa = draw_per_axis(&mut r);
         let con = contribution(&member.mech, &ctx, &pa);
         let (mut g, _) = scale_to_size(&member.mech, member.size_sigma, &member.axis_weight, &con, &pa, kd, sigma_g);
-        // A contribution this profile holds constant (a scale-factor term in one orientation)
-        // has only rounding about its mean: nothing to scale up.
+        // A contribution this profile holds constant (a scale-factor term in one orientation,
+        // a tempco on a soak long after power-on) has only rounding or the die's residual
+        // drift about its mean: nothing to scale up ([`MIN_VARIATION_SHARE`]).
         for i in 0..3 {
             let v: Vec<f64> = con.iter().map(|row| row[i]).collect();
             let peak = v.iter().fold(0.0f64, |a, b| a.max(b.abs()));
-            if !(std_about_mean(&v) > 1e-9 * peak) {
+            if !(std_about_mean(&v) > MIN_VARIATION_SHARE * peak) {
                 g[i] = 0.0;
             }
         }
