@@ -260,6 +260,31 @@ fn a_warm_up_beside_a_lag_is_grouped_with_the_lags_rise_resized() {
     }
 }
 
+#[test]
+fn a_warm_up_and_a_play_that_are_one_lag_are_grouped_with_it() {
+    // Case 109: a die lag of 127 s alone, one ramp at 0.23 °C/min from a cold power-on, with
+    // the noise `bins-cal allan --noise-toml` fits to a quiet recording. x was modelled as a
+    // 2.2 °C thermal play and a warm-up with a fast part at 148 s, and the warm-up was named:
+    // the play takes the lag's offset along the ramp, the warm-up the transient the thermistor
+    // misses at power-on. Refitted together as one lag with its missed rise free
+    // (`Refit::lag_with_rise_free`), they are grouped with the lag.
+    let d = draw(109);
+    assert_eq!(d.truth, [LAG]);
+    let dir = tempfile::tempdir().unwrap();
+    let noise = SensorNoise::read(&noise_of_quiet_recording(dir.path(), d.rate_hz)).unwrap();
+    let (sim, real) = (rows(&d.sim, 219), rows(&d.real, 218));
+    let options = Options { sensor_noise: Some(noise), ..Options::default() };
+    let r = diagnose_with(&sim, &real, Path::new("sim.csv"), Path::new("real.csv"), &options).unwrap().report;
+    println!("effects {:?}", r.effects.iter().map(|e| (&e.id, &e.axes)).collect::<Vec<_>>());
+    assert_eq!(false_names(&r, &d.truth), Vec::<String>::new());
+    assert!(r.effects.iter().all(|e| e.id != WARMUP), "no warm-up named for the lag's missed rise");
+    assert!(
+        r.ambiguous.iter().any(|g| g.axes.iter().any(|a| a == "x") && g.ids.iter().any(|i| i == LAG)),
+        "x's group holds the lag: {:?}",
+        r.ambiguous
+    );
+}
+
 /// Runs `bins-cal` with `args`; its standard output (a failure stops the test with its errors).
 fn bins_cal(args: &[&std::ffi::OsStr]) -> String {
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_bins-cal")).args(args).output().unwrap();

@@ -1047,10 +1047,48 @@ pub fn naming_threshold(alpha: f64, df: usize) -> f64 {
 pub(crate) fn separability_of(ctx: &Context, fit: &AxisFit) -> Vec<(Mech, Vec<(Mech, f64)>)> {
     use super::separate::{Fitted, Refit, predict};
     let mut out = Vec::new();
+    let fitted = |t: &Term| Fitted { mech: t.mech, theta: t.theta, coef: t.coef.clone() };
     for (k, term) in fit.terms.iter().enumerate() {
-        let a = [Fitted { mech: term.mech, theta: term.theta, coef: term.coef.clone() }];
+        let a = [fitted(term)];
         let refit = Refit::new(ctx, fit.q, fit.deviance_scale, &predict(ctx, &a), &shared_with(ctx, fit, k));
-        out.push((term.mech, rivals_of(ctx, fit, k, &refit)));
+        let mut rivals = rivals_of(ctx, fit, k, &refit);
+        // A turn-on term and a play or temperature form beside it may together be one die lag
+        // the model lacks (`Refit::lag_with_rise_free`): both are refitted as that lag at once,
+        // the rest of the model free beside it.
+        let turn_on = |m: Mech| matches!(m, Mech::Warmup | Mech::SelfHeating);
+        let partner = |m: Mech| m.temperature_form() && m != Mech::ThermalLag;
+        if !fit.terms.iter().any(|t| t.mech == Mech::ThermalLag) && (turn_on(term.mech) || partner(term.mech)) {
+            let pair_lag = fit
+                .terms
+                .iter()
+                .enumerate()
+                .filter(|(j, t)| *j != k && if turn_on(term.mech) { partner(t.mech) } else { turn_on(t.mech) })
+                .filter_map(|(j, t)| {
+                    let eta = predict(ctx, &[fitted(term), fitted(t)]);
+                    let shared: Vec<Vec<f64>> = ctx
+                        .nuisance
+                        .iter()
+                        .cloned()
+                        .chain(
+                            fit.terms
+                                .iter()
+                                .enumerate()
+                                .filter(|(i, _)| *i != k && *i != j)
+                                .flat_map(|(_, t)| t.columns.iter().cloned()),
+                        )
+                        .collect();
+                    Refit::new(ctx, fit.q, fit.deviance_scale, &eta, &shared).lag_with_rise_free()
+                })
+                .min_by(f64::total_cmp);
+            if let Some(d) = pair_lag {
+                match rivals.iter_mut().find(|r| r.0 == Mech::ThermalLag) {
+                    Some(r) => r.1 = r.1.min(d),
+                    None => rivals.push((Mech::ThermalLag, d)),
+                }
+                rivals.sort_by(|a, b| a.1.total_cmp(&b.1));
+            }
+        }
+        out.push((term.mech, rivals));
     }
     out
 }

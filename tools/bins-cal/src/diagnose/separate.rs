@@ -337,6 +337,29 @@ impl Refit<'_, '_> {
         self.deviance(&[], &|_| true, &|_| vec![d.clone()]).map(|s| s.deviance)
     }
 
+    /// The deviance a die lag cannot absorb with its missed rise at power-on of any size: the
+    /// lag's column at θ ([`Context::with_missed_rise`]) beside the change of that column with
+    /// the rise 1 °C larger, both free, θ on the lag's grid. Refitted to what a turn-on term and
+    /// a play or temperature form predict together, it is whether the pair is one lag the model
+    /// lacks: on one ramp from a cold power-on the play takes the lag's offset along the ramp
+    /// and the turn-on term the transient the thermistor misses. `None` without `power_s`.
+    pub fn lag_with_rise_free(&self) -> Option<f64> {
+        let ctx = self.ctx;
+        let power = ctx.p.power.as_deref()?;
+        let temp = &ctx.p.temp_s;
+        let grid = ctx.grid(Mech::ThermalLag);
+        let columns = |th: f64| -> Vec<Vec<f64>> {
+            let te =
+                ctx.with_missed_rise(Mech::ThermalLag, th, super::mech::state_of(Mech::ThermalLag, &ctx.p.t, temp, th));
+            let mut cols = ctx.state_columns(Mech::ThermalLag, th, &te, temp);
+            let te1: Vec<f64> = te.iter().zip(power).map(|(x, pw)| x - (-pw / th).exp()).collect();
+            let c1 = ctx.state_columns(Mech::ThermalLag, th, &te1, temp);
+            cols.push(c1[0].iter().zip(&cols[0]).map(|(a, b)| a - b).collect());
+            cols
+        };
+        self.deviance(&grid, &|_| true, &columns).map(|s| s.deviance)
+    }
+
     /// The deviance a richer form of the fitted lag or play `mech` cannot absorb: its columns
     /// at θ times `(1, ΔT, ΔT²)` (a gain that varies with temperature, as a sensitivity's slope
     /// at a die running warmer than the thermistor does), θ on its grid. Beside a lag or a play,
