@@ -1065,19 +1065,8 @@ pub(crate) fn separability_of(ctx: &Context, fit: &AxisFit) -> Vec<(Mech, Vec<(M
                 .filter(|(j, t)| *j != k && if turn_on(term.mech) { partner(t.mech) } else { turn_on(t.mech) })
                 .filter_map(|(j, t)| {
                     let eta = predict(ctx, &[fitted(term), fitted(t)]);
-                    let shared: Vec<Vec<f64>> = ctx
-                        .nuisance
-                        .iter()
-                        .cloned()
-                        .chain(
-                            fit.terms
-                                .iter()
-                                .enumerate()
-                                .filter(|(i, _)| *i != k && *i != j)
-                                .flat_map(|(_, t)| t.columns.iter().cloned()),
-                        )
-                        .collect();
-                    Refit::new(ctx, fit.q, fit.deviance_scale, &eta, &shared).lag_with_rise_free()
+                    Refit::new(ctx, fit.q, fit.deviance_scale, &eta, &shared_without(ctx, fit, &[k, j]))
+                        .lag_with_rise_free()
                 })
                 .min_by(f64::total_cmp);
             if let Some(d) = pair_lag {
@@ -1096,10 +1085,21 @@ pub(crate) fn separability_of(ctx: &Context, fit: &AxisFit) -> Vec<(Mech, Vec<(M
 /// The columns free beside term `k` of `fit` and its rivals: the nuisance and every other
 /// term's columns ([`separability_of`]).
 pub(crate) fn shared_with(ctx: &Context, fit: &AxisFit, k: usize) -> Vec<Vec<f64>> {
+    shared_without(ctx, fit, &[k])
+}
+
+/// The nuisance and the columns of every term of `fit` but those in `left_out`.
+fn shared_without(ctx: &Context, fit: &AxisFit, left_out: &[usize]) -> Vec<Vec<f64>> {
     ctx.nuisance
         .iter()
         .cloned()
-        .chain(fit.terms.iter().enumerate().filter(|(j, _)| *j != k).flat_map(|(_, t)| t.columns.iter().cloned()))
+        .chain(
+            fit.terms
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| !left_out.contains(j))
+                .flat_map(|(_, t)| t.columns.iter().cloned()),
+        )
         .collect()
 }
 

@@ -53,6 +53,18 @@ fn change_of(cols: &[Vec<f64>], coef: &[f64], contribution: &[f64]) -> Vec<f64> 
     d
 }
 
+/// A lag's state at θ with the die's rise it misses at each power-on (`te − ρ·e^(−P/θ)`,
+/// [`Context::with_missed_rise`]), and the same with that rise 1 °C larger.
+fn lag_states(ctx: &Context, theta: f64, power: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let te = ctx.with_missed_rise(
+        Mech::ThermalLag,
+        theta,
+        super::mech::state_of(Mech::ThermalLag, &ctx.p.t, &ctx.p.temp_s, theta),
+    );
+    let raised = te.iter().zip(power).map(|(x, pw)| x - (-pw / theta).exp()).collect();
+    (te, raised)
+}
+
 /// The prediction of `members` on the design `ctx` \[g\].
 pub fn predict(ctx: &Context, members: &[Fitted]) -> Vec<f64> {
     let n = ctx.p.t.len();
@@ -323,13 +335,8 @@ impl Refit<'_, '_> {
         let ctx = self.ctx;
         let power = ctx.p.power.as_deref()?;
         let temp = &ctx.p.temp_s;
-        let te = ctx.with_missed_rise(
-            Mech::ThermalLag,
-            theta,
-            super::mech::state_of(Mech::ThermalLag, &ctx.p.t, temp, theta),
-        );
-        let te: Vec<f64> = te.iter().zip(power).map(|(x, pw)| x - (-pw / theta).exp()).collect();
-        let d = change_of(&ctx.state_columns(Mech::ThermalLag, theta, &te, temp), coef, contribution);
+        let (_, raised) = lag_states(ctx, theta, power);
+        let d = change_of(&ctx.state_columns(Mech::ThermalLag, theta, &raised, temp), coef, contribution);
         let size = contribution.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         if !(d.iter().fold(0.0f64, |m, v| m.max(v.abs())) > 1e-9 * size) {
             return None;
@@ -349,11 +356,9 @@ impl Refit<'_, '_> {
         let temp = &ctx.p.temp_s;
         let grid = ctx.grid(Mech::ThermalLag);
         let columns = |th: f64| -> Vec<Vec<f64>> {
-            let te =
-                ctx.with_missed_rise(Mech::ThermalLag, th, super::mech::state_of(Mech::ThermalLag, &ctx.p.t, temp, th));
+            let (te, raised) = lag_states(ctx, th, power);
             let mut cols = ctx.state_columns(Mech::ThermalLag, th, &te, temp);
-            let te1: Vec<f64> = te.iter().zip(power).map(|(x, pw)| x - (-pw / th).exp()).collect();
-            let c1 = ctx.state_columns(Mech::ThermalLag, th, &te1, temp);
+            let c1 = ctx.state_columns(Mech::ThermalLag, th, &raised, temp);
             cols.push(c1[0].iter().zip(&cols[0]).map(|(a, b)| a - b).collect());
             cols
         };
