@@ -401,6 +401,30 @@ fn a_named_warmup_takes_its_fast_part() {
     assert_no_definite_false_name(case);
 }
 
+/// A record started after power-on shows a warm-up's tail, and the turn-on grid holds the
+/// warm-up's own time constant there (`mech::TURN_ON_MIN_TAIL`, docs/diagnosis.md, section 4).
+/// Single draw 109034: a soak at 37 °C in one orientation whose record starts 17 minutes after
+/// power-on, a warm-up of τ = 262 s and 15 σ on y; the record shows 2 % of its size at
+/// power-on. Combined draw 109051: steps started 49 minutes after power-on, a warm-up of
+/// τ = 938 s and 20 σ on y (4 % of it shown). While `e^(−P/τ)` had to change by 0.25 over the
+/// record, the grid began at 741 s on 109034 and held no τ at all on 109051: nothing was named,
+/// y was left at 15 and 21× its floor, and the structure was reported as within the random
+/// walk estimated from the record.
+#[test]
+fn a_warm_ups_tail_on_a_record_started_after_power_on_is_found() {
+    for case in [Case::draw_user(109034, false), Case::draw_user(109051, true)] {
+        let u = case.user.as_ref().expect("a user profile");
+        assert!(u.sessions[0].power_offset_s > 900.0, "the draw no longer starts after power-on: {u:?}");
+        let r = report_of(&case);
+        let on_y = r.effects.iter().any(|e| e.id == "warmup" && e.axes.iter().any(|a| a == "y"))
+            || r.ambiguous.iter().any(|g| g.axes.iter().any(|a| a == "y") && g.ids.iter().any(|i| i == "warmup"));
+        assert!(on_y, "{}: no warm-up on y: {:?} {:?}", case.seed, r.effects, r.ambiguous);
+        let ratio = r.heldout_rms_after_mg["y"] / r.noise_floor_mg["y"];
+        assert!(ratio <= 1.25, "{}: y at {ratio:.2}× its floor", case.seed);
+        assert_no_definite_false_name(case);
+    }
+}
+
 /// The die's rise over the thermistor SIM shows (`mech::die_rise`) against the generator's
 /// own: `(1 − share)·rise` settled, for user profiles of `n` single draws from `seed`, rows
 /// capped near `max_rows`. Returns (seed, sessions' kinds, estimate [°C], truth [°C]).

@@ -24,10 +24,20 @@ pub const GRID_PER_DECADE: f64 = 3.0;
 /// Reference temperature of the polynomial terms [°C] (the paper's normal conditions).
 pub const T0_C: f64 = 20.0;
 
-/// A turn-on term (`warmup`, `self_heating`) is offered at a time constant τ only when
-/// `e^(−P/τ)` changes by at least this much over the recording's `power_s`: the recording has
-/// rows near power-on on the scale of τ.
+/// A turn-on term is offered at a time constant τ only when `e^(−P/τ)` changes over the
+/// recording's `power_s` by at least this much: a warm-up `A·e^(−P/τ)` by this share of its
+/// level on the first row (the recording shows the term's shape, not a constant, nor a slow
+/// ramp at a τ far beyond the recording: a drift under another name); a self-heating
+/// `S'·(1 − e^(−P/τ))` by this share of its rise (where `e^(−P/τ)` has died out the column is
+/// SIM's sensitivity times a constant, a static term under another name).
 pub const TURN_ON_MIN_RANGE: f64 = 0.25;
+
+/// A warm-up is offered at τ only when `e^(−P/τ)` on the recording's first row is at least
+/// this share of its level at power-on: the recording starts within 4.6 τ of power-on, what it
+/// shows is the warm-up's tail, and its size at power-on is at most 100× what the recording
+/// shows (a record started 25 min after power-on shows a warm-up of 5 min at e^(−5), 1/150
+/// of its size at power-on: not offered).
+pub const TURN_ON_MIN_TAIL: f64 = 0.01;
 
 /// A turn-on term is offered at τ only when at most this share of the centred energy of
 /// `e^(−P/τ)` falls in one held-out fold ([`super::fit::FOLDS`]): a signature that lives
@@ -954,15 +964,20 @@ impl<'a> Context<'a> {
     }
 
     /// Whether mechanism `m` is offered at `theta`: a turn-on term (`warmup`, `self_heating`)
-    /// only where `e^(−P/τ)` changes by at least [`TURN_ON_MIN_RANGE`] over the recording and
-    /// at most [`TURN_ON_MAX_FOLD_SHARE`] of its centred energy lies in one held-out fold;
-    /// every other mechanism at every θ.
+    /// only where `e^(−P/τ)` on the first row is at least [`TURN_ON_MIN_TAIL`], changes over
+    /// the recording by at least [`TURN_ON_MIN_RANGE`] (of that level for a warm-up, of the
+    /// rise for a self-heating), and has at most [`TURN_ON_MAX_FOLD_SHARE`] of its centred
+    /// energy in one held-out fold; every other mechanism at every θ.
     pub fn offered(&self, m: Mech, theta: f64) -> bool {
         if !matches!(m, Mech::SelfHeating | Mech::Warmup) {
             return true;
         }
         let (pmin, pmax) = self.power_range_s;
-        (-pmin / theta).exp() - (-pmax / theta).exp() >= TURN_ON_MIN_RANGE && theta >= self.turn_on_min_tau_s
+        let (first, last) = ((-pmin / theta).exp(), (-pmax / theta).exp());
+        // A self-heating's column `S'·(1 − e^(−P/τ))` is SIM's sensitivity times a constant
+        // where `e^(−P/τ)` has died out: only its change counts, as a share of the rise.
+        let level = if m == Mech::Warmup { first } else { 1.0 };
+        first >= TURN_ON_MIN_TAIL && first - last >= TURN_ON_MIN_RANGE * level && theta >= self.turn_on_min_tau_s
     }
 
     /// The shortest time constant a lag or turn-on grid holds \[s\]: three samples, and 1 s.
