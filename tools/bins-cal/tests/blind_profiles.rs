@@ -401,6 +401,25 @@ fn a_named_warmup_takes_its_fast_part() {
     assert_no_definite_false_name(case);
 }
 
+/// A scale-factor tempco over a soak is a static scale term at the soak's temperature beside
+/// the die's rise through the same tempco (`Refit::static_scale_with_self_heating`,
+/// docs/diagnosis.md, section 4). Combined draw 101164: one soak in tilted positions, a scale
+/// factor of 10.5 σ and a self-heating of 5.5 σ on x. `scale_temp` alone fits x to its floor
+/// and was named there, a definite false name; the group on x now holds the pair.
+#[test]
+fn a_scale_tempco_on_a_soak_is_grouped_with_the_static_term_and_the_rise() {
+    let case = Case::draw_user(101164, true);
+    let r = report_of(&case);
+    let effects: Vec<_> = r.effects.iter().map(|e| (&e.id, &e.axes)).collect();
+    assert!(r.effects.iter().all(|e| e.id != "scale_temp"), "{effects:?}");
+    let x = r.ambiguous.iter().find(|g| g.axes.iter().any(|a| a == "x") && g.ids.iter().any(|i| i == "scale_temp"));
+    let x = x.unwrap_or_else(|| panic!("no tempco group on x: {:?}", r.ambiguous));
+    for id in ["scale_factor", "self_heating"] {
+        assert!(x.ids.iter().any(|i| i == id), "x: {:?} without {id}", x.ids);
+    }
+    assert_no_definite_false_name(case);
+}
+
 /// A record started after power-on shows a warm-up's tail, and the turn-on grid holds the
 /// warm-up's own time constant there (`mech::TURN_ON_MIN_TAIL`, docs/diagnosis.md, section 4).
 /// Single draw 109034: a soak at 37 °C in one orientation whose record starts 17 minutes after

@@ -1192,6 +1192,18 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
     {
         add(Mech::SelfHeating, d);
     }
+    // A scale-factor or cross-coupling tempco may be, over a soak, the static scale or cross
+    // term at the soak's temperature together with the die's rise through the same tempcos:
+    // the group holds both.
+    if let Some(fixed) = match term.mech {
+        Mech::ScaleTemp => Some(Mech::ScaleFactor),
+        Mech::CrossCouplingTemp => Some(Mech::CrossAxis),
+        _ => None,
+    } && let Some(d) = refit.static_scale_with_self_heating()
+    {
+        add(fixed, d);
+        add(Mech::SelfHeating, d);
+    }
     // Beside a lag, any term may be the rest of a second lag stage.
     for (j, other) in fit.terms.iter().enumerate() {
         if j != k

@@ -481,6 +481,23 @@ impl Refit<'_, '_> {
     /// die's rise): only the transient after each power-on tells them apart. `None` without
     /// `power_s`, a turn-on τ the recording shows, or a specific force that changes.
     pub fn self_heating_through_scale(&self) -> Option<f64> {
+        self.scale_rise(false)
+    }
+
+    /// The deviance a static scale or cross term beside the die's rise after power-on through
+    /// the same tempcos cannot absorb: `f_j` and `(1 − e^(−P/τ))·f_j` for each specific-force
+    /// component that changes, τ on the turn-on grid. Over a soak the temperature moves only
+    /// with the die's rise, so a scale-factor or cross-coupling tempco is that pair there: its
+    /// level at the soak's temperature a static term, its change the rise. `None` as for
+    /// [`Refit::self_heating_through_scale`].
+    pub fn static_scale_with_self_heating(&self) -> Option<f64> {
+        self.scale_rise(true)
+    }
+
+    /// The rise through the scale factor's and cross-sensitivities' tempcos,
+    /// `(1 − e^(−P/τ))·f_j` for each component `j` of the specific force that changes, with
+    /// `f_j` itself beside it where `with_static`.
+    fn scale_rise(&self, with_static: bool) -> Option<f64> {
         let ctx = self.ctx;
         let p = ctx.p;
         let power = p.power.as_deref()?;
@@ -490,10 +507,14 @@ impl Refit<'_, '_> {
             return None;
         }
         let columns = |tau: f64| -> Vec<Vec<f64>> {
-            (0..3)
-                .filter(|&j| moves(j))
-                .map(|j| power.iter().zip(&p.f).map(|(pw, f)| -(-pw / tau).exp_m1() * f[j]).collect())
-                .collect()
+            let mut cols = Vec::new();
+            for j in (0..3).filter(|&j| moves(j)) {
+                if with_static {
+                    cols.push(p.f.iter().map(|f| f[j]).collect());
+                }
+                cols.push(power.iter().zip(&p.f).map(|(pw, f)| -(-pw / tau).exp_m1() * f[j]).collect());
+            }
+            cols
         };
         self.deviance(&grid, &|th| ctx.offered(Mech::SelfHeating, th), &columns).map(|s| s.deviance)
     }
