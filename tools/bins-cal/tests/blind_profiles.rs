@@ -251,9 +251,13 @@ fn a_scale_term_on_a_soak_is_grouped_with_the_self_heating_it_may_be() {
 
 /// The thermal path is the unit's (docs/diagnosis.md, section 4, `Mech::thermal_path`).
 /// Combined draw 45098: a thermal play of 4.4 σ beside a static scale factor on one ramp at
-/// 1 Hz, one orientation. x and z held the play in a thermal-history group, y a group of
-/// tempcos and a lag without it: a definite false name. The play passes y's test on its own,
-/// so y's group now holds it too, with a note saying where it was shown.
+/// 1 Hz, one orientation, started 116 min after power-on. y was once a group of tempcos and a
+/// lag without the play while x and z held it: a definite false name. y's group holds it now
+/// (by its own rivals since a warm-up's tail is offered, by this rule before). Combined draw
+/// 109181: a self-heating of 8.8 σ on one ramp in six positions, started 83 min after power-on;
+/// x names a thermal play (a definite false name: a settled die rise on one ramp is that
+/// play's column once engaged), and z's thermal-history group, modelled as the self-heating and
+/// a scale tempco, holds that play too, with a note saying where it was shown.
 #[test]
 fn a_thermal_group_holds_the_play_another_accelerometer_shows() {
     let case = Case::draw_user(45098, true);
@@ -261,12 +265,17 @@ fn a_thermal_group_holds_the_play_another_accelerometer_shows() {
     let on_y: Vec<_> = r.ambiguous.iter().filter(|g| g.axes.iter().any(|a| a == "y")).collect();
     assert!(!on_y.is_empty(), "no group on y: {:?}", r.ambiguous);
     assert!(on_y.iter().all(|g| g.ids.iter().any(|i| i == "thermal_hysteresis")), "y: {on_y:?} without the play");
+    assert_no_definite_false_name(case);
+    let r = report_of(&Case::draw_user(109181, true));
+    let named_on_x = r.effects.iter().any(|e| e.id == "thermal_hysteresis" && e.axes.iter().any(|a| a == "x"));
+    assert!(named_on_x, "the play is no longer named on x: {:?}", r.effects);
+    let on_z: Vec<_> = r.ambiguous.iter().filter(|g| g.axes.iter().any(|a| a == "z")).collect();
+    assert!(on_z.iter().any(|g| g.ids.iter().any(|i| i == "thermal_hysteresis")), "z: {on_z:?} without the play");
     assert!(
-        r.notes.iter().any(|n| n.starts_with("accelerometer y:") && n.contains("thermal_hysteresis (on ")),
+        r.notes.iter().any(|n| n.starts_with("accelerometer z:") && n.contains("thermal_hysteresis (on x)")),
         "{:?}",
         r.notes
     );
-    assert_no_definite_false_name(case);
 }
 
 /// Single draw 65094: a lag of 13.9 σ on one soak in six positions, read to 1/16 °C at 50 Hz in
