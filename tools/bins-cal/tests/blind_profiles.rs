@@ -453,6 +453,90 @@ fn a_warm_ups_tail_on_a_record_started_after_power_on_is_found() {
     }
 }
 
+/// A bias tempco SIM lacks, acting on a die that trails the thermistor, on one ramp from a
+/// hold: the die starts to trail at the ramp's start, and the tempco's curve at the die's
+/// temperature bends there as an additive play bends where it engages. User-profile draws
+/// 105057 (single: one ramp from −16 to +46 °C, a bias tempco of 4.7 σ on x) and 113002
+/// (combined: one ramp, a bias tempco of 11.8 σ beside a scale factor and a small
+/// self-heating) named a `bias_hysteresis` alone on x (of width 32 °C on 105057) until the
+/// play's rivals held the tempco at the lagged temperature (`Refit::through_die_lag`): every
+/// play named on x is now in a group with the bias tempco.
+#[test]
+fn a_tempco_through_the_dies_lag_is_grouped_with_the_play_it_looks_like() {
+    for case in [Case::draw_user(105057, false), Case::draw_user(113002, true)] {
+        let u = case.user.as_ref().expect("a user profile");
+        assert_eq!(u.name(), "1x[ramp]", "the draw is no longer one ramp: {u:?}");
+        let r = report_of(&case);
+        let on_x = |ids: &[String], axes: &[String]| {
+            axes.iter().any(|a| a == "x") && ids.iter().any(|i| i == "bias_hysteresis")
+        };
+        assert!(
+            !r.effects.iter().any(|e| on_x(std::slice::from_ref(&e.id), &e.axes)),
+            "{}: a play named alone on x: {:?}",
+            case.seed,
+            r.effects
+        );
+        let tempco_on_x =
+            r.ambiguous.iter().any(|g| g.axes.iter().any(|a| a == "x") && g.ids.iter().any(|i| i == "bias_temp_order"))
+                || r.effects.iter().any(|e| e.id == "bias_temp_order" && e.axes.iter().any(|a| a == "x"));
+        assert!(tempco_on_x, "{}: no bias tempco on x: {:?} {:?}", case.seed, r.effects, r.ambiguous);
+        assert_no_definite_false_name(case);
+    }
+}
+
+/// A soak recorded long after power-on, where SIM shows no temperature sensitivity: a die
+/// settled warmer than its thermistor acts through tempcos nothing on the record fixes, as a
+/// static scale and cross term. Combined draws 113122 (a soak started 87 min after power-on,
+/// a self-heating on x) and 109135 (90 min, a self-heating beside a static scale factor and a
+/// quadratic nonlinearity) named groups of static scale or cross terms without the
+/// self-heating — a definite false name — until the settled self-heating's rival took that
+/// static form there (`Refit::self_heating_settled`).
+#[test]
+fn a_die_settled_warmer_on_a_soak_is_grouped_with_the_static_terms_it_makes() {
+    for (seed, axes) in [(113122, &["x"][..]), (109135, &["y", "z"][..])] {
+        let case = Case::draw_user(seed, true);
+        let u = case.user.as_ref().expect("a user profile");
+        assert_eq!(u.name(), "1x[soak]", "the draw is no longer one soak: {u:?}");
+        assert!(u.sessions[0].power_offset_s > 3600.0, "the soak no longer starts long after power-on: {u:?}");
+        let r = report_of(&case);
+        for axis in axes {
+            let held = r
+                .ambiguous
+                .iter()
+                .any(|g| g.axes.iter().any(|a| a == axis) && g.ids.iter().any(|i| i == "self_heating"));
+            assert!(held, "{seed}: no group on {axis} holds the self-heating: {:?}", r.ambiguous);
+        }
+        assert_no_definite_false_name(case);
+    }
+}
+
+/// On an accelerometer the model leaves above 1.25× its floor, a thermal-history term is no
+/// more pinned when the other thermal-history term beside it is negligible
+/// (`report::THERMAL_JOIN_RATIO`). Combined draw 109055 (a soak from power-on, a thermal play
+/// of 4.5 σ) left x at 1.66× its floor with an additive play beside a negligible thermal play,
+/// and named the additive play alone there: a definite false name.
+#[test]
+fn a_negligible_thermal_finding_counts_where_the_model_does_not_fit() {
+    let case = Case::draw_user(109055, true);
+    let r = report_of(&case);
+    let ratio = r.heldout_rms_after_mg["x"] / r.noise_floor_mg["x"];
+    assert!(ratio > 1.25, "x now at {ratio:.2}× its floor, not a case of the rule");
+    assert!(
+        !r.effects.iter().any(|e| e.id == "bias_hysteresis" && e.axes.iter().any(|a| a == "x")),
+        "the additive play named alone on x: {:?}",
+        r.effects
+    );
+    let group =
+        r.ambiguous.iter().find(|g| g.axes.iter().any(|a| a == "x") && g.ids.iter().any(|i| i == "bias_hysteresis"));
+    let group = group.unwrap_or_else(|| panic!("no group on x holds the play: {:?}", r.ambiguous));
+    assert!(
+        group.ids.iter().any(|i| i == "thermal_hysteresis"),
+        "the group on x lacks the thermal play: {:?}",
+        group.ids
+    );
+    assert_no_definite_false_name(case);
+}
+
 /// The die's rise over the thermistor SIM shows (`mech::die_rise`) against the generator's
 /// own: `(1 − share)·rise` settled, for user profiles of `n` single draws from `seed`, rows
 /// capped near `max_rows`. Returns (seed, sessions' kinds, estimate [°C], truth [°C]).

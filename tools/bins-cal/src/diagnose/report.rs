@@ -642,10 +642,11 @@ pub const PLAY_MIN_STEPS: f64 = 2.0;
 
 /// An accelerometer whose held-out RMS after the model stays above this multiple of its noise
 /// floor is one the model does not fit; there, two or more thermal-history findings
-/// ([`Mech::thermal_history`]: named terms, or groups with such a member) are reported as one
-/// group. Each was selected beside the others on a thermal path the model does not have
-/// exactly (the die between case and thermistor, its self-heating), so their split between
-/// forms is not what the recording shows. On the user-profile draws (docs/diagnosis-blind.md),
+/// ([`Mech::thermal_history`]: named terms, or groups with such a member, a negligible one
+/// among them where one is shown) are reported as one group. Each was selected beside the
+/// others on a thermal path the model does not have exactly (the die between case and
+/// thermistor, its self-heating), so their split between forms is not what the recording
+/// shows. On the user-profile draws (docs/diagnosis-blind.md),
 /// a thermal-history finding beside another on its accelerometer is false five to ten times as
 /// often as a lone one (effects 16 of 124 against 5 of 395, groups 20 of 118 against 16 of 541).
 pub const THERMAL_JOIN_RATIO: f64 = 1.25;
@@ -776,15 +777,30 @@ pub fn build(
         let shown = |ms: &[Mech]| shown(fit.axis, ms);
         let thermal_group = |l: &Local| shown(&l.0) && l.1.iter().any(|m| m.thermal_history());
         if fit.heldout_rms.1 > THERMAL_JOIN_RATIO * floor.0[fit.axis] {
-            let touching: Vec<usize> = (0..local.len()).filter(|&k| thermal_group(&local[k])).collect();
+            // A negligible one counts as well: the finding shown was selected beside it, and
+            // their split is no more what the recording shows than between two shown ones.
+            let touching: Vec<usize> = (0..local.len())
+                .filter(|&k| {
+                    let l = &local[k];
+                    thermal_group(l) || (!shown(&l.0) && l.0.iter().any(|m| m.thermal_history()))
+                })
+                .collect();
             let named: Vec<Mech> = fit
                 .terms
                 .iter()
                 .map(|t| t.mech)
-                .filter(|m| m.thermal_history() && shown(&[*m]) && !is_folded(fit.axis, *m))
+                .filter(|m| m.thermal_history() && !is_folded(fit.axis, *m))
                 .filter(|m| local.iter().all(|l| !l.0.contains(m)))
                 .collect();
-            if touching.len() + named.len() >= 2 {
+            let any_shown = touching.iter().any(|&k| shown(&local[k].0)) || named.iter().any(|m| shown(&[*m]));
+            if any_shown && touching.len() + named.len() >= 2 {
+                // A negligible group joins with what was modelled of it, not its alternatives:
+                // the shown finding was selected beside that term.
+                for &k in &touching {
+                    if !shown(&local[k].0) {
+                        local[k].1 = local[k].0.clone();
+                    }
+                }
                 let singles = named
                     .into_iter()
                     .map(|m| (vec![m], vec![m], BTreeMap::new(), BTreeMap::new(), threshold_of(fit, m)));

@@ -65,6 +65,20 @@ fn lag_states(ctx: &Context, theta: f64, power: &[f64]) -> (Vec<f64>, Vec<f64>) 
     (te, raised)
 }
 
+/// The columns of the temperature form `rival` (θ `theta` for a play) built from the die's
+/// temperature `die` instead of the thermistor's. For the bias polynomial, the orders SIM's
+/// calibration holds are shared at the thermistor's temperature: the rival adds their
+/// difference at the die's.
+fn form_at_die(ctx: &Context, rival: Mech, theta: f64, die: &[f64]) -> Vec<Vec<f64>> {
+    let mut cols = ctx.columns_at(rival, theta, die);
+    if rival == Mech::BiasTempOrder {
+        let at_die = super::mech::bias_powers(die, &ctx.nuisance_orders);
+        let at_thermistor = super::mech::bias_powers(&ctx.p.temp_s, &ctx.nuisance_orders);
+        cols.extend(at_die.iter().zip(&at_thermistor).map(|(d, t)| d.iter().zip(t).map(|(a, b)| a - b).collect()));
+    }
+    cols
+}
+
 /// The prediction of `members` on the design `ctx` \[g\].
 pub fn predict(ctx: &Context, members: &[Fitted]) -> Vec<f64> {
     let n = ctx.p.t.len();
@@ -231,17 +245,7 @@ impl<'c, 'p> Refit<'c, 'p> {
                 Some(sessions) if rho == 0.0 => soak_temperature(sessions, power, tau),
                 _ => super::mech::die_temperature(&ctx.p.temp_s, power, rho, tau),
             };
-            let mut cols = ctx.columns_at(rival, th, &temp);
-            if rival == Mech::BiasTempOrder {
-                // The orders SIM's calibration holds are shared at the thermistor's
-                // temperature: the rival adds their difference at the die's.
-                let at_die = super::mech::bias_powers(&temp, &ctx.nuisance_orders);
-                let at_thermistor = super::mech::bias_powers(&ctx.p.temp_s, &ctx.nuisance_orders);
-                cols.extend(
-                    at_die.iter().zip(&at_thermistor).map(|(d, t)| d.iter().zip(t).map(|(a, b)| a - b).collect()),
-                );
-            }
-            cols
+            form_at_die(ctx, rival, th, &temp)
         };
         // The best (SSE, ρ, width) over τ on the turn-on grid, kept in `at`.
         let mut at: Option<(f64, f64, f64)> = None;
@@ -434,11 +438,22 @@ impl Refit<'_, '_> {
     /// The deviance a die that runs steadily warmer than its thermistor cannot absorb: the
     /// library's self-heating settled (`S'(T, f)`, SIM's sensitivity's slope), which long after
     /// power-on is a temperature function like a tempco SIM lacks, and at steady temperatures
-    /// in several positions a static scale and cross term. `None` without `power_s`.
+    /// in several positions a static scale and cross term. Where SIM shows no temperature
+    /// sensitivity (the free form) and a rise may have settled before the first row (it starts
+    /// at least five of the turn-on grid's shortest τ after power-on, or no turn-on τ is
+    /// offered), the settled die acts through tempcos nothing on the record fixes: a static
+    /// term `f_j` for each specific-force component that changes. `None` without `power_s`.
     pub fn self_heating_settled(&self) -> Option<f64> {
         let ctx = self.ctx;
-        ctx.p.power.as_ref()?;
-        let col = ctx.columns(Mech::SelfHeating, 1e-9);
+        let p = ctx.p;
+        p.power.as_ref()?;
+        let settled_before = ctx.power_range_s.0 >= 5.0 * ctx.shortest_tau_s();
+        let col = if !ctx.s.from_sim && (settled_before || ctx.grid(Mech::SelfHeating).is_empty()) {
+            let moves = |j: usize| p.f.iter().any(|f| (f[j] - p.f[0][j]).abs() > 0.1);
+            (0..3).filter(|&j| moves(j)).map(|j| p.f.iter().map(|f| f[j]).collect()).collect()
+        } else {
+            ctx.columns(Mech::SelfHeating, 1e-9)
+        };
         self.deviance(&[], &|_| true, &|_| col.clone()).map(|s| s.deviance)
     }
 
@@ -453,6 +468,28 @@ impl Refit<'_, '_> {
         let first = super::mech::lagged(&p.t, &p.temp_s, tau_s);
         let grid = ctx.grid(Mech::ThermalLag);
         self.deviance(&grid, &|_| true, &|th| ctx.columns_at(Mech::ThermalLag, th, &first)).map(|s| s.deviance)
+    }
+
+    /// The deviance the temperature form `rival` cannot absorb acting on a die that lags the
+    /// thermistor: its columns built from the thermistor's reading lagged by τ on the lag's
+    /// grid. SIM's own sensitivity acting through such a lag is the library's `thermal_lag`
+    /// (and so are the bias orders SIM's calibration of this recording holds, which the
+    /// polynomial leaves out); a tempco SIM lacks acting through it is not, and on one ramp
+    /// from a hold its knee where the die starts to trail is the knee of a play that engages.
+    /// `None` for a form that is not a temperature function or a recording without a lag's
+    /// grid.
+    pub fn through_die_lag(&self, rival: Mech) -> Option<f64> {
+        let ctx = self.ctx;
+        let p = ctx.p;
+        let grid = ctx.grid(Mech::ThermalLag);
+        if grid.is_empty()
+            || !matches!(rival, Mech::BiasTempOrder | Mech::ScaleTemp | Mech::CrossCouplingTemp)
+            || !ctx.rival_possible(rival)
+        {
+            return None;
+        }
+        let columns = |tau: f64| ctx.columns_at(rival, 0.0, &super::mech::lagged(&p.t, &p.temp_s, tau));
+        self.deviance(&grid, &|_| true, &columns).map(|s| s.deviance)
     }
 
     /// The deviance a die heating after power-on cannot absorb, acting through a sensitivity
