@@ -79,6 +79,12 @@ fn form_at_die(ctx: &Context, rival: Mech, theta: f64, die: &[f64]) -> Vec<Vec<f
     cols
 }
 
+/// Whether the specific force's component `j` changes over the recording (by more than 0.1 g):
+/// a term in `f_j` is then a column of its own, not a constant.
+fn force_moves(p: &super::prep::Prepared, j: usize) -> bool {
+    p.f.iter().any(|f| (f[j] - p.f[0][j]).abs() > 0.1)
+}
+
 /// The prediction of `members` on the design `ctx` \[g\].
 pub fn predict(ctx: &Context, members: &[Fitted]) -> Vec<f64> {
     let n = ctx.p.t.len();
@@ -449,8 +455,7 @@ impl Refit<'_, '_> {
         p.power.as_ref()?;
         let settled_before = ctx.power_range_s.0 >= 5.0 * ctx.shortest_tau_s();
         let col = if !ctx.s.from_sim && (settled_before || ctx.grid(Mech::SelfHeating).is_empty()) {
-            let moves = |j: usize| p.f.iter().any(|f| (f[j] - p.f[0][j]).abs() > 0.1);
-            (0..3).filter(|&j| moves(j)).map(|j| p.f.iter().map(|f| f[j]).collect()).collect()
+            (0..3).filter(|&j| force_moves(p, j)).map(|j| p.f.iter().map(|f| f[j]).collect()).collect()
         } else {
             ctx.columns(Mech::SelfHeating, 1e-9)
         };
@@ -539,7 +544,7 @@ impl Refit<'_, '_> {
         let p = ctx.p;
         let power = p.power.as_deref()?;
         let grid = ctx.grid(Mech::SelfHeating);
-        let moves = |j: usize| p.f.iter().any(|f| (f[j] - p.f[0][j]).abs() > 0.1);
+        let moves = |j: usize| force_moves(p, j);
         if grid.is_empty() || !(0..3).any(moves) {
             return None;
         }
