@@ -484,6 +484,35 @@ fn a_tempco_through_the_dies_lag_is_grouped_with_the_play_it_looks_like() {
     }
 }
 
+/// A thermal play on an accelerometer with a tempco SIM lacks: the sensor reads that tempco,
+/// too, at the play's state, so the heating and cooling legs differ by more than SIM's
+/// sensitivity predicts, which is what an additive play is. Combined user-profile draw 117073
+/// (one ramp; on x a bias tempco of 16.8 σ and a thermal play of 5.6 σ) named a
+/// `bias_hysteresis` alone on x beside a group holding the tempco — a definite false name —
+/// until an additive play's rivals held the thermal play acting through the fitted tempco as
+/// well (`Refit::play_through_fitted_tempco`): x is now one group that holds the thermal play
+/// and the tempco.
+#[test]
+fn a_thermal_play_through_a_tempco_sim_lacks_is_grouped_with_the_additive_play() {
+    let case = Case::draw_user(117073, true);
+    let u = case.user.as_ref().expect("a user profile");
+    assert_eq!(u.name(), "1x[ramp]", "the draw is no longer one ramp: {u:?}");
+    let r = report_of(&case);
+    let on_x = |axes: &[String]| axes.iter().any(|a| a == "x");
+    assert!(
+        !r.effects.iter().any(|e| e.id == "bias_hysteresis" && on_x(&e.axes)),
+        "an additive play named alone on x: {:?}",
+        r.effects
+    );
+    let held = |id: &str| {
+        r.ambiguous.iter().any(|g| on_x(&g.axes) && g.ids.iter().any(|i| i == id))
+            || r.effects.iter().any(|e| e.id == id && on_x(&e.axes))
+    };
+    assert!(held("thermal_hysteresis"), "no thermal play on x: {:?} {:?}", r.effects, r.ambiguous);
+    assert!(held("bias_temp_order"), "no bias tempco on x: {:?} {:?}", r.effects, r.ambiguous);
+    assert_no_definite_false_name(case);
+}
+
 /// A soak recorded long after power-on, where SIM shows no temperature sensitivity: a die
 /// settled warmer than its thermistor acts through tempcos nothing on the record fixes, as a
 /// static scale and cross term. Combined draws 113122 (a soak started 87 min after power-on,

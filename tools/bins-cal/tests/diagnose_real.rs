@@ -9,7 +9,10 @@
 //!   (or an ambiguous group modelled) that cuts the held-out RMS by ≥ 30 %, or the axis is
 //!   reported `unexplained` with at least one located stratum of the unexplained structure;
 //! - SIM's own cubic is recognised as a fit of this recording, re-fitted as a nuisance and
-//!   never reported as `bias_temp_order`.
+//!   never reported as `bias_temp_order`;
+//! - the unit sits in one position the whole sweep (the reference's specific force, read from
+//!   the CSV cells, never changes), so a scale or cross tempco is a bias term here and is
+//!   named neither alone nor in a group.
 
 use bins_cal::diagnose::diagnose_files;
 use common::csv_text::Csv;
@@ -63,6 +66,18 @@ fn real_thermal_sweep_figures_are_raw_and_the_structure_is_named_or_located() {
     }
     assert!(r.effects.iter().all(|e| e.id != "bias_temp_order"), "SIM's own cubic reported as a discovery");
     assert!(r.ambiguous.iter().all(|g| !g.ids.iter().any(|i| i == "bias_temp_order")));
+
+    let rec = Csv::read(&real);
+    let f0 = ["fx_g", "fy_g", "fz_g"].map(|c| rec.num(&rec.rows[0], c));
+    let one_position = rec.rows.iter().all(|row| ["fx_g", "fy_g", "fz_g"].map(|c| rec.num(row, c)) == f0);
+    assert!(one_position, "the sweep was read as one position");
+    let in_f = |id: &str| id == "scale_temp" || id == "cross_coupling_temp";
+    assert!(r.effects.iter().all(|e| !in_f(&e.id)), "a tempco in f named on one position: {:?}", r.effects);
+    assert!(
+        r.ambiguous.iter().all(|g| !g.ids.iter().any(|i| in_f(i))),
+        "a tempco in f grouped on one position: {:?}",
+        r.ambiguous
+    );
 }
 
 /// The z axis of the sweep jumps twice (−3.4 mg within one sample at 1 022 s, about +1.5 mg at

@@ -1214,6 +1214,17 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
             }
         }
     }
+    // An additive play beside a tempco SIM lacks may be a thermal play acting through that
+    // tempco as well as through SIM's sensitivity.
+    if term.mech == Mech::BiasHysteresis {
+        for (j, other) in fit.terms.iter().enumerate() {
+            if j != k
+                && let Some(d) = refit.play_through_fitted_tempco(other.mech, &other.coef, &other.contribution)
+            {
+                add(Mech::ThermalHysteresis, d);
+            }
+        }
+    }
     // Beside a lag, any term may be the rest of a second lag stage.
     for (j, other) in fit.terms.iter().enumerate() {
         if j != k

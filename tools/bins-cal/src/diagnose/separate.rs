@@ -481,7 +481,10 @@ impl Refit<'_, '_> {
     /// (and so are the bias orders SIM's calibration of this recording holds, which the
     /// polynomial leaves out); a tempco SIM lacks acting through it is not, and on one ramp
     /// from a hold its knee where the die starts to trail is the knee of a play that engages.
-    /// `None` for a form that is not a temperature function or a recording without a lag's
+    /// Only a form the search offers on this design ([`Context::available`]): a scale tempco
+    /// on a component of the specific force that never changes is a bias term, and through
+    /// a lag that is SIM's own bias curve lagged again. `None` for a form that is not a
+    /// temperature function, one the design does not offer, or a recording without a lag's
     /// grid.
     pub fn through_die_lag(&self, rival: Mech) -> Option<f64> {
         let ctx = self.ctx;
@@ -489,11 +492,37 @@ impl Refit<'_, '_> {
         let grid = ctx.grid(Mech::ThermalLag);
         if grid.is_empty()
             || !matches!(rival, Mech::BiasTempOrder | Mech::ScaleTemp | Mech::CrossCouplingTemp)
-            || !ctx.rival_possible(rival)
+            || !ctx.available(rival)
         {
             return None;
         }
         let columns = |tau: f64| ctx.columns_at(rival, 0.0, &super::mech::lagged(&p.t, &p.temp_s, tau));
+        self.deviance(&grid, &|_| true, &columns).map(|s| s.deviance)
+    }
+
+    /// The deviance a thermal play cannot absorb acting through SIM's sensitivity and the
+    /// fitted tempco `mech` beside it (coefficients `coef`, contributing `contribution`): the
+    /// play's columns at width h on its grid and the tempco's contribution at the play's state
+    /// less its contribution at the thermistor's temperature, each with a gain of its own. A
+    /// sensor whose temperature follows the thermistor through a play reads every tempco it
+    /// has at that state; where the recording shows a tempco SIM lacks, the play through it is
+    /// a difference between the heating and cooling legs that SIM's sensitivity does not
+    /// predict, which is what an additive play is. `None` for a term that is not a tempco or
+    /// a recording without a play's grid.
+    pub fn play_through_fitted_tempco(&self, mech: Mech, coef: &[f64], contribution: &[f64]) -> Option<f64> {
+        let ctx = self.ctx;
+        let grid = ctx.grid(Mech::ThermalHysteresis);
+        if grid.is_empty() || !matches!(mech, Mech::BiasTempOrder | Mech::ScaleTemp | Mech::CrossCouplingTemp) {
+            return None;
+        }
+        let columns = |h: f64| -> Vec<Vec<f64>> {
+            let state = super::mech::play(&ctx.p.temp_s, h);
+            let mut cols = ctx.columns_at(Mech::ThermalHysteresis, h, &ctx.p.temp_s);
+            cols.push(change_of(&ctx.columns_at(mech, 0.0, &state), coef, contribution));
+            // SIM without a temperature sensitivity gives the play no column of its own.
+            cols.retain(|c| c.iter().any(|v| *v != 0.0));
+            cols
+        };
         self.deviance(&grid, &|_| true, &columns).map(|s| s.deviance)
     }
 
