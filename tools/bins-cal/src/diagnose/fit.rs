@@ -1183,17 +1183,6 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
     {
         add(Mech::ThermalHysteresis, d);
     }
-    // A temperature form, a turn-on term or a term odd in the specific force may be a thermal
-    // play the chamber engaged before the record: the sensor held a half-width off the
-    // thermistor, through SIM's sensitivity.
-    if (term.mech.temperature_form()
-        || matches!(term.mech, Mech::Warmup | Mech::SelfHeating)
-        || ODD_IN_F.contains(&term.mech))
-        && !fit.terms.iter().any(|t| t.mech == Mech::ThermalHysteresis)
-        && let Some(d) = refit.play_engaged_before()
-    {
-        add(Mech::ThermalHysteresis, d);
-    }
     // A term odd in the specific force may be the die's rise after power-on acting through
     // the scale factor's and cross-sensitivities' tempcos, `(1 − e^(−P/τ))·f_j`; or, long
     // after power-on, the die running steadily warmer than the thermistor through SIM's own

@@ -707,14 +707,7 @@ pub fn bias_powers(temp: &[f64], orders: &[i32]) -> Vec<Vec<f64>> {
 /// time does not relax, and the temperature between two sessions is taken to have gone straight
 /// from the last reading to the next (docs/recording-format.md, "Sessions").
 pub fn play(temp: &[f64], h: f64) -> Vec<f64> {
-    play_from(temp, h, temp.first().copied().unwrap_or(0.0))
-}
-
-/// [`play`] with the play's position at the first row given: `start` a half-width below the
-/// first temperature for a play the chamber engaged heating before the record, above it for
-/// one engaged cooling (clamped to the play's reach).
-pub fn play_from(temp: &[f64], h: f64, start: f64) -> Vec<f64> {
-    let mut e = start;
+    let mut e = temp.first().copied().unwrap_or(0.0);
     temp.iter()
         .map(|&x| {
             e = e.clamp(x - 0.5 * h, x + 0.5 * h);

@@ -617,52 +617,6 @@ impl Refit<'_, '_> {
     }
 }
 
-impl Refit<'_, '_> {
-    /// The deviance a thermal play engaged before the record cannot absorb: the play's
-    /// position at the first row a half-width below the thermistor's reading (the chamber
-    /// heated the unit before the record) or above it (cooled), width h on a log grid from the
-    /// play's narrowest to [`NEVER_ENGAGED_MAX_WIDTH_C`], through SIM's sensitivity. The
-    /// library's play starts at the first reading; one the chamber engaged holds the sensor
-    /// h/2 off the thermistor until the temperature turns by h, all through a soak: there
-    /// `S(T ∓ h/2, f) − S(T, f)`, the column of a die settled off its thermistor. Where SIM
-    /// shows no temperature sensitivity (the free form) the play acts through tempcos nothing
-    /// on the record fixes: `T_e − T` and `(T_e − T)·f_j` for each specific-force component
-    /// that changes, which on a soak in several positions are static scale and cross terms.
-    pub fn play_engaged_before(&self) -> Option<f64> {
-        let ctx = self.ctx;
-        let p = ctx.p;
-        let temp = &ctx.p.temp_s;
-        let first = *temp.first()?;
-        let (lo, hi) = (0.02f64, NEVER_ENGAGED_MAX_WIDTH_C);
-        let n = ((hi / lo).log10() * super::mech::GRID_PER_DECADE).ceil() as usize;
-        let grid: Vec<f64> = (0..=n).map(|k| lo * (hi / lo).powf(k as f64 / n as f64)).collect();
-        let mut best: Option<f64> = None;
-        for side in [-0.5, 0.5] {
-            let columns = |h: f64| -> Vec<Vec<f64>> {
-                let te = super::mech::play_from(temp, h, first + side * h);
-                let mut cols = ctx.state_columns(Mech::ThermalHysteresis, h, &te, temp);
-                if !ctx.s.from_sim {
-                    let d: Vec<f64> = te.iter().zip(temp).map(|(e, t)| e - t).collect();
-                    cols = std::iter::once(d.clone())
-                        .chain(
-                            (0..3)
-                                .filter(|&j| force_moves(p, j))
-                                .map(|j| d.iter().zip(&p.f).map(|(d, f)| d * f[j]).collect()),
-                        )
-                        .collect();
-                }
-                cols.into_iter().filter(|c| c.iter().any(|v| *v != 0.0)).collect()
-            };
-            if let Some(s) = self.deviance(&grid, &|_| true, &columns)
-                && best.is_none_or(|b| s.deviance < b)
-            {
-                best = Some(s.deviance);
-            }
-        }
-        best
-    }
-}
-
 /// The widest play [`Refit::play_never_engaged`] stands for \[°C\]: a thermal backlash of a
 /// few °C, which a recording that swept (8 − 1) / 2 = 3.5 °C or more would have engaged. Over a
 /// wider sweep a play that never engages would have to be wider than any thermal play, and a
