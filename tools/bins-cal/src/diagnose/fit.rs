@@ -1208,7 +1208,7 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
     // from a hold, the knee where the die starts to trail is a play's engagement. (A lag named
     // is that die lag already, through SIM's sensitivity.)
     if matches!(term.mech, Mech::ThermalHysteresis | Mech::BiasHysteresis) {
-        for m in TEMPCO_FORMS {
+        for m in super::separate::TEMPCO_FORMS {
             if let Some(d) = refit.through_die_lag(m) {
                 add(m, d);
             }
@@ -1277,10 +1277,6 @@ pub(crate) fn rivals_of(ctx: &Context, fit: &AxisFit, k: usize, refit: &super::s
 /// power-on ([`super::separate::Refit::through_die_rise`]).
 const DIE_RISE_FORMS: [Mech; 5] =
     [Mech::BiasTempOrder, Mech::ScaleTemp, Mech::CrossCouplingTemp, Mech::BiasHysteresis, Mech::ThermalHysteresis];
-
-/// The tempcos a play's rival builds from a die that lags the thermistor
-/// ([`super::separate::Refit::through_die_lag`]).
-const TEMPCO_FORMS: [Mech; 3] = [Mech::BiasTempOrder, Mech::ScaleTemp, Mech::CrossCouplingTemp];
 
 /// The terms odd in the specific force, which the die's rise after power-on may make through
 /// the scale factor's and cross-sensitivities' tempcos, and a die settled warmer than the

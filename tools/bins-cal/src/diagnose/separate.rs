@@ -79,6 +79,11 @@ fn form_at_die(ctx: &Context, rival: Mech, theta: f64, die: &[f64]) -> Vec<Vec<f
     cols
 }
 
+/// The tempcos SIM may lack that a play's rivals act through: built from a die that lags the
+/// thermistor ([`Refit::through_die_lag`]), or read at a play's state
+/// ([`Refit::play_through_fitted_tempco`]).
+pub(crate) const TEMPCO_FORMS: [Mech; 3] = [Mech::BiasTempOrder, Mech::ScaleTemp, Mech::CrossCouplingTemp];
+
 /// Whether the specific force's component `j` changes over the recording (by more than 0.1 g):
 /// a term in `f_j` is then a column of its own, not a constant.
 fn force_moves(p: &super::prep::Prepared, j: usize) -> bool {
@@ -490,10 +495,7 @@ impl Refit<'_, '_> {
         let ctx = self.ctx;
         let p = ctx.p;
         let grid = ctx.grid(Mech::ThermalLag);
-        if grid.is_empty()
-            || !matches!(rival, Mech::BiasTempOrder | Mech::ScaleTemp | Mech::CrossCouplingTemp)
-            || !ctx.available(rival)
-        {
+        if grid.is_empty() || !TEMPCO_FORMS.contains(&rival) || !ctx.available(rival) {
             return None;
         }
         let columns = |tau: f64| ctx.columns_at(rival, 0.0, &super::mech::lagged(&p.t, &p.temp_s, tau));
@@ -512,7 +514,7 @@ impl Refit<'_, '_> {
     pub fn play_through_fitted_tempco(&self, mech: Mech, coef: &[f64], contribution: &[f64]) -> Option<f64> {
         let ctx = self.ctx;
         let grid = ctx.grid(Mech::ThermalHysteresis);
-        if grid.is_empty() || !matches!(mech, Mech::BiasTempOrder | Mech::ScaleTemp | Mech::CrossCouplingTemp) {
+        if grid.is_empty() || !TEMPCO_FORMS.contains(&mech) {
             return None;
         }
         let columns = |h: f64| -> Vec<Vec<f64>> {
